@@ -1,0 +1,43 @@
+# Two entry points for a fresh machine:  `make repro` (tiny end-to-end reproduction) and `make test`.
+SHELL := /bin/bash
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+export MUJOCO_GL ?= egl
+export PYOPENGL_PLATFORM ?= egl
+
+.PHONY: setup sysdeps repro test test-fast bench clean
+
+# Debian rendering packages (Mesa EGL); skipped when already present or when not root.
+sysdeps:
+	@if ! ldconfig -p | grep -q 'libEGL.so.1' || [ ! -e /usr/lib/x86_64-linux-gnu/dri ] && [ ! -e /usr/lib/aarch64-linux-gnu/dri ]; then \
+	  if [ "$$(id -u)" = 0 ]; then apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libgl1-mesa-dri libglvnd0 >/dev/null; \
+	  else echo "missing libegl1/libgl1-mesa-dri: install them (apt-get install libegl1 libgl1-mesa-dri)"; fi; fi
+
+$(STAMP): requirements.txt pyproject.toml
+	$(MAKE) sysdeps
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q torch==2.13.0 || $(BIN)/pip install -q 'torch>=2.4,<=2.14.1' --index-url https://download.pytorch.org/whl/cpu
+	$(BIN)/pip install -q -r requirements.txt
+	$(BIN)/pip install -q --no-deps -e .
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+# The main job: a tiny end-to-end reproduction on the defaults.
+repro: $(STAMP)
+	$(BIN)/repro reproduce
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -ra $(PYTEST_ARGS)
+
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -ra -m "not slow and not slurm" $(PYTEST_ARGS)
+
+bench: $(STAMP)
+	$(BIN)/repro bench
+
+clean:
+	rm -rf $(VENV) runs results
