@@ -19,7 +19,7 @@ $(STAMP): requirements.txt pyproject.toml
 	$(MAKE) sysdeps
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q torch==2.13.0 || $(BIN)/pip install -q 'torch>=2.4,<=2.14.1' --index-url https://download.pytorch.org/whl/cpu
+	$(BIN)/pip install -q torch==2.13.0
 	$(BIN)/pip install -q -r requirements.txt
 	$(BIN)/pip install -q --no-deps -e .
 	touch $(STAMP)
