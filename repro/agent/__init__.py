@@ -1,0 +1,1 @@
+"""The shared agent core: networks, augmentation, auxiliary objectives and the agent."""

@@ -1,0 +1,111 @@
+"""Pluggable auxiliary objectives: each gets the batch and the encoders, returns a loss and metrics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, ClassVar
+
+import torch
+from torch import nn
+
+from repro.agent.networks import SharedHeads
+
+OBJECTIVES: dict[str, type["Objective"]] = {}
+
+
+def register(name: str) -> Callable[[type["Objective"]], type["Objective"]]:
+    """Class decorator adding an objective to the registry under ``name``."""
+
+    def wrap(cls: type[Objective]) -> type[Objective]:
+        cls.name = name
+        OBJECTIVES[name] = cls
+        return cls
+
+    return wrap
+
+
+@dataclass
+class ObjectiveContext:
+    """What an objective may use when it builds its parameters."""
+
+    repr_dim: int
+    feature_dim: int
+    hidden_dim: int
+    action_dim: int
+    K: int
+    seq_dim: int  # size of the encoded action sequence (K d_u, or K |A| without action encoder)
+    params: dict[str, Any] = field(default_factory=dict)  # agent.objective_params.<name>
+    _shared: SharedHeads | None = None
+
+    def shared(self) -> SharedHeads:
+        """The state projection H and bilinear W shared between objectives (created on first use)."""
+        if self._shared is None:
+            self._shared = SharedHeads(self.repr_dim, self.feature_dim)
+        return self._shared
+
+
+class AuxBatch:
+    """One update's data for the auxiliary objectives, with encoder passes computed once and shared.
+
+    Each view applies a fresh random shift: ``anchor`` (gradients flow into the encoder),
+    ``positive`` (same observation, other augmentation, no gradient) and ``future`` (the observation
+    K steps ahead, no gradient).
+    """
+
+    def __init__(self, batch: dict[str, torch.Tensor], encoder: nn.Module, aug: Callable,
+                 encode_actions: Callable[[torch.Tensor], torch.Tensor], reward_target: str):
+        self.batch = batch
+        self.encoder = encoder
+        self.aug = aug
+        self._encode_actions = encode_actions
+        self.reward_target = reward_target
+        self._cache: dict[str, torch.Tensor] = {}
+
+    def memo(self, key: str, fn: Callable[[], torch.Tensor]) -> torch.Tensor:
+        if key not in self._cache:
+            self._cache[key] = fn()
+        return self._cache[key]
+
+    def anchor(self) -> torch.Tensor:
+        return self.memo("anchor", lambda: self.encoder(self.aug(self.batch["obs"].float())))
+
+    def positive(self) -> torch.Tensor:
+        def fn() -> torch.Tensor:
+            with torch.no_grad():
+                return self.encoder(self.aug(self.batch["obs"].float()))
+        return self.memo("positive", fn)
+
+    def future(self) -> torch.Tensor:
+        def fn() -> torch.Tensor:
+            with torch.no_grad():
+                return self.encoder(self.aug(self.batch["future_obs"].float()))
+        return self.memo("future", fn)
+
+    def action_sequence(self) -> torch.Tensor:
+        """Encoded actions a_t..a_{t+K-1}: (B, seq_dim)."""
+        return self.memo("u_seq", lambda: self._encode_actions(self.batch["action_seq"]))
+
+    def reward(self) -> torch.Tensor:
+        """Reward target: n-step discounted return (upstream) or the sum of the K rewards (paper)."""
+        return self.batch["reward"] if self.reward_target == "nstep" else self.batch["reward_ksum"]
+
+
+class Objective(nn.Module):
+    """Base class: subclasses build parameters from the context and implement ``forward``."""
+
+    name: ClassVar[str] = ""
+
+    def __init__(self, ctx: ObjectiveContext):
+        super().__init__()
+        self.ctx = ctx
+
+    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:  # pragma: no cover
+        raise NotImplementedError
+
+
+def info_nce(logits: torch.Tensor) -> tuple[torch.Tensor, float]:
+    """Cross-entropy against the diagonal, and the accuracy of picking the diagonal."""
+    labels = torch.arange(logits.shape[0], device=logits.device)
+    loss = nn.functional.cross_entropy(logits, labels)
+    acc = (logits.argmax(dim=1) == labels).float().mean().item()
+    return loss, acc

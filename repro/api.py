@@ -1,0 +1,138 @@
+"""Build a run from its config and train it: the one place where env, agent, buffer and logger are made."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import torch
+from omegaconf import DictConfig
+
+from repro import rundir
+from repro.agent.agent import Agent
+from repro.checkpoint import load_checkpoint, save_checkpoint
+from repro.config import compose, typed
+from repro.episodes import EpisodeStore
+from repro.logger import RunLogger
+from repro.replay import ReplayBuffer
+from repro.schema import RunConfig
+from repro.trainer import Trainer
+
+
+def resolve_device(name: str) -> str:
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return name
+
+
+def build_env(rc: RunConfig, seed: int):
+    from repro.envs import make_env
+
+    e = rc.env
+    return make_env(rc.task.name, seed=seed, action_repeat=e.action_repeat, frame_stack=e.frame_stack,
+                    image_size=e.image_size, distracting_dims=e.distracting_dims,
+                    max_episode_frames=e.max_episode_frames, camera=e.camera)
+
+
+def build_agent(rc: RunConfig, obs_shape: tuple[int, int, int], action_dim: int, device: str) -> Agent:
+    torch.manual_seed(rc.seed)
+    return Agent(rc.agent, obs_shape, action_dim, device=device, explore_steps=rc.train.explore_steps)
+
+
+def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress: bool | None = None) -> Path:
+    """Train (or resume, or skip if done) the run described by ``cfg``; return its run directory."""
+    rc = typed(cfg)
+    path = rundir.run_dir(cfg)
+    diff = rundir.config_diff(path, cfg)
+    if diff:
+        raise rundir.RunDirMismatch(f"{path} holds a run with another config ({diff[0]}"
+                                    f"{f' and {len(diff) - 1} more' if len(diff) > 1 else ''}); "
+                                    "use another experiment/variant name or move it away.")
+    if rundir.run_state(path) == "done":
+        echo(f"already done: {path}")
+        return path
+    path.mkdir(parents=True, exist_ok=True)
+    ckpt_file = path / rundir.CHECKPOINT
+    resuming = ckpt_file.exists()
+    if not (path / rundir.CONFIG).exists():
+        rundir.write_config(path, cfg)
+    device = resolve_device(rc.runtime.device)
+    if rc.runtime.threads:
+        torch.set_num_threads(int(rc.runtime.threads))
+    rundir.write_meta(path, device, resumed=resuming)
+
+    env = build_env(rc, rc.seed)
+    eval_env = build_env(rc, rc.seed + 10_000)
+    try:
+        spec = env.spec
+        agent = build_agent(rc, spec.obs_shape, spec.action_dim, device)
+        replay_device = resolve_device(rc.replay.device)
+        buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
+                              rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device)
+        episodes = EpisodeStore(path / "replay")
+        state = load_checkpoint(ckpt_file) if resuming else None
+        if state is None:
+            episodes.prune(set())
+        logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo)
+        bar = _progress(rc, progress)
+        trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
+                          lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None)
+        if state is not None:
+            trainer.restore(state)
+            episodes.prune({rec[0] for rec in state["buffer"]["episodes"]})
+            echo(f"resumed {path} at frame {trainer.frame}")
+        try:
+            counters = trainer.run()
+        finally:
+            if bar:
+                bar.close()
+            logger.close()
+        rundir.write_done(path, {"frame": counters.step * rc.env.action_repeat, "step": counters.step,
+                                 "episode": counters.episode, "total_time": round(trainer.total_time(), 3),
+                                 "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+    finally:
+        env.close()
+        eval_env.close()
+    return path
+
+
+def train(overrides: list[str], echo: Callable[[str], None] = print, progress: bool | None = False) -> Path:
+    """Compose the config from Hydra ``overrides`` and train it (resumable)."""
+    return train_config(compose(overrides), echo=echo, progress=progress)
+
+
+class _Progress:
+    """A rich progress bar: frames, frames/s, last eval return, ETA."""
+
+    def __init__(self, total_frames: int, start_frame: int, label: str):
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                                   TimeRemainingColumn)
+
+        self._p = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                           TextColumn("{task.fields[fps]} fps"), TextColumn("eval {task.fields[ret]}"),
+                           TimeElapsedColumn(), TimeRemainingColumn(), transient=False)
+        self._p.start()
+        self._task = self._p.add_task(label, total=total_frames, completed=start_frame, fps="-", ret="-")
+        self._t, self._f = time.time(), start_frame
+
+    def update(self, frame: int, last_eval: float | None) -> None:
+        now = time.time()
+        fps = (frame - self._f) / max(now - self._t, 1e-9)
+        fields = {"ret": f"{last_eval:.1f}" if last_eval is not None else "-"}
+        if now - self._t > 2.0:
+            fields["fps"] = f"{fps:.0f}"
+            self._t, self._f = now, frame
+        self._p.update(self._task, completed=frame, **fields)
+
+    def close(self) -> None:
+        self._p.stop()
+
+
+def _progress(rc: RunConfig, forced: bool | None) -> _Progress | None:
+    setting = rc.runtime.progress if forced is None else forced
+    enabled = sys.stderr.isatty() if setting == "auto" else bool(setting)
+    if not enabled:
+        return None
+    return _Progress(rc.train.frames, 0, f"{rc.agent.name} {rc.task.name} s{rc.seed}")

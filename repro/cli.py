@@ -1,0 +1,113 @@
+"""The `repro` command line: train one run, list tasks, benchmark; sweeps and analysis register theirs."""
+
+from __future__ import annotations
+
+import os
+import sys
+from typing import List, Optional
+
+import typer
+from omegaconf import OmegaConf
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Reproduce, extend and report TACO (Zheng et al., NeurIPS 2023).")
+
+
+def fail(message: str, code: int = 2) -> None:
+    """One clear line on stderr and a non-zero exit."""
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code)
+
+
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def train(ctx: typer.Context,
+          dry_run: bool = typer.Option(False, "--dry-run", help="Print the resolved config and parameter counts."),
+          progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="Rich progress bar.")):
+    """Train one run: `repro train agent=taco task=hopper_hop agent.K=3 seed=2` (Hydra overrides)."""
+    from repro.config import ConfigError, compose
+
+    try:
+        cfg = compose(ctx.args)
+    except ConfigError as exc:
+        fail(str(exc))
+    if dry_run:
+        _dry_run(cfg)
+        return
+    from repro.api import train_config
+    from repro.rundir import RunDirMismatch
+
+    try:
+        path = train_config(cfg, echo=typer.echo, progress=progress)
+    except RunDirMismatch as exc:
+        fail(str(exc))
+    typer.echo(f"run directory: {path}")
+
+
+def _dry_run(cfg) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    from repro.api import build_agent
+    from repro.config import typed
+    from repro.envs import get_task
+
+    rc = typed(cfg)
+    console = Console()
+    console.print(OmegaConf.to_yaml(cfg, resolve=True), markup=False, highlight=False)
+    info = get_task(rc.task.name)
+    action_dim = info.action_dim + rc.env.distracting_dims
+    obs_shape = (3 * rc.env.frame_stack, rc.env.image_size, rc.env.image_size)
+    agent = build_agent(rc, obs_shape, action_dim, "cpu")
+    table = Table(title=f"trainable parameters ({rc.agent.name}, |A|={action_dim})")
+    table.add_column("module")
+    table.add_column("parameters", justify="right")
+    rows = agent.parameter_counts()
+    for name, count in rows:
+        table.add_row(name, f"{count:,}")
+    table.add_row("[bold]total", f"[bold]{sum(c for _, c in rows):,}")
+    console.print(table)
+    from repro.rundir import run_dir
+    console.print(f"run directory: {run_dir(cfg)}")
+
+
+@app.command()
+def tasks():
+    """List every task with its suite, action dimension and defaults."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from repro.config import compose
+    from repro.envs import TASKS
+
+    table = Table(title="tasks")
+    for col in ("task", "suite", "|A|", "preset", "K", "nstep", "frames", "camera"):
+        table.add_column(col)
+    for name, info in TASKS.items():
+        cfg = compose([f"task={name}"])
+        table.add_row(name, info.suite, str(info.action_dim), cfg.task.preset, str(cfg.agent.K),
+                      str(cfg.agent.nstep), f"{cfg.train.frames:,}", str(info.camera))
+    Console().print(table)
+
+
+def _register_plugins() -> None:
+    for module in ("repro.launch.cli", "analysis.cli", "repro.bench", "repro.reproduce"):
+        try:
+            mod = __import__(module, fromlist=["register"])
+        except ModuleNotFoundError as exc:
+            if exc.name and module.startswith(exc.name):
+                continue
+            raise
+        mod.register(app)
+
+
+_register_plugins()
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":
+    main()

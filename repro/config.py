@@ -1,0 +1,143 @@
+"""Compose the packaged Hydra config (compose API) and validate it against the typed schema."""
+
+from __future__ import annotations
+
+import difflib
+import re
+from pathlib import Path
+
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from repro.schema import RunConfig
+
+CONF_DIR = Path(__file__).parent / "conf"
+NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
+VALID_CHOICES = {
+    "agent.latent_action_rounding": ("upstream", "paper"),
+    "agent.reward_target": ("nstep", "ksum"),
+    "replay.device": ("cpu", "cuda", "auto"),
+    "runtime.device": ("cpu", "cuda", "auto"),
+}
+
+
+class ConfigError(ValueError):
+    """A config problem, explained in one line."""
+
+
+def group_options(group: str) -> list[str]:
+    """Names of the YAML files in a config group (e.g. ``task`` or ``agent``)."""
+    return sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
+
+
+def _close(name: str, options: list[str]) -> str:
+    matches = difflib.get_close_matches(name, options, n=3, cutoff=0.5)
+    return f" Did you mean: {', '.join(matches)}?" if matches else f" Known: {', '.join(options)}."
+
+
+def _check_group_overrides(overrides: list[str]) -> None:
+    for ov in overrides:
+        key, sep, value = ov.partition("=")
+        if not sep:
+            raise ConfigError(f"override '{ov}' is not key=value.")
+        key = key.lstrip("+~")
+        if key in ("agent", "task", "profile"):
+            options = group_options(key)
+            if value not in options:
+                raise ConfigError(f"unknown {key} '{value}'." + _close(value, options))
+
+
+def _check_keys(overrides: list[str], cfg: DictConfig) -> None:
+    for ov in overrides:
+        key = ov.partition("=")[0]
+        if key.startswith(("+", "~")) or key in ("agent", "task", "profile"):
+            continue
+        if OmegaConf.select(cfg, key, default="__missing__") == "__missing__":
+            parent, _, leaf = key.rpartition(".")
+            node = OmegaConf.select(cfg, parent) if parent else cfg
+            siblings = list(node.keys()) if isinstance(node, DictConfig) else []
+            raise ConfigError(f"unknown config key '{key}'." + _close(leaf, [str(s) for s in siblings]))
+
+
+def compose(overrides: list[str] | tuple[str, ...] = ()) -> DictConfig:
+    """Resolve the config for ``overrides`` (Hydra syntax); raise ConfigError with one line on bad input."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import HydraException
+
+    overrides = list(overrides)
+    _check_group_overrides(overrides)
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            raw = hydra_compose(config_name="config", overrides=overrides)
+    except (HydraException, OmegaConfBaseException) as exc:
+        # Hydra's messages are multi-line; keep the first line and name close keys when possible.
+        first = str(exc).strip().splitlines()[0]
+        for ov in overrides:
+            key = ov.partition("=")[0].lstrip("+~")
+            if f"'{key}'" in first or key in first:
+                base = compose_base()
+                try:
+                    _check_keys([ov], base)
+                except ConfigError as err:
+                    raise ConfigError(str(err)) from None
+        raise ConfigError(first) from None
+    finally:
+        GlobalHydra.instance().clear()
+    return validate(raw)
+
+
+_BASE: DictConfig | None = None
+
+
+def compose_base() -> DictConfig:
+    """The config with no overrides (cached), for key suggestions."""
+    global _BASE
+    if _BASE is None:
+        _BASE = compose([])
+    return _BASE
+
+
+def validate(raw: DictConfig) -> DictConfig:
+    """Resolve interpolations, check types against the schema and value choices."""
+    try:
+        OmegaConf.resolve(raw)
+        cfg = OmegaConf.merge(OmegaConf.structured(RunConfig), raw)
+    except OmegaConfBaseException as exc:
+        raise ConfigError(str(exc).strip().splitlines()[0]) from None
+    for key, choices in VALID_CHOICES.items():
+        value = OmegaConf.select(cfg, key)
+        if value not in choices:
+            raise ConfigError(f"{key}={value} is not one of {', '.join(choices)}.")
+    for key in ("experiment", "variant", "task.name", "agent.name"):
+        value = str(OmegaConf.select(cfg, key))
+        if not NAME_RE.match(value):
+            raise ConfigError(f"{key}='{value}' may only contain letters, digits, '_', '.' and '-'.")
+    positive = ("agent.K", "agent.batch_size", "agent.nstep", "env.action_repeat", "env.frame_stack",
+                "train.frames", "train.eval_every_frames", "train.update_every_steps", "replay.capacity")
+    for key in positive:
+        if OmegaConf.select(cfg, key) < 1:
+            raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
+    if cfg.env.distracting_dims < 0 or cfg.train.eval_episodes < 0:
+        raise ConfigError("env.distracting_dims and train.eval_episodes must be >= 0.")
+    from repro.agent.objectives import OBJECTIVES
+
+    for name in cfg.agent.objectives:
+        if name not in OBJECTIVES:
+            raise ConfigError(f"unknown objective '{name}'." + _close(str(name), sorted(OBJECTIVES)))
+    return cfg
+
+
+def typed(cfg: DictConfig) -> RunConfig:
+    """The config as typed dataclasses."""
+    return OmegaConf.to_object(cfg)  # type: ignore[return-value]
+
+
+def identity(cfg: DictConfig) -> dict:
+    """The part of the config that defines a run (everything but ``runtime``)."""
+    data = OmegaConf.to_container(cfg, resolve=True)
+    assert isinstance(data, dict)
+    data.pop("runtime", None)
+    return data

@@ -1,0 +1,140 @@
+"""The run directory contract (docs/run-format.md): path, identity check, metadata, DONE marker."""
+
+from __future__ import annotations
+
+import getpass
+import json
+import platform
+import socket
+import subprocess
+import sys
+import time
+from importlib import metadata
+from pathlib import Path
+
+import yaml
+from omegaconf import DictConfig, OmegaConf
+
+from repro.config import identity
+from repro.fsutil import atomic_write_text
+
+CONFIG, META, DONE, CHECKPOINT = "config.yaml", "meta.json", "DONE", "checkpoint.pt"
+PACKAGES = ("torch", "numpy", "mujoco", "dm-control", "metaworld", "hydra-core", "omegaconf", "submitit",
+            "pandas", "rliable", "taco-repro")
+
+
+class RunDirMismatch(ValueError):
+    """The run directory holds a run with another config."""
+
+
+def run_dir(cfg: DictConfig) -> Path:
+    """``{results_root}/{experiment}/{agent}/{variant}/{task}/seed_{seed}`` from config values only."""
+    return (Path(cfg.runtime.results_root) / str(cfg.experiment) / str(cfg.agent.name) / str(cfg.variant)
+            / str(cfg.task.name) / f"seed_{cfg.seed}")
+
+
+def run_state(path: str | Path) -> str:
+    """``done`` (DONE exists), ``partial`` (a config or checkpoint but no DONE) or ``absent``."""
+    path = Path(path)
+    if (path / DONE).exists():
+        return "done"
+    if (path / CHECKPOINT).exists() or (path / CONFIG).exists():
+        return "partial"
+    return "absent"
+
+
+def saved_identity(path: str | Path) -> dict | None:
+    file = Path(path) / CONFIG
+    if not file.exists():
+        return None
+    data = yaml.safe_load(file.read_text()) or {}
+    data.pop("runtime", None)
+    return data
+
+
+def config_diff(path: str | Path, cfg: DictConfig) -> list[str]:
+    """Dotted keys whose values differ between the saved run config and ``cfg`` (runtime ignored)."""
+    saved = saved_identity(path)
+    if saved is None:
+        return []
+    new = identity(cfg)
+    diffs: list[str] = []
+
+    def walk(a, b, prefix: str) -> None:
+        if isinstance(a, dict) and isinstance(b, dict):
+            for k in sorted(set(a) | set(b), key=str):
+                walk(a.get(k, "<absent>"), b.get(k, "<absent>"), f"{prefix}{k}.")
+        elif a != b:
+            diffs.append(f"{prefix[:-1]}: {a!r} -> {b!r}")
+
+    walk(saved, new, "")
+    return diffs
+
+
+def config_matches(path: str | Path, cfg: DictConfig) -> bool:
+    return not config_diff(path, cfg)
+
+
+def write_config(path: Path, cfg: DictConfig) -> None:
+    atomic_write_text(path / CONFIG, OmegaConf.to_yaml(cfg, resolve=True))
+
+
+def _git(*args: str) -> str | None:
+    try:
+        out = subprocess.run(["git", *args], cwd=Path(__file__).parent, capture_output=True, text=True,
+                             timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() if out.returncode == 0 else None
+
+
+def _versions() -> dict[str, str | None]:
+    versions: dict[str, str | None] = {"python": platform.python_version()}
+    for pkg in PACKAGES:
+        try:
+            versions[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            versions[pkg] = None
+    return versions
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def device_name(device: str) -> str:
+    import torch
+
+    if device.startswith("cuda") and torch.cuda.is_available():
+        return f"cuda:{torch.cuda.get_device_name(0)}"
+    return "cpu"
+
+
+def write_meta(path: Path, device: str, resumed: bool) -> dict:
+    """Create meta.json on the first start; append to its ``resumes`` list on each resume."""
+    file = path / META
+    now = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    entry = {"time": now, "host": socket.gethostname(), "command": sys.argv, "device": device_name(device)}
+    if file.exists():
+        meta = json.loads(file.read_text())
+        if resumed:
+            meta.setdefault("resumes", []).append(entry)
+    else:
+        sha = _git("rev-parse", "HEAD")
+        status = _git("status", "--porcelain", "--untracked-files=no")
+        meta = {"git_sha": sha, "git_dirty": bool(status) if status is not None else None,
+                "versions": _versions(), "host": socket.gethostname(), "user": getpass.getuser(),
+                "device": device_name(device), "cpu": _cpu_model(), "command": sys.argv, "started": now,
+                "platform": platform.platform(), "resumes": []}
+    atomic_write_text(file, json.dumps(meta, indent=2) + "\n")
+    return meta
+
+
+def write_done(path: Path, summary: dict) -> None:
+    atomic_write_text(path / DONE, json.dumps(summary, indent=2) + "\n")

@@ -1,0 +1,98 @@
+"""Typed schema of the run config: code reads these dataclasses, never raw strings."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+
+@dataclass
+class StdSchedule:
+    start: float = 1.0
+    end: float = 0.1
+    duration: int = 500_000
+
+    def __call__(self, step: int) -> float:
+        """Linear interpolation from ``start`` to ``end`` over ``duration`` agent steps."""
+        mix = min(max(step / max(self.duration, 1), 0.0), 1.0)
+        return (1.0 - mix) * self.start + mix * self.end
+
+
+@dataclass
+class AgentConfig:
+    name: str = "taco"
+    lr: float = 1e-4
+    feature_dim: int = 50
+    hidden_dim: int = 1024
+    batch_size: int = 1024
+    K: int = 3
+    nstep: int = 3
+    discount: float = 0.99
+    critic_target_tau: float = 0.01
+    stddev_clip: float = 0.3
+    stddev_schedule: StdSchedule = field(default_factory=StdSchedule)
+    action_encoder: bool = True
+    latent_action_dim: Optional[int] = None
+    latent_action_rounding: str = "upstream"
+    action_hidden_dim: int = 64
+    reward_target: str = "nstep"
+    objectives: dict[str, float] = field(default_factory=dict)
+    objective_params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class TaskConfig:
+    name: str = "cheetah_run"
+    suite: str = "dmc"
+    preset: str = "medium"
+    std_duration: int = 500_000
+    frames: int = 3_100_000
+    drqv2_batch_size: int = 256
+
+
+@dataclass
+class EnvConfig:
+    action_repeat: int = 2
+    frame_stack: int = 3
+    image_size: int = 84
+    distracting_dims: int = 0
+    max_episode_frames: Optional[int] = None
+    camera: Optional[Any] = None
+
+
+@dataclass
+class TrainConfig:
+    frames: int = 3_100_000
+    seed_frames: int = 4000
+    explore_steps: int = 2000
+    update_every_steps: int = 2
+    eval_every_frames: int = 10_000
+    eval_episodes: int = 10
+    checkpoint_every_episodes: int = 1
+
+
+@dataclass
+class ReplayConfig:
+    capacity: int = 1_000_000
+    device: str = "cpu"
+
+
+@dataclass
+class RuntimeConfig:
+    results_root: str = "runs"
+    device: str = "auto"
+    progress: Any = "auto"
+    threads: Optional[int] = None
+
+
+@dataclass
+class RunConfig:
+    experiment: str = "default"
+    variant: str = "base"
+    seed: int = 1
+    agent: AgentConfig = field(default_factory=AgentConfig)
+    task: TaskConfig = field(default_factory=TaskConfig)
+    env: EnvConfig = field(default_factory=EnvConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
+    runtime: RuntimeConfig = field(default_factory=RuntimeConfig)

@@ -1,0 +1,172 @@
+"""The online training loop (as upstream DrQ-v2): it receives env, agent, buffer and logger."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import torch
+
+from repro.agent.agent import Agent
+from repro.envs.base import Env
+from repro.episodes import EpisodeStore
+from repro.logger import RunLogger
+from repro.replay import ReplayBuffer
+from repro.schema import TrainConfig
+
+
+def episode_seed(seed: int, kind: int, index: int, sub: int = 0) -> int:
+    """Deterministic per-episode environment seed (kind 0: training, 1: evaluation)."""
+    return int(np.random.SeedSequence([seed, kind, index, sub]).generate_state(1)[0])
+
+
+@dataclass
+class Counters:
+    step: int = 0  # agent steps
+    episode: int = 0  # finished training episodes
+    total_time: float = 0.0  # wall-clock seconds before this process
+
+
+class Trainer:
+    def __init__(self, cfg: TrainConfig, seed: int, action_repeat: int, env: Env, eval_env: Env, agent: Agent,
+                 buffer: ReplayBuffer, logger: RunLogger, episodes: EpisodeStore,
+                 save_checkpoint: Callable[[dict], None], progress=None):
+        self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
+        self.env, self.eval_env, self.agent, self.buffer = env, eval_env, agent, buffer
+        self.logger, self.episodes, self._save = logger, episodes, save_checkpoint
+        self.progress = progress
+        self.counters = Counters()
+        self.batch_size = agent.cfg.batch_size
+        self.has_success = env.spec.has_success
+        self._t0 = time.time()
+        self.last_eval: float | None = None
+        self._eval_seconds = 0.0  # evaluation time inside the current training episode (excluded from fps)
+
+    # ----------------------------------------------------------------- helpers
+    @property
+    def frame(self) -> int:
+        return self.counters.step * self.action_repeat
+
+    def total_time(self) -> float:
+        return self.counters.total_time + (time.time() - self._t0)
+
+    def _steps(self, frames: int) -> int:
+        return max(frames // self.action_repeat, 1)
+
+    def checkpoint_state(self) -> dict:
+        return {"counters": {"step": self.counters.step, "episode": self.counters.episode,
+                             "total_time": self.total_time()},
+                "agent": self.agent.state_dict()["modules"],
+                "optimizers": self.agent.state_dict()["optimizers"],
+                "rng": {"torch": torch.get_rng_state(),
+                        "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else []},
+                "buffer": self.buffer.state(), "csv": self.logger.offsets(), "last_eval": self.last_eval}
+
+    def restore(self, state: dict) -> None:
+        c = state["counters"]
+        self.counters = Counters(int(c["step"]), int(c["episode"]), float(c["total_time"]))
+        self.agent.load_state_dict({"modules": state["agent"], "optimizers": state["optimizers"]})
+        torch.set_rng_state(state["rng"]["torch"])
+        if state["rng"]["cuda"] and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(state["rng"]["cuda"])
+        self.buffer.restore(state["buffer"], self.episodes.load)
+        self.last_eval = state.get("last_eval")
+        self._t0 = time.time()
+
+    # ----------------------------------------------------------------- evaluation
+    def evaluate(self) -> None:
+        started = time.time()
+        try:
+            self._evaluate()
+        finally:
+            self._eval_seconds += time.time() - started
+
+    def _evaluate(self) -> None:
+        returns, lengths, successes = [], [], []
+        eval_index = self.counters.step
+        self.agent.train(False)
+        for ep in range(self.cfg.eval_episodes):
+            ts = self.eval_env.reset(seed=episode_seed(self.seed, 1, eval_index, ep))
+            total, length, success = 0.0, 0, 0.0
+            while not ts.last:
+                action = self.agent.act(ts.observation, self.counters.step, eval_mode=True)
+                ts = self.eval_env.step(action)
+                total += ts.reward
+                length += 1
+                success = max(success, float(ts.info.get("success", 0.0)))
+            returns.append(total)
+            lengths.append(length)
+            successes.append(success)
+        self.agent.train(True)
+        mean = float(np.mean(returns)) if returns else float("nan")
+        self.last_eval = mean
+        self.logger.log_eval({
+            "frame": self.frame, "step": self.counters.step, "episode": self.counters.episode,
+            "episode_reward": mean, "episode_reward_std": float(np.std(returns)) if returns else float("nan"),
+            "episode_length": float(np.mean(lengths)) if lengths else float("nan"),
+            "success": float(np.mean(successes)) if (self.has_success and successes) else None,
+            "eval_episodes": len(returns), "total_time": round(self.total_time(), 3)})
+
+    # ----------------------------------------------------------------- training
+    def _checkpoint(self) -> None:
+        state = self.checkpoint_state()
+        self._save(state)
+        self.episodes.prune({rec[0] for rec in state["buffer"]["episodes"]})
+
+    def run(self) -> Counters:
+        cfg = self.cfg
+        total_steps = self._steps(cfg.frames)
+        eval_every = self._steps(cfg.eval_every_frames)
+        seed_steps = cfg.seed_frames // self.action_repeat
+        metric_names = self.agent.metric_names()
+
+        def new_episode():
+            ts = self.env.reset(seed=episode_seed(self.seed, 0, self.counters.episode))
+            self.buffer.start_episode(ts.observation[-3:])
+            return ts
+
+        ts = new_episode()
+        ep_reward, ep_len, ep_success, ep_start = 0.0, 0, 0.0, time.time()
+        sums: dict[str, float] = {}
+        n_updates = 0
+        while True:
+            if self.counters.step % eval_every == 0 or self.counters.step >= total_steps:
+                if cfg.eval_episodes > 0:
+                    self.evaluate()
+            if self.progress is not None:
+                self.progress(self.frame, self.last_eval)
+            if self.counters.step >= total_steps:
+                break
+            step = self.counters.step
+            action = self.agent.act(ts.observation, step, eval_mode=False)
+            if step >= seed_steps and step % cfg.update_every_steps == 0:
+                metrics = self.agent.update(self.buffer.sample(self.batch_size), step)
+                for k, v in metrics.items():
+                    sums[k] = sums.get(k, 0.0) + v
+                n_updates += 1
+            ts = self.env.step(action)
+            self.buffer.add(action, ts.reward, ts.discount, ts.observation[-3:])
+            self.counters.step += 1
+            ep_reward += ts.reward
+            ep_len += 1
+            ep_success = max(ep_success, float(ts.info.get("success", 0.0)))
+            if ts.last:
+                self.counters.episode += 1
+                elapsed = max(time.time() - ep_start - self._eval_seconds, 1e-9)
+                row = {"frame": self.frame, "step": self.counters.step, "episode": self.counters.episode,
+                       "episode_reward": ep_reward, "episode_length": ep_len,
+                       "success": ep_success if self.has_success else None, "buffer_size": len(self.buffer),
+                       "stddev": self.agent.stddev(self.counters.step),
+                       "fps": round(ep_len * self.action_repeat / elapsed, 3),
+                       "total_time": round(self.total_time(), 3)}
+                row.update({k: (sums[k] / n_updates if n_updates and k in sums else None) for k in metric_names})
+                self.logger.log_train(row)
+                self.episodes.save(self.buffer.end_episode())
+                if self.counters.episode % cfg.checkpoint_every_episodes == 0:
+                    self._checkpoint()
+                ts = new_episode()
+                ep_reward, ep_len, ep_success, ep_start = 0.0, 0, 0.0, time.time()
+                sums, n_updates, self._eval_seconds = {}, 0, 0.0
+        return self.counters
