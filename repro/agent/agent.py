@@ -54,7 +54,7 @@ class Agent:
 
         active = [name for name, w in cfg.objectives.items() if w]
         ctx = ObjectiveContext(repr_dim=repr_dim, feature_dim=cfg.feature_dim, hidden_dim=cfg.hidden_dim,
-                               action_dim=action_dim, K=cfg.K, seq_dim=seq_dim)
+                               action_dim=action_dim, K=cfg.K, seq_dim=seq_dim, encoder=self.encoder)
         objectives = OrderedDict()
         for name in active:
             ctx.params = dict(cfg.objective_params.get(name, {}))
@@ -215,6 +215,8 @@ class Agent:
         self.aux_opt.zero_grad(set_to_none=True)
         total.backward()
         self.aux_opt.step()
+        for objective in self.objectives.values():
+            objective.after_update()
         metrics["aux_loss"] = total.item()
         return metrics
 

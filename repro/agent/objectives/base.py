@@ -35,6 +35,7 @@ class ObjectiveContext:
     K: int
     seq_dim: int  # size of the encoded action sequence (K d_u, or K |A| without action encoder)
     params: dict[str, Any] = field(default_factory=dict)  # agent.objective_params.<name>
+    encoder: nn.Module | None = None  # the online conv encoder (read-only reference, e.g. to copy an EMA target)
     _shared: SharedHeads | None = None
 
     def shared(self) -> SharedHeads:
@@ -101,6 +102,9 @@ class Objective(nn.Module):
 
     def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:  # pragma: no cover
         raise NotImplementedError
+
+    def after_update(self) -> None:
+        """Called after the auxiliary optimizer step (e.g. to move an EMA target). Default: nothing."""
 
 
 def info_nce(logits: torch.Tensor) -> tuple[torch.Tensor, float]:

@@ -1,0 +1,147 @@
+"""Meta-world v3 from pixels (``metaworld`` is imported lazily inside :class:`MetaWorldEnv`).
+
+Setup (see docs/machine.md): ``metaworld.MT1("<name>-v3", seed)`` provides 50 train tasks (object and
+goal positions); the environment class renders ``camera_name`` at ``image_size``. Each ``reset(seed)``
+picks one of the train tasks deterministically from ``seed``, calls ``set_task`` and ``env.seed(seed)``
+(``reset(seed=...)`` is ignored by Meta-world). Episodes end after 500 environment steps (truncation:
+``last=True``, discount 1.0); there is no terminal state.
+
+The ``corner``/``corner2``/``corner3``/``corner4`` cameras are defined upside down (their up axis points
+down in the world), so their frames come out rotated by 180 degrees: such frames are rotated back, which
+gives the upright, non-mirrored view. The rule is generic: any camera whose up axis has a negative world
+z component is rotated.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from repro.envs.base import EnvSpec, TimeStep
+from repro.envs.registry import TaskInfo
+from repro.envs.wrappers import FrameStack
+
+
+class MetaWorldEnv:
+    """A Meta-world v3 MT1 task as a pixel :class:`repro.envs.base.Env`; ``info['success']`` is 0.0/1.0.
+
+    ``info['success']`` is the environment's success flag after the last environment step of the agent
+    step (a function of the current state, like ``evaluate_state``).
+    """
+
+    def __init__(
+        self,
+        info: TaskInfo,
+        *,
+        seed: int,
+        action_repeat: int = 2,
+        frame_stack: int = 3,
+        image_size: int = 84,
+        camera: int | str | None = None,
+    ) -> None:
+        if info.suite != "metaworld":
+            raise ValueError(f"{info.name} is not a Meta-world task (suite {info.suite!r})")
+        if action_repeat < 1:
+            raise ValueError(f"action_repeat must be >= 1, got {action_repeat}")
+        import metaworld
+
+        self.info = info
+        self._action_repeat = action_repeat
+        camera = info.camera if camera is None else camera
+        self._benchmark = metaworld.MT1(info.task, seed=seed)
+        self._tasks = list(self._benchmark.train_tasks)
+        camera_kwargs: dict[str, Any] = (
+            {"camera_id": camera} if isinstance(camera, int) else {"camera_name": camera}
+        )
+        self._env = self._benchmark.train_classes[info.task](
+            render_mode="rgb_array", width=image_size, height=image_size, **camera_kwargs
+        )
+        self._env.set_task(self._tasks[0])
+        self._camera = camera
+        self._rotate: bool | None = None  # decided after the first reset (needs camera poses)
+        self._frames = FrameStack(frame_stack)
+        self._done = True
+        self._state: np.ndarray | None = None
+        self.task_index = 0
+        self.spec = EnvSpec(
+            action_dim=int(self._env.action_space.shape[0]),
+            obs_shape=(3 * frame_stack, image_size, image_size),
+            has_success=True,
+        )
+
+    @property
+    def raw_env(self) -> Any:
+        """The underlying Meta-world environment (for tests and scripted policies)."""
+        return self._env
+
+    @property
+    def state_observation(self) -> np.ndarray:
+        """The current Meta-world state vector (39-d); not part of the pixel observation."""
+        if self._state is None:
+            raise RuntimeError("call reset(seed) first")
+        return self._state.copy()
+
+    @property
+    def frames_rotated(self) -> bool:
+        """Whether rendered frames are rotated by 180 degrees (camera defined upside down)."""
+        return bool(self._rotate)
+
+    def _camera_upside_down(self) -> bool:
+        """Whether the render camera's up axis points downwards in the world."""
+        model, data = self._env.model, self._env.data
+        cam_id = self._camera if isinstance(self._camera, int) else model.camera(self._camera).id
+        up_axis = data.cam_xmat[cam_id].reshape(3, 3)[:, 1]
+        return bool(up_axis[2] < 0.0)
+
+    def _render(self) -> np.ndarray:
+        frame = self._env.render()
+        if self._rotate:
+            frame = frame[::-1, ::-1]
+        return frame
+
+    def reset(self, seed: int) -> TimeStep:
+        self.task_index = int(np.random.default_rng(seed).integers(len(self._tasks)))
+        self._env.set_task(self._tasks[self.task_index])
+        self._env.seed(seed)
+        self._state, _ = self._env.reset()
+        if self._rotate is None:
+            self._rotate = self._camera_upside_down()
+        self._done = False
+        obs = self._frames.reset(self._render())
+        return TimeStep(
+            observation=obs, reward=0.0, discount=1.0, first=True, last=False, info={"success": 0.0}
+        )
+
+    def step(self, action: np.ndarray) -> TimeStep:
+        if self._done:
+            raise RuntimeError("episode is over: call reset(seed) first")
+        action = np.asarray(action, dtype=np.float32)
+        if action.shape != (self.spec.action_dim,):
+            raise ValueError(f"expected action shape ({self.spec.action_dim},), got {action.shape}")
+        action = np.clip(action, -1.0, 1.0)
+        reward = 0.0
+        discount = 1.0
+        last = False
+        success = 0.0
+        for _ in range(self._action_repeat):
+            self._state, r, terminated, truncated, env_info = self._env.step(action)
+            reward += float(r)
+            success = float(bool(env_info["success"]))
+            if terminated or truncated:
+                last = True
+                discount = 0.0 if terminated else 1.0
+                break
+        self._done = last
+        obs = self._frames.push(self._render())
+        return TimeStep(
+            observation=obs,
+            reward=reward,
+            discount=discount,
+            first=False,
+            last=last,
+            info={"success": success},
+        )
+
+    def close(self) -> None:
+        self._env.close()

@@ -1,0 +1,120 @@
+"""Replay buffer: frames stored once, stacks rebuilt by index, samples never cross episode boundaries."""
+
+import numpy as np
+import pytest
+import torch
+
+from repro.replay import ReplayBuffer
+
+A = 2
+
+
+def frame(ep, pos):
+    """A 3x4x4 frame whose pixels encode (episode, position)."""
+    f = np.zeros((3, 4, 4), dtype=np.uint8)
+    f[0] = ep
+    f[1] = pos
+    return f
+
+
+def fill(buf, lengths, start_ep=0):
+    for i, n in enumerate(lengths):
+        ep = start_ep + i
+        buf.start_episode(frame(ep, 0))
+        for t in range(n):
+            buf.add(np.array([ep, t], dtype=np.float32), reward=float(10 * ep + t), discount=1.0,
+                    next_frame=frame(ep, t + 1))
+        buf.end_episode()
+
+
+def decode(stack, F=3):
+    """(3F,4,4) -> list of (ep, pos) of the stacked frames, oldest first."""
+    return [(int(stack[3 * k, 0, 0]), int(stack[3 * k + 1, 0, 0])) for k in range(F)]
+
+
+@pytest.mark.parametrize("nstep,K", [(3, 3), (1, 3), (3, 1), (2, 5)])
+def test_samples_stay_inside_episodes(nstep, K):
+    buf = ReplayBuffer(1000, (3, 4, 4), A, frame_stack=3, nstep=nstep, K=K, discount=0.9, seed=0)
+    fill(buf, [7, 3, 12, 6])
+    h = max(nstep, K)
+    batch = buf.sample(512)
+    for i in range(512):
+        obs = decode(batch["obs"][i].numpy())
+        ep, t = obs[-1]
+        assert all(e == ep for e, _ in obs)
+        assert [p for _, p in obs] == [max(t - 2, 0), max(t - 1, 0), t]  # clamped at the first frame
+        assert decode(batch["next_obs"][i].numpy())[-1] == (ep, t + nstep)
+        assert decode(batch["future_obs"][i].numpy())[-1] == (ep, t + K)
+        np.testing.assert_array_equal(batch["action"][i].numpy(), [ep, t])
+        np.testing.assert_array_equal(batch["action_seq"][i].numpy(), [[ep, t + k] for k in range(K)])
+        rewards = [10 * ep + t + k for k in range(h)]
+        expected = sum(0.9 ** k * rewards[k] for k in range(nstep))
+        assert batch["reward"][i].item() == pytest.approx(expected, rel=1e-6)
+        assert batch["discount"][i].item() == pytest.approx(0.9 ** nstep, rel=1e-6)
+        assert batch["reward_ksum"][i].item() == pytest.approx(sum(rewards[:K]), rel=1e-6)
+    # an episode too short for the horizon is never sampled; every valid start is reachable
+    starts = {decode(batch["obs"][i].numpy())[-1] for i in range(512)}
+    lengths = {0: 7, 1: 3, 2: 12, 3: 6}
+    assert all(t + h <= lengths[e] for e, t in starts)
+    if h > 3:
+        assert not any(e == 1 for e, _ in starts)
+
+
+def test_discount_stops_at_terminal():
+    buf = ReplayBuffer(100, (3, 4, 4), A, frame_stack=3, nstep=3, K=1, discount=0.5, seed=0)
+    buf.start_episode(frame(0, 0))
+    for t in range(5):
+        buf.add(np.zeros(A, np.float32), reward=1.0, discount=0.0 if t == 3 else 1.0, next_frame=frame(0, t + 1))
+    buf.end_episode()
+    batch = buf.sample(256)
+    for i in range(256):
+        t = decode(batch["obs"][i].numpy())[-1][1]
+        if t == 2:  # rewards at t=2,3 count, the discount is cut after the terminal at t=3
+            assert batch["reward"][i].item() == pytest.approx(1 + 0.5)
+            assert batch["discount"][i].item() == 0.0
+
+
+def test_ring_wraparound_keeps_samples_valid_and_drops_overwritten_episodes():
+    buf = ReplayBuffer(20, (3, 4, 4), A, frame_stack=3, nstep=3, K=3, discount=0.99, seed=1)
+    fill(buf, [8, 8, 8, 8])  # 36 frames into 20 slots
+    assert len(buf) == 20
+    assert [r.ep_id for r in buf.episodes] == [1, 2, 3] or [r.ep_id for r in buf.episodes] == [2, 3]
+    batch = buf.sample(300)
+    for i in range(300):
+        obs = decode(batch["obs"][i].numpy())
+        ep, t = obs[-1]
+        assert all(e == ep for e, _ in obs)
+        assert [p for _, p in obs] == [max(t - 2, 0), max(t - 1, 0), t]
+        assert decode(batch["future_obs"][i].numpy())[-1] == (ep, t + 3)
+
+
+def test_memory_is_within_ten_percent_of_raw_frames():
+    buf = ReplayBuffer(10_000, (3, 84, 84), 12, frame_stack=3, nstep=3, K=3, discount=0.99, seed=0)
+    assert buf.frame_bytes() == 10_000 * 3 * 84 * 84
+    assert buf.nbytes() <= 1.10 * buf.frame_bytes()
+
+
+def test_state_restore_reproduces_samples():
+    buf = ReplayBuffer(20, (3, 4, 4), A, frame_stack=3, nstep=2, K=3, discount=0.9, seed=5)
+    store = {}
+    for i, n in enumerate([8, 6, 9, 7]):
+        buf.start_episode(frame(i, 0))
+        for t in range(n):
+            buf.add(np.array([i, t], np.float32), float(t), 1.0, frame(i, t + 1))
+        data = buf.end_episode()
+        store[int(data["ep_id"])] = data
+    state = buf.state()
+    other = ReplayBuffer(20, (3, 4, 4), A, frame_stack=3, nstep=2, K=3, discount=0.9, seed=99)
+    other.restore(state, lambda ep: store[ep])
+    a, b = buf.sample(64), other.sample(64)
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+
+
+def test_empty_or_too_short_buffer_raises_clearly():
+    buf = ReplayBuffer(10, (3, 4, 4), A, frame_stack=3, nstep=3, K=3, discount=0.9, seed=0)
+    with pytest.raises(ValueError, match="empty"):
+        buf.sample(4)
+    fill(buf, [2])
+    with pytest.raises(ValueError, match="no transition"):
+        buf.sample(4)
