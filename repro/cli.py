@@ -54,7 +54,7 @@ def _dry_run(cfg) -> None:
     from repro.envs import get_task
 
     rc = typed(cfg)
-    console = Console()
+    console = _console()
     console.print(OmegaConf.to_yaml(cfg, resolve=True), markup=False, highlight=False)
     info = get_task(rc.task.name)
     action_dim = info.action_dim + rc.env.distracting_dims
@@ -88,7 +88,16 @@ def tasks():
         cfg = compose([f"task={name}"])
         table.add_row(name, info.suite, str(info.action_dim), cfg.task.preset, str(cfg.agent.K),
                       str(cfg.agent.nstep), f"{cfg.train.frames:,}", str(info.camera))
-    Console().print(table)
+    _console().print(table)
+
+
+def _console():
+    """A rich console at least 120 columns wide, so tables are not truncated in narrow or piped output."""
+    import shutil
+
+    from rich.console import Console
+
+    return Console(width=max(120, shutil.get_terminal_size((120, 24)).columns))
 
 
 def _register_plugins() -> None:

@@ -106,7 +106,9 @@ def validate(raw: DictConfig) -> DictConfig:
         OmegaConf.resolve(raw)
         cfg = OmegaConf.merge(OmegaConf.structured(RunConfig), raw)
     except OmegaConfBaseException as exc:
-        raise ConfigError(str(exc).strip().splitlines()[0]) from None
+        key = getattr(exc, "full_key", None)
+        first = str(exc).strip().splitlines()[0]
+        raise ConfigError(f"{key}: {first}" if key else first) from None
     for key, choices in VALID_CHOICES.items():
         value = OmegaConf.select(cfg, key)
         if value not in choices:

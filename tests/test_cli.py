@@ -1,0 +1,73 @@
+"""The `repro` CLI as a user types it: tasks, dry runs, bad input, a Meta-world run with success."""
+
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from repro.cli import app
+from repro.envs import TASKS
+
+runner = CliRunner()
+
+
+def repro(*args: str, timeout: int = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "repro", *args], capture_output=True, text=True, timeout=timeout)
+
+
+def test_tasks_lists_every_task_with_action_dim_and_defaults():
+    result = runner.invoke(app, ["tasks"], terminal_width=200)
+    assert result.exit_code == 0, result.output
+    for name, info in TASKS.items():
+        line = next(l for l in result.output.splitlines() if f" {name} " in l)
+        assert f" {info.action_dim} " in line
+    qr = next(l for l in result.output.splitlines() if " quadruped_run " in l)
+    hh = next(l for l in result.output.splitlines() if " hopper_hop " in l)
+    assert " 1 " in qr.split("medium")[1][:6]  # K=1 on quadruped_run
+    assert " 3 " in hh.split("medium")[1][:6]  # K=3 on hopper_hop
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["task=hoper_hop"], "hopper_hop"),
+    (["agent=tacoo"], "taco"),
+    (["agent.KK=3"], "K"),
+    (["agent.K=abc"], "agent.K"),
+    (["agent.reward_target=sum"], "nstep"),
+    (["agent.objectives.spr2=1"], "objective"),
+    (["seed"], "key=value"),
+])
+def test_bad_input_is_one_line_and_exit_2(args, needle):
+    out = repro("train", "--dry-run", *args, timeout=120)
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1, out.stderr
+    assert needle in lines[0] and "Traceback" not in out.stderr
+
+
+def test_dry_run_prints_config_and_parameter_table_without_training(tmp_path):
+    result = runner.invoke(app, ["train", "--dry-run", "agent=drqv2", "task=walker_run",
+                                 f"runtime.results_root={tmp_path}"], terminal_width=200)
+    assert result.exit_code == 0, result.output
+    assert "batch_size: 512" in result.output and "nstep: 1" in result.output
+    assert "encoder" in result.output and "total" in result.output
+    assert "objective" not in result.output.split("trainable parameters")[1]
+    assert not any(tmp_path.iterdir())  # nothing written
+    result = runner.invoke(app, ["train", "--dry-run", "task=cheetah_run", "env.distracting_dims=20"],
+                           terminal_width=200)
+    assert "|A|=26" in result.output and "objective.taco" in result.output
+
+
+@pytest.mark.slow
+def test_metaworld_tiny_run_logs_success(tmp_path):
+    out = repro("train", "profile=tiny", "task=hand-insert", "train.frames=80", "train.seed_frames=40",
+                "train.eval_every_frames=80", "env.max_episode_frames=40", "runtime.threads=1",
+                f"runtime.results_root={tmp_path}", timeout=600)
+    assert out.returncode == 0, out.stderr
+    run = tmp_path / "default/taco/base/hand-insert/seed_1"
+    ev = pd.read_csv(run / "eval.csv")
+    assert list(ev["frame"]) == [0, 80]
+    assert ev["success"].between(0, 1).all() and ev["success"].notna().all()
+    tr = pd.read_csv(run / "train.csv")
+    assert tr["success"].notna().all()
