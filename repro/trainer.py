@@ -97,7 +97,7 @@ class Trainer:
                 length += 1
                 success = max(success, float(ts.info.get("success", 0.0)))
             returns.append(total)
-            lengths.append(length)
+            lengths.append(length * self.action_repeat)  # in frames, as upstream
             successes.append(success)
         self.agent.train(True)
         mean = float(np.mean(returns)) if returns else float("nan")
@@ -156,7 +156,7 @@ class Trainer:
                 self.counters.episode += 1
                 elapsed = max(time.time() - ep_start - self._eval_seconds, 1e-9)
                 row = {"frame": self.frame, "step": self.counters.step, "episode": self.counters.episode,
-                       "episode_reward": ep_reward, "episode_length": ep_len,
+                       "episode_reward": ep_reward, "episode_length": ep_len * self.action_repeat,
                        "success": ep_success if self.has_success else None, "buffer_size": len(self.buffer),
                        "stddev": self.agent.stddev(self.counters.step),
                        "fps": round(ep_len * self.action_repeat / elapsed, 3),
