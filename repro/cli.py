@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import os
-import sys
-from typing import List, Optional
+from typing import Optional
 
 import typer
 from omegaconf import OmegaConf
@@ -46,7 +45,6 @@ def train(ctx: typer.Context,
 
 
 def _dry_run(cfg) -> None:
-    from rich.console import Console
     from rich.table import Table
 
     from repro.api import build_agent
@@ -75,7 +73,6 @@ def _dry_run(cfg) -> None:
 @app.command()
 def tasks():
     """List every task with its suite, action dimension and defaults."""
-    from rich.console import Console
     from rich.table import Table
 
     from repro.config import compose
@@ -95,7 +92,6 @@ def _console():
     """A rich console at least 120 columns wide, so tables are not truncated in narrow or piped output."""
     import shutil
 
-    from rich.console import Console
 
     return Console(width=max(120, shutil.get_terminal_size((120, 24)).columns))
 

@@ -112,8 +112,8 @@ class Agent:
 
     def metric_names(self) -> list[str]:
         names = list(CRITIC_METRICS) + list(ACTOR_METRICS)
-        for name in self.objectives:
-            names += [f"{name}_loss"] + ([f"{name}_acc"] if name in ("taco", "curl") else [])
+        for objective in self.objectives.values():
+            names += objective.metric_keys()
         if self.objectives:
             names.append("aux_loss")
         return names

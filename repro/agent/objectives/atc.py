@@ -19,12 +19,14 @@ from torch import nn
 
 from repro.agent.networks import orthogonal_init
 from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, info_nce, register
-from repro.agent.objectives.spr import MomentumTarget, read_params
+from repro.agent.objectives.common import MomentumTarget, read_params
 
 
 @register("atc")
 class ATCObjective(Objective):
     """InfoNCE between (c_t + MLP(c_t)) W and the momentum target's latent of o_{t+K}."""
+
+    extra_metrics = ("acc",)
 
     DEFAULTS: dict[str, Any] = {
         "momentum": 0.99,          # ATC on DMControl: target update rate tau = 0.01 every update

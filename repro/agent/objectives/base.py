@@ -82,6 +82,10 @@ class AuxBatch:
                 return self.encoder(self.aug(self.batch["future_obs"].float()))
         return self.memo("future", fn)
 
+    def encode_actions(self, actions: torch.Tensor) -> torch.Tensor:
+        """Encode any (B, K, |A|) action sequence with the agent's action (sequence) encoder."""
+        return self._encode_actions(actions)
+
     def action_sequence(self) -> torch.Tensor:
         """Encoded actions a_t..a_{t+K-1}: (B, seq_dim)."""
         return self.memo("u_seq", lambda: self._encode_actions(self.batch["action_seq"]))
@@ -95,6 +99,12 @@ class Objective(nn.Module):
     """Base class: subclasses build parameters from the context and implement ``forward``."""
 
     name: ClassVar[str] = ""
+    extra_metrics: ClassVar[tuple[str, ...]] = ()  # metric suffixes besides "loss", e.g. ("acc",)
+
+    @classmethod
+    def metric_keys(cls) -> list[str]:
+        """Column names of this objective's metrics in train.csv."""
+        return [f"{cls.name}_loss"] + [f"{cls.name}_{m}" for m in cls.extra_metrics]
 
     def __init__(self, ctx: ObjectiveContext):
         super().__init__()

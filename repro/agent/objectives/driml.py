@@ -27,6 +27,8 @@ def first_action_only(action_seq: torch.Tensor) -> torch.Tensor:
 class DRIMLObjective(Objective):
     """InfoNCE between G(z_t, encode([a_t, 0, .., 0])) and H(z_{t+K}) with the shared bilinear W."""
 
+    extra_metrics = ("acc",)
+
     def __init__(self, ctx: ObjectiveContext):
         super().__init__(ctx)
         if ctx.params:
@@ -39,7 +41,7 @@ class DRIMLObjective(Objective):
     def first_action_code(self, aux: AuxBatch) -> torch.Tensor:
         """The action sequence encoder applied to [a_t, 0, .., 0]: (B, seq_dim), with gradient."""
         # AuxBatch has no public hook for encoding another action tensor; its encoder is the agent's.
-        return aux.memo("u_first", lambda: aux._encode_actions(first_action_only(aux.batch["action_seq"])))
+        return aux.memo("u_first", lambda: aux.encode_actions(first_action_only(aux.batch["action_seq"])))
 
     def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:
         z = aux.memo("z_anchor", lambda: self.heads.state_proj(aux.anchor()))

@@ -13,6 +13,8 @@ from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, i
 class TACOObjective(Objective):
     """InfoNCE between G(z_t, u_t..u_{t+K-1}) and H(z_{t+K}) with the shared bilinear W."""
 
+    extra_metrics = ("acc",)
+
     def __init__(self, ctx: ObjectiveContext):
         super().__init__(ctx)
         self.heads = ctx.shared()
@@ -32,6 +34,8 @@ class TACOObjective(Objective):
 @register("curl")
 class CURLObjective(Objective):
     """InfoNCE between two augmentations of the same observation, through H and W."""
+
+    extra_metrics = ("acc",)
 
     def __init__(self, ctx: ObjectiveContext):
         super().__init__(ctx)
