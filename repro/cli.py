@@ -92,6 +92,7 @@ def _console():
     """A rich console at least 120 columns wide, so tables are not truncated in narrow or piped output."""
     import shutil
 
+    from rich.console import Console
 
     return Console(width=max(120, shutil.get_terminal_size((120, 24)).columns))
 
