@@ -38,6 +38,8 @@ class AgentConfig:
     reward_target: str = "nstep"
     objectives: dict[str, float] = field(default_factory=dict)
     objective_params: dict[str, Any] = field(default_factory=dict)
+    compile: bool = False
+    amp: bool = False
 
 
 @dataclass

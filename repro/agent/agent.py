@@ -38,6 +38,8 @@ class Agent:
         self.aug = RandomShift(pad=4)
 
         self.encoder = Encoder(obs_shape).to(self.device)
+        # Opt-in speedups: a compiled encoder for updates, and bfloat16 autocast of the forward passes.
+        self._encode = torch.compile(self.encoder, dynamic=False) if cfg.compile else self.encoder
         repr_dim = self.encoder.repr_dim
         self.action_encoder: ActionEncoder | None = None
         if cfg.action_encoder:
@@ -160,14 +162,19 @@ class Agent:
         return action.cpu().numpy()[0].astype(np.float32)
 
     # ----------------------------------------------------------------- learning
+    def _amp(self):
+        """bfloat16 autocast of forward passes when ``agent.amp`` is on (losses stay float32)."""
+        return torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=self.cfg.amp)
+
     def update(self, batch: dict[str, torch.Tensor], step: int) -> dict[str, float]:
         """One DrQ-v2 update (critic, actor, target) followed by one auxiliary step."""
         metrics: dict[str, float] = {}
         obs = self.aug(batch["obs"].float())
         next_obs = self.aug(batch["next_obs"].float())
-        h = self.encoder(obs)
-        with torch.no_grad():
-            next_h = self.encoder(next_obs)
+        with self._amp():
+            h = self._encode(obs)
+            with torch.no_grad():
+                next_h = self._encode(next_obs)
         metrics.update(self._update_critic(h, batch["action"], batch["reward"], batch["discount"], next_h, step))
         metrics.update(self._update_actor(h.detach(), step))
         soft_update(self.critic, self.critic_target, self.cfg.critic_target_tau)
@@ -176,13 +183,15 @@ class Agent:
         return metrics
 
     def _update_critic(self, h, action, reward, discount, next_h, step) -> dict[str, float]:
-        with torch.no_grad():
-            dist = self.actor(next_h, self.stddev(step))
-            next_action = self.encode_action(dist.sample(clip=self.cfg.stddev_clip))
-            tq1, tq2 = self.critic_target(next_h, next_action)
-            target_q = reward + discount * torch.min(tq1, tq2)
-        q1, q2 = self.critic(h, self.encode_action(action))
-        loss = nn.functional.mse_loss(q1, target_q) + nn.functional.mse_loss(q2, target_q)
+        with self._amp():
+            with torch.no_grad():
+                dist = self.actor(next_h, self.stddev(step))
+                next_action = self.encode_action(dist.sample(clip=self.cfg.stddev_clip))
+                tq1, tq2 = self.critic_target(next_h, next_action)
+                target_q = (reward + discount * torch.min(tq1, tq2)).float()
+            q1, q2 = self.critic(h, self.encode_action(action))
+            q1, q2 = q1.float(), q2.float()
+            loss = nn.functional.mse_loss(q1, target_q) + nn.functional.mse_loss(q2, target_q)
         self.encoder_opt.zero_grad(set_to_none=True)
         self.critic_opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -192,11 +201,12 @@ class Agent:
                 "critic_target_q": target_q.mean().item()}
 
     def _update_actor(self, h, step) -> dict[str, float]:
-        dist = self.actor(h, self.stddev(step))
-        action = dist.sample(clip=self.cfg.stddev_clip)
-        log_prob = dist.log_prob(action).sum(-1, keepdim=True)
-        q1, q2 = self.critic(h, self.encode_action(action))
-        loss = -torch.min(q1, q2).mean()
+        with self._amp():
+            dist = self.actor(h, self.stddev(step))
+            action = dist.sample(clip=self.cfg.stddev_clip)
+            log_prob = dist.log_prob(action).sum(-1, keepdim=True)
+            q1, q2 = self.critic(h, self.encode_action(action))
+            loss = -torch.min(q1, q2).float().mean()
         self.actor_opt.zero_grad(set_to_none=True)
         loss.backward()
         self.actor_opt.step()
@@ -204,13 +214,14 @@ class Agent:
                 "actor_ent": dist.entropy().sum(-1).mean().item()}
 
     def _update_aux(self, batch: dict[str, torch.Tensor]) -> dict[str, float]:
-        aux = AuxBatch(batch, self.encoder, self.aug, self.encode_action_sequence, self.cfg.reward_target)
+        aux = AuxBatch(batch, self._encode, self.aug, self.encode_action_sequence, self.cfg.reward_target)
         total = torch.zeros((), device=self.device)
         metrics: dict[str, float] = {}
-        for name, objective in self.objectives.items():
-            loss, m = objective(aux)
-            total = total + self.weights[name] * loss
-            metrics.update(m)
+        with self._amp():
+            for name, objective in self.objectives.items():
+                loss, m = objective(aux)
+                total = total + self.weights[name] * loss.float()
+                metrics.update(m)
         assert self.aux_opt is not None
         self.aux_opt.zero_grad(set_to_none=True)
         total.backward()
