@@ -34,13 +34,14 @@ def _batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tensor]:
 
 
 def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
-                device: str = "cpu") -> dict:
+                device: str = "cpu", speedup: str = "plain") -> dict:
     """Median wall-clock seconds of one full agent update (after one warm-up update)."""
     from repro.agent.agent import Agent
     from repro.config import compose, typed
     from repro.envs import get_task
 
-    rc = typed(compose([f"agent={algo}", f"task={task}", f"agent.batch_size={batch_size}"]))
+    flags = {"plain": [], "amp": ["agent.amp=true"], "compile": ["agent.compile=true"]}[speedup]
+    rc = typed(compose([f"agent={algo}", f"task={task}", f"agent.batch_size={batch_size}", *flags]))
     A = get_task(task).action_dim
     torch.manual_seed(0)
     agent = Agent(rc.agent, (9, 84, 84), A, device=device)
@@ -58,7 +59,7 @@ def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: 
     seconds = statistics.median(times)
     # one update every 2 agent steps at action repeat 2 = 4 frames per update (update-bound estimate)
     fps = rc.train.update_every_steps * rc.env.action_repeat / seconds
-    return {"algo": algo, "batch_size": batch_size, "update_seconds": round(seconds, 4),
+    return {"algo": algo, "batch_size": batch_size, "speedup": speedup, "update_seconds": round(seconds, 4),
             "fps_estimate": round(fps, 3), "repeats": repeats}
 
 
@@ -80,10 +81,20 @@ def hardware(device: str) -> str:
 
 
 def run_bench(configs: list[tuple[str, int]], repeats: int, device: str, out_dir: Path,
-              echo=print) -> dict:
+              echo=print, speedups: tuple[str, ...] = ()) -> dict:
     results = []
-    for algo, bs in configs:
-        row = time_update(algo, bs, repeats=repeats, device=device)
+    plain_seconds: dict[tuple[str, int], float] = {}
+    for algo, bs, speedup in [(a, b, "plain") for a, b in configs] + [(a, b, s) for s in speedups
+                                                                      for a, b in configs]:
+        row = time_update(algo, bs, repeats=repeats, device=device, speedup=speedup)
+        if speedup == "plain":
+            plain_seconds[(algo, bs)] = row["update_seconds"]
+        else:
+            row["speedup_vs_plain"] = round(plain_seconds[(algo, bs)] / row["update_seconds"], 3)
+            results.append(row)
+            echo(f"{algo:>6} batch {bs:>5} {speedup}: {row['update_seconds']:.3f} s/update, "
+                 f"{row['speedup_vs_plain']:.2f}x the plain path")
+            continue
         upstream = UPSTREAM_CPU_SECONDS.get((algo, bs))
         if upstream is not None and device == "cpu":
             row["upstream_cpu_seconds"] = upstream
@@ -91,7 +102,7 @@ def run_bench(configs: list[tuple[str, int]], repeats: int, device: str, out_dir
         results.append(row)
         echo(f"{algo:>6} batch {bs:>5}: {row['update_seconds']:.3f} s/update, ~{row['fps_estimate']:.1f} fps"
              + (f", {row['speedup_vs_upstream']:.2f}x upstream's CPU time" if "speedup_vs_upstream" in row else ""))
-    by = {(r["algo"], r["batch_size"]): r["update_seconds"] for r in results}
+    by = plain_seconds
     ratios = {}
     if ("taco", 1024) in by and ("drqv2", 256) in by:
         ratios["taco1024_over_drqv2_256"] = round(by[("taco", 1024)] / by[("drqv2", 256)], 3)
@@ -114,6 +125,8 @@ def register(app: typer.Typer) -> None:
               algo: Optional[list[str]] = typer.Option(None, "--algo", help="taco and/or drqv2 (default both)."),
               repeats: int = typer.Option(2, help="Timed updates per setting (median reported)."),
               device: str = typer.Option("cpu", help="cpu or cuda."),
+              amp: bool = typer.Option(False, "--amp", help="Also time agent.amp=true (ratio to plain)."),
+              compile_: bool = typer.Option(False, "--compile", help="Also time agent.compile=true (ratio to plain)."),
               results_root: Path = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).")):
         """Time one update of TACO and DrQ-v2 at batch 256 and 1024; report ratios and replay memory."""
         if device.startswith("cuda") and not torch.cuda.is_available():
@@ -124,4 +137,5 @@ def register(app: typer.Typer) -> None:
                 typer.echo(f"error: unknown algo '{a}' (taco, drqv2)", err=True)
                 raise typer.Exit(2)
         configs = [(a, b) for a in (algo or ["taco", "drqv2"]) for b in (batch or [256, 1024])]
-        run_bench(configs, repeats, device, results_root / "bench", echo=typer.echo)
+        speedups = tuple(name for name, on in (("amp", amp), ("compile", compile_)) if on)
+        run_bench(configs, repeats, device, results_root / "bench", echo=typer.echo, speedups=speedups)
