@@ -1,0 +1,435 @@
+"""A verdict for every claim of ``claims.csv`` from the user's runs: supported / refuted / not enough data.
+
+Rules (also in docs/analysis.md): verdicts compare point estimates (means over the seeds that reached
+the frame budget) with the tolerances written in each rule; 95% CIs are reported beside them. A cell
+with fewer than ``ctx.min_seeds`` seeds counts as missing. A claim about every task ("on each of the
+nine tasks") is refuted by one counterexample among the cells that exist, even if others are missing.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from analysis import select
+from analysis.context import Context
+from analysis.paper import DMC9, METAWORLD6, OFFLINE_TASKS
+from analysis.robustness import seed_spread, solved_counts
+from analysis.scores import best_online_returns, normalize_offline
+from analysis.speed import speed_measurements
+from analysis.stats import grand_mean_ci, ratio_of_means, score_matrix
+from analysis.tables import write_table
+from analysis.tsne import CLUSTER_THRESHOLD, tsne_for_context
+
+SUPPORTED, REFUTED, NO_DATA = "supported", "refuted", "not enough data"
+
+
+@dataclass
+class Verdict:
+    """The outcome of one claim: verdict, the numbers behind it, and the rule applied."""
+
+    id: str
+    claim: str
+    verdict: str
+    evidence: str
+    rule: str
+
+
+class NotEnoughData(Exception):
+    """Raised by a check when the cells it needs are missing or have too few seeds."""
+
+
+CHECKS: dict[str, tuple[Callable[[Context], tuple[str, str]], str]] = {}
+
+
+def check(claim_id: str, rule: str):
+    """Register ``fn(ctx) -> (verdict, evidence)`` for ``claim_id`` with a one-line ``rule``."""
+
+    def deco(fn: Callable[[Context], tuple[str, str]]):
+        CHECKS[claim_id] = (fn, rule)
+        return fn
+
+    return deco
+
+
+# ---------------------------------------------------------------- helpers
+def means(df: pd.DataFrame, keys: Sequence[str], value: str = "score") -> dict[tuple, tuple[int, float]]:
+    """(n, mean) per key over the runs that reached the budget."""
+    out: dict[tuple, tuple[int, float]] = {}
+    if df.empty:
+        return out
+    ok = df[df["reached"].astype(bool) & df[value].notna()]
+    for key, rows in ok.groupby(list(keys)):
+        out[key if isinstance(key, tuple) else (key,)] = (len(rows), float(rows[value].mean()))
+    return out
+
+
+def get(ctx: Context, table: dict[tuple, tuple[int, float]], *key) -> float | None:
+    """The mean of a cell with at least ``ctx.min_seeds`` seeds, else None."""
+    n, mean = table.get(tuple(key), (0, math.nan))
+    return mean if n >= ctx.min_seeds else None
+
+
+def require(ctx: Context, table: dict, keys: Sequence[tuple]) -> None:
+    missing = [k for k in keys if get(ctx, table, *k) is None]
+    if missing:
+        shown = ", ".join("/".join(str(p) for p in k) for k in missing[:6])
+        more = f" (+{len(missing) - 6} more)" if len(missing) > 6 else ""
+        raise NotEnoughData(f"need >= {ctx.min_seeds} seeds that reached {ctx.budget_text()} for: {shown}{more}")
+
+
+def pct(a: float, b: float) -> str:
+    return f"{100 * (a / b - 1):+.1f}%"
+
+
+def universal(ctx: Context, table: dict, pairs: Sequence[tuple[tuple, tuple, str]]) -> tuple[str, str]:
+    """Check 'A > B' for every (A key, B key, name): refuted by any counterexample present, supported if all hold."""
+    fails, lines, missing = [], [], []
+    for a, b, name in pairs:
+        va, vb = get(ctx, table, *a), get(ctx, table, *b)
+        if va is None or vb is None:
+            missing.append(name)
+            continue
+        lines.append(f"{name}: {va:.1f} vs {vb:.1f}")
+        if not va > vb:
+            fails.append(name)
+    evidence = "; ".join(lines)
+    if fails:
+        return REFUTED, f"fails on {', '.join(fails)}. {evidence}"
+    if missing:
+        raise NotEnoughData(f"missing cells: {', '.join(missing)}" + (f". So far: {evidence}" if evidence else ""))
+    return SUPPORTED, evidence
+
+
+def labelled(df: pd.DataFrame) -> pd.DataFrame:
+    return df.drop(columns=["method"], errors="ignore").rename(columns={"label": "method"}) if "label" in df else df
+
+
+# ---------------------------------------------------------------- checks
+@check("online_avg_gain", "mean over the 9 tasks of TACO / DrQ-v2 >= 1.3 (about 1.4x, tolerance 0.1); CI by rliable bootstrap")
+def _online_avg_gain(ctx: Context) -> tuple[str, str]:
+    df = labelled(select.online_main(ctx.scores, ctx.experiment_map))
+    table = means(df, ["task", "method"])
+    require(ctx, table, [(t, m) for t in DMC9 for m in ("TACO", "DrQ-v2")])
+    ok = df[df["reached"].astype(bool)]
+    x, _ = score_matrix(ok[ok["method"] == "TACO"], DMC9)
+    y, _ = score_matrix(ok[ok["method"] == "DrQ-v2"], DMC9)
+    r, lo, hi = ratio_of_means(x, y, ctx.reps, ctx.seed)
+    verdict = SUPPORTED if r >= 1.3 else REFUTED
+    return verdict, f"TACO/DrQ-v2 = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); paper: 1.4x (Table 1 gives 1.397)"
+
+
+@check("online_beats_drqv2_all", "TACO mean > DrQ-v2 mean on each of the 9 tasks")
+def _beats_drqv2(ctx: Context) -> tuple[str, str]:
+    table = means(labelled(select.online_main(ctx.scores, ctx.experiment_map)), ["task", "method"])
+    return universal(ctx, table, [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9])
+
+
+@check("online_beats_model_based", "TACO mean > both DreamerV3 and TD-MPC on >= 6 of 9 tasks (baselines from runs, else the paper's Table 1)")
+def _beats_model_based(ctx: Context) -> tuple[str, str]:
+    table = means(labelled(select.online_main(ctx.scores, ctx.experiment_map)), ["task", "method"])
+    require(ctx, table, [(t, "TACO") for t in DMC9])
+    wins, used_paper, lines = 0, False, []
+    for t in DMC9:
+        base = []
+        for m in ("DreamerV3", "TD-MPC"):
+            v = get(ctx, table, t, m)
+            if v is None:
+                v, used_paper = ctx.paper.online_value(t, m)[0], True
+            base.append(v)
+        taco = get(ctx, table, t, "TACO")
+        wins += taco > max(base)
+        lines.append(f"{t} {taco:.0f} vs {max(base):.0f}")
+    src = " (DreamerV3/TD-MPC values from the paper, not rerun)" if used_paper else ""
+    return (SUPPORTED if wins >= 6 else REFUTED), f"TACO beats both on {wins}/9{src}: " + "; ".join(lines)
+
+
+def _mean_curves(ctx: Context, curves: pd.DataFrame, task: str) -> dict[str, pd.Series]:
+    out = {}
+    rows = curves[curves["task"] == task] if not curves.empty else curves
+    for method, r in rows.groupby("method") if not rows.empty else []:
+        piv = r.pivot_table(index="frame", columns="seed", values="value")
+        if piv.shape[1] >= ctx.min_seeds:
+            out[method] = piv.dropna().mean(axis=1)
+    return out
+
+
+@check("reacher_speed", "on reacher_hard, with target = 95% of TACO's best mean-curve value: TACO reaches it by 1.0M frames and DrQ-v2 needs >= 1.5x as many frames (or never does)")
+def _reacher_speed(ctx: Context) -> tuple[str, str]:
+    curves = labelled(select.online_main(ctx.curves, ctx.experiment_map))
+    mc = _mean_curves(ctx, curves, "reacher_hard")
+    if "TACO" not in mc or "DrQ-v2" not in mc or min(mc["TACO"].index.max(), mc["DrQ-v2"].index.max()) < 1e6:
+        raise NotEnoughData("need TACO and DrQ-v2 learning curves on reacher_hard up to >= 1M frames")
+    target = 0.95 * mc["TACO"].max()
+    t_taco = float(mc["TACO"][mc["TACO"] >= target].index.min())
+    hit = mc["DrQ-v2"][mc["DrQ-v2"] >= target]
+    t_drq = float(hit.index.min()) if len(hit) else None
+    ok = t_taco <= 1e6 and (t_drq is None or t_drq >= 1.5 * t_taco)
+    drq_text = f"{t_drq / 1e6:.2f}M" if t_drq is not None else f"not within {mc['DrQ-v2'].index.max() / 1e6:.2f}M"
+    return (SUPPORTED if ok else REFUTED), f"target {target:.0f}: TACO at {t_taco / 1e6:.2f}M, DrQ-v2 {drq_text} (paper: 0.75M vs 1.5M)"
+
+
+@check("longer_training", "TACO mean > DrQ-v2 mean at the last common frame (>= 2M) on quadruped_run, hopper_hop, walker_run, cheetah_run")
+def _longer(ctx: Context) -> tuple[str, str]:
+    curves = labelled(select.online_main(ctx.curves, ctx.experiment_map))
+    lines, fails, missing = [], [], []
+    for t in ("quadruped_run", "hopper_hop", "walker_run", "cheetah_run"):
+        mc = _mean_curves(ctx, curves, t)
+        if "TACO" not in mc or "DrQ-v2" not in mc:
+            missing.append(t)
+            continue
+        common = mc["TACO"].index.intersection(mc["DrQ-v2"].index)
+        if len(common) == 0 or common.max() < 2e6:
+            missing.append(t)
+            continue
+        f = common.max()
+        lines.append(f"{t} at {f / 1e6:.1f}M: {mc['TACO'][f]:.0f} vs {mc['DrQ-v2'][f]:.0f}")
+        if not mc["TACO"][f] > mc["DrQ-v2"][f]:
+            fails.append(t)
+    if fails:
+        return REFUTED, f"fails on {', '.join(fails)}: " + "; ".join(lines)
+    if missing:
+        raise NotEnoughData(f"need curves to >= 2M frames on {', '.join(missing)}")
+    return SUPPORTED, "; ".join(lines)
+
+
+@check("metaworld", "TACO mean success > each baseline's (DrQ-v2; A-LIX if run) on each of the 6 tasks at the budget")
+def _metaworld(ctx: Context) -> tuple[str, str]:
+    table = means(labelled(select.metaworld(ctx.scores, ctx.experiment_map)), ["task", "method"])
+    bases = ["DrQ-v2"] + (["A-LIX"] if any(k[1] == "A-LIX" for k in table) else [])
+    verdict, ev = universal(ctx, table, [((t, "TACO"), (t, b), f"{t} vs {b}") for t in METAWORLD6 for b in bases])
+    return verdict, ev + ("" if "A-LIX" in bases else " (A-LIX not run: checked against DrQ-v2 only)")
+
+
+@check("action_repr_gain", "TACO mean > TACO w/o action repr mean on every task of the action_repr sweep (named: quadruped_run, hopper_hop, reacher_hard)")
+def _action_repr_gain(ctx: Context) -> tuple[str, str]:
+    df = select.action_repr(ctx.scores, ctx.experiment_map)
+    table = means(df, ["task", "label"])
+    tasks = sorted({k[0] for k in table if k[1] == "TACO w/o action repr"} | {"quadruped_run", "hopper_hop", "reacher_hard"})
+    verdict, ev = universal(ctx, table, [((t, "TACO"), (t, "TACO w/o action repr"), t) for t in tasks])
+    gains = [f"{t} {pct(get(ctx, table, t, 'TACO'), get(ctx, table, t, 'TACO w/o action repr'))}" for t in tasks
+             if get(ctx, table, t, "TACO") and get(ctx, table, t, "TACO w/o action repr")]
+    return verdict, f"gains {', '.join(gains)} (paper: +12.2% quadruped_run ... +70.4% hopper_hop). {ev}"
+
+
+@check("no_action_repr_vs_drqv2", "TACO w/o action repr beats DrQ-v2 on quadruped_run and reacher_hard, and is within ±20% of DrQ-v2 on the other tasks of the sweep")
+def _no_repr_vs_drqv2(ctx: Context) -> tuple[str, str]:
+    df = select.action_repr(ctx.scores, ctx.experiment_map)
+    table = means(df, ["task", "label"])
+    require(ctx, table, [(t, lab) for t in ("quadruped_run", "reacher_hard") for lab in ("TACO w/o action repr", "DrQ-v2")])
+    lines, ok = [], True
+    for t in sorted({k[0] for k in table}):
+        a, b = get(ctx, table, t, "TACO w/o action repr"), get(ctx, table, t, "DrQ-v2")
+        if a is None or b is None:
+            continue
+        lines.append(f"{t} {pct(a, b)}")
+        ok &= (a > b) if t in ("quadruped_run", "reacher_hard") else abs(a / b - 1) <= 0.2
+    return (SUPPORTED if ok else REFUTED), "w/o action repr vs DrQ-v2: " + ", ".join(lines) + " (paper: +18% quadruped_run, +51% reacher_hard)"
+
+
+@check("tsne_clusters", f"silhouette of the 4 centroid labels on the t-SNE embedding: latent >= {CLUSTER_THRESHOLD} and raw < {CLUSTER_THRESHOLD}")
+def _tsne(ctx: Context) -> tuple[str, str]:
+    if not ctx.results.runs.empty and "tsne" not in ctx.cache:
+        from analysis.tsne import find_tsne_run
+
+        if find_tsne_run(ctx.results.runs) is None:
+            raise NotEnoughData("no TACO run with distracting action dims and a checkpoint (experiment 'tsne')")
+    elif ctx.results.runs.empty:
+        raise NotEnoughData("no runs")
+    res, info = tsne_for_context(ctx)
+    if res.silhouette_latent_2d is None:
+        raise NotEnoughData(info["reason"] or "no latent embedding")
+    ok = res.silhouette_latent_2d >= CLUSTER_THRESHOLD and res.silhouette_raw_2d < CLUSTER_THRESHOLD
+    return (SUPPORTED if ok else REFUTED), (
+        f"silhouette raw {res.silhouette_raw_2d:.3f}, latent {res.silhouette_latent_2d:.3f} (t-SNE 2-D; original "
+        f"spaces: raw {res.silhouette_raw:.3f}, latent {res.silhouette_latent:.3f}); run {info['run_id']}")
+
+
+@check("batch_size", "on quadruped_run TACO's mean is non-decreasing in batch size and >= 10% higher at the largest than at the smallest; DrQ-v2's range is <= 15% of its mean")
+def _batch(ctx: Context) -> tuple[str, str]:
+    df = select.batch_size(ctx.scores, ctx.experiment_map)
+    table = means(df, ["method", "batch_size"])
+    series = {}
+    for m in ("TACO", "DrQ-v2"):
+        pts = sorted((int(k[1]), get(ctx, table, *k)) for k in table if k[0] == m and get(ctx, table, *k) is not None)
+        if len(pts) < 2:
+            raise NotEnoughData(f"need {m} at >= 2 batch sizes (have {len(pts)})")
+        series[m] = pts
+    t_vals = [v for _, v in series["TACO"]]
+    d_vals = [v for _, v in series["DrQ-v2"]]
+    grows = all(b >= a for a, b in zip(t_vals, t_vals[1:])) and t_vals[-1] >= 1.1 * t_vals[0]
+    flat = (max(d_vals) - min(d_vals)) <= 0.15 * np.mean(d_vals)
+    ev = "; ".join(f"{m}: " + ", ".join(f"B{b} {v:.0f}" for b, v in pts) for m, pts in series.items())
+    return (SUPPORTED if grows and flat else REFUTED), ev + f" (TACO grows: {grows}; DrQ-v2 flat: {flat})"
+
+
+@check("objective_removal", "on quadruped_run the drop full - no TACO is positive and larger than the drops of no CURL and no reward")
+def _objectives(ctx: Context) -> tuple[str, str]:
+    table = means(select.objective_removal(ctx.scores, ctx.experiment_map), ["label"])
+    require(ctx, table, [("full",), ("no TACO",), ("no CURL",), ("no reward",)])
+    full = get(ctx, table, "full")
+    drops = {k: full - get(ctx, table, k) for k in ("no TACO", "no CURL", "no reward")}
+    ok = drops["no TACO"] > 0 and drops["no TACO"] > max(drops["no CURL"], drops["no reward"])
+    return (SUPPORTED if ok else REFUTED), f"full {full:.0f}; drops: " + ", ".join(f"{k} {v:.0f}" for k, v in drops.items())
+
+
+@check("vs_repr_objectives", "TACO mean > SPR, ATC and DRIML (where the paper has DRIML) on each of the 5 tasks")
+def _vs_repr(ctx: Context) -> tuple[str, str]:
+    table = means(labelled(select.repr_objectives(ctx.scores, ctx.experiment_map)), ["task", "method"])
+    tasks = ["quadruped_run", "walker_run", "hopper_hop", "reacher_hard", "acrobot_swingup"]
+    pairs = [((t, "TACO"), (t, m), f"{t} vs {m}") for t in tasks for m in ("SPR", "ATC", "DRIML")
+             if m != "DRIML" or ctx.paper.repr_value(t, "DRIML") is not None]
+    return universal(ctx, table, pairs)
+
+
+def _offline_table(ctx: Context, value: str = "score") -> tuple[dict, pd.DataFrame]:
+    df = labelled(select.offline(ctx.scores, ctx.experiment_map))
+    if not df.empty:
+        df = normalize_offline(df, best_online_returns(ctx.results))
+    return means(df, ["task", "dataset", "method"], value), df
+
+
+@check("offline_gain", "return of X+TACO > X for X in TD3+BC, CQL on each of the 12 task/dataset pairs")
+def _offline_gain(ctx: Context) -> tuple[str, str]:
+    table, _ = _offline_table(ctx)
+    pairs = [((t, d, f"{x}+TACO"), (t, d, x), f"{t}/{d} {x}") for t in OFFLINE_TASKS
+             for d in ("medium", "medium-replay", "full-replay") for x in ("TD3+BC", "CQL")]
+    return universal(ctx, table, pairs)
+
+
+@check("offline_average", "each printed average (TD3+BC+TACO 71.0, TD3+BC 68.2, CQL+TACO 72.1, CQL 66.7) lies in the 95% CI of the reproduced average normalised score over the 12 pairs")
+def _offline_average(ctx: Context) -> tuple[str, str]:
+    table, df = _offline_table(ctx, "normalized")
+    printed = {"TD3+BC+TACO": 71.0, "TD3+BC": 68.2, "CQL+TACO": 72.1, "CQL": 66.7}
+    pairs = [(t, d) for t in OFFLINE_TASKS for d in ("medium", "medium-replay", "full-replay")]
+    require(ctx, table, [(t, d, m) for t, d in pairs for m in printed])
+    ok, lines = True, []
+    for m, p in printed.items():
+        rows = df[(df["method"] == m) & df["reached"].astype(bool)]
+        rows = rows.assign(task=rows["task"] + "/" + rows["dataset"])
+        matrix, _ = score_matrix(rows, [f"{t}/{d}" for t, d in pairs], value="normalized")
+        mean, lo, hi = grand_mean_ci(matrix, ctx.reps, ctx.seed)
+        inside = lo <= p <= hi
+        ok &= inside
+        lines.append(f"{m} {mean:.1f} [{lo:.1f}, {hi:.1f}] vs {p}{'' if inside else ' (outside)'}")
+    return (SUPPORTED if ok else REFUTED), "; ".join(lines)
+
+
+@check("horizon_choice", "K=3 > K=1 on hopper_hop, quadruped_walk, acrobot_swingup, reacher_hard; K=1 > K=3 on quadruped_run, walker_run; K=1 and K=3 > DrQ-v2 on all 9 tasks")
+def _horizon(ctx: Context) -> tuple[str, str]:
+    table = means(select.horizon(ctx.scores, ctx.experiment_map), ["task", "label"])
+    pairs = [((t, "K=3"), (t, "K=1"), f"{t} K3>K1") for t in ("hopper_hop", "quadruped_walk", "acrobot_swingup", "reacher_hard")]
+    pairs += [((t, "K=1"), (t, "K=3"), f"{t} K1>K3") for t in ("quadruped_run", "walker_run")]
+    pairs += [((t, k), (t, "DrQ-v2"), f"{t} {k}>DrQ-v2") for t in DMC9 for k in ("K=1", "K=3")]
+    return universal(ctx, table, pairs)
+
+
+@check("action_repeat", "on hopper_hop the K in {1,3,5} with the highest mean is 5 at action repeat 1, 3 at 2 and 1 at 4")
+def _action_repeat(ctx: Context) -> tuple[str, str]:
+    table = means(select.action_repeat(ctx.scores, ctx.experiment_map), ["label"])
+    keys = [(f"AR={a}, K={k}",) for a in (1, 2, 4) for k in (1, 3, 5)]
+    require(ctx, table, keys)
+    best = {a: max((1, 3, 5), key=lambda k: get(ctx, table, f"AR={a}, K={k}")) for a in (1, 2, 4)}
+    ok = best == {1: 5, 2: 3, 4: 1}
+    return (SUPPORTED if ok else REFUTED), "best K: " + ", ".join(f"AR{a}: K={k}" for a, k in best.items()) + " (paper: AR1 K=5, AR2 K=3, AR4 K=1)"
+
+
+@check("action_dim", "on quadruped_run the means at dims 6 and 24 are below every intermediate dim's, and the intermediate dims' range is <= 15% of their mean")
+def _action_dim(ctx: Context) -> tuple[str, str]:
+    df = select.action_dim(ctx.scores, ctx.experiment_map)
+    table = means(df, ["dim"]) if not df.empty else {}
+    have = sorted(k[0] for k in table if get(ctx, table, *k) is not None)
+    mid = [d for d in have if 6 < d < 24]
+    if 6 not in have or 24 not in have or not mid:
+        raise NotEnoughData(f"need dims 6, 24 and one in between (have {have})")
+    mids = [get(ctx, table, d) for d in mid]
+    ok = max(get(ctx, table, 6), get(ctx, table, 24)) < min(mids) and (max(mids) - min(mids)) <= 0.15 * np.mean(mids)
+    return (SUPPORTED if ok else REFUTED), ", ".join(f"d={d} {get(ctx, table, d):.0f}" for d in have)
+
+
+@check("speed", "on one hardware, FPS(DrQ-v2 B256) / FPS(TACO B1024) within ±25% of 3.6, and TACO's FPS decreases with batch size where measured")
+def _speed(ctx: Context) -> tuple[str, str]:
+    meas = speed_measurements(ctx.results)
+    meas = meas[meas["speedup"] == "plain"]
+    if meas.empty:
+        raise NotEnoughData("no FPS measurements (runs' train.csv or bench/*.json)")
+    for hw, rows in meas.groupby("hardware"):
+        fps = rows.groupby(["method", "batch_size"])["fps"].mean()
+        if ("TACO", 1024) in fps.index and ("DrQ-v2", 256) in fps.index:
+            ratio = fps[("DrQ-v2", 256)] / fps[("TACO", 1024)]
+            taco = [(b, fps[("TACO", b)]) for b in (256, 512, 1024) if ("TACO", b) in fps.index]
+            decreasing = all(a[1] > b[1] for a, b in zip(taco, taco[1:]))
+            ok = 0.75 * 3.6 <= ratio <= 1.25 * 3.6 and decreasing
+            ev = f"on {hw}: ratio {ratio:.2f} (paper 3.6, from its table 130/35 = 3.71); TACO FPS " + ", ".join(
+                f"B{b} {v:.1f}" for b, v in taco) + " (paper B256 94, B512 65, B1024 35)"
+            return (SUPPORTED if ok else REFUTED), ev
+    raise NotEnoughData("need TACO B1024 and DrQ-v2 B256 FPS measured on the same hardware")
+
+
+@check("seed_robustness", "TACO's std over seeds < DrQ-v2's on >= 7 of the 9 tasks, and DrQ-v2 has >= 1 broken seed (below half its cell's median)")
+def _seeds(ctx: Context) -> tuple[str, str]:
+    df = select.online_main(ctx.scores, ctx.experiment_map)
+    df = df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df
+    spread = seed_spread(df)
+    need = max(3, ctx.min_seeds)
+    got = spread[spread["n"] >= need]
+    tasks = [t for t in DMC9 if set(got[got["task"] == t]["label"]) >= {"TACO", "DrQ-v2"}]
+    if len(tasks) < 9:
+        raise NotEnoughData(f"need >= {need} seeds of TACO and DrQ-v2 on all 9 tasks (have {len(tasks)})")
+    s = got.set_index(["task", "label"])
+    less = sum(s.loc[(t, "TACO"), "std"] < s.loc[(t, "DrQ-v2"), "std"] for t in tasks)
+    broken = int(got[got["label"] == "DrQ-v2"]["broken"].sum())
+    ok = less >= 7 and broken >= 1
+    return (SUPPORTED if ok else REFUTED), f"TACO's std lower on {less}/9 tasks; DrQ-v2 broken seeds: {broken}; TACO broken seeds: {int(got[got['label'] == 'TACO']['broken'].sum())}"
+
+
+@check("manipulator", "within 30M frames TACO solves (an eval return >= 500) at least a third of its seeds (paper 3/6) and DrQ-v2 none")
+def _manipulator(ctx: Context) -> tuple[str, str]:
+    curves = select.manipulator(ctx.curves, ctx.experiment_map)
+    solved = solved_counts(curves, 30e6)
+    s = solved.set_index("label") if not solved.empty else solved
+    if "DrQ-v2" in s.index and s.loc["DrQ-v2", "solved"] > 0:
+        return REFUTED, f"DrQ-v2 solves {int(s.loc['DrQ-v2', 'solved'])} seeds"
+    if "TACO" not in s.index or "DrQ-v2" not in s.index or min(s["runs"]) < ctx.min_seeds:
+        raise NotEnoughData("need TACO and DrQ-v2 runs on manipulator_bring_ball")
+    taco_frac = s.loc["TACO", "solved"] / s.loc["TACO", "runs"]
+    ev = f"TACO {int(s.loc['TACO', 'solved'])}/{int(s.loc['TACO', 'runs'])}, DrQ-v2 0/{int(s.loc['DrQ-v2', 'runs'])} solved"
+    if taco_frac >= 1 / 3:
+        return SUPPORTED, ev
+    if min(s["last_frame"]) >= 30e6:
+        return REFUTED, ev
+    raise NotEnoughData(ev + f"; runs reach only {min(s['last_frame']) / 1e6:.1f}M of 30M frames")
+
+
+# ---------------------------------------------------------------- entry points
+def evaluate_claims(ctx: Context) -> list[Verdict]:
+    """One verdict per row of claims.csv, in its order."""
+    out = []
+    for row in ctx.paper.claims.itertuples(index=False):
+        fn, rule = CHECKS.get(row.id, (None, "no check implemented"))
+        if fn is None:
+            out.append(Verdict(row.id, row.claim, NO_DATA, "no check implemented for this claim", rule))
+            continue
+        try:
+            verdict, evidence = fn(ctx)
+        except NotEnoughData as exc:
+            verdict, evidence = NO_DATA, str(exc)
+        out.append(Verdict(row.id, row.claim, verdict, f"at {ctx.budget_text()}: {evidence}", rule))
+    return out
+
+
+def write_claims(ctx: Context, verdicts: Sequence[Verdict]):
+    """Write ``claims.csv/.md/.tex`` to ``ctx.out_dir``."""
+    raw = pd.DataFrame([v.__dict__ for v in verdicts])
+    disp = pd.DataFrame({"Claim": [v.id for v in verdicts], "Verdict": [v.verdict for v in verdicts],
+                         "Numbers": [v.evidence for v in verdicts], "Rule": [v.rule for v in verdicts]})
+    counts = raw["verdict"].value_counts().to_dict() if not raw.empty else {}
+    caption = ("Verdict on each claim of the paper from the reproduced runs (" +
+               ", ".join(f"{counts.get(k, 0)} {k}" for k in (SUPPORTED, REFUTED, NO_DATA)) + ").")
+    notes = [f"A cell needs >= {ctx.min_seeds} seeds that reached {ctx.budget_text()}; verdicts compare means "
+             "with the tolerances in the Rule column; CIs are 95% stratified-bootstrap (rliable)."]
+    return write_table(ctx.out_dir, "claims", raw, caption, disp, notes)

@@ -1,0 +1,177 @@
+"""``repro figures | claims | audit | report``: commands added to the project's Typer app by :func:`register`.
+
+Bad input (unknown artifact id, missing results root, bad option) prints one line and exits non-zero.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from analysis.stats import DEFAULT_REPS, DEFAULT_SEED
+
+DEFAULT_RESULTS = Path("runs")
+RESULTS_OPT = typer.Option(DEFAULT_RESULTS, "--results", "-r", help="Results root holding the run directories.")
+OUT_OPT = typer.Option(Path("results/report"), "--out", "-o", help="Folder for tables, figures and reports.")
+FRAMES_OPT = typer.Option(1_000_000, "--frames", help="Frame budget of 'score at N frames' (the paper: 1M).")
+REPS_OPT = typer.Option(DEFAULT_REPS, "--reps", help="Bootstrap repetitions (rliable's default 50,000).")
+SEED_OPT = typer.Option(DEFAULT_SEED, "--seed", help="Random state of the bootstrap and t-SNE.")
+MIN_SEEDS_OPT = typer.Option(2, "--min-seeds", help="Seeds a cell needs before a claim gets a verdict.")
+MAP_OPT = typer.Option(
+    None, "--experiment-map", "-x",
+    help="Read a canonical experiment from other experiment names, e.g. -x main=tiny (repeatable).",
+)
+TSNE_OPT = typer.Option(1000, "--tsne-n", help="Noisy copies per centroid in F6 (the paper: 1000).")
+RENDER_OPT = typer.Option(
+    True, "--render-envs/--no-render-envs",
+    help="F13: render random-action frames with make_env when no run saved frames.",
+)
+
+
+def _fail(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code=2)
+
+
+def _experiment_map(items: Optional[list[str]]) -> dict[str, list[str]]:
+    out: dict[str, list[str]] = {}
+    for item in items or []:
+        if "=" not in item:
+            _fail(f"--experiment-map expects CANONICAL=ACTUAL[,ACTUAL...], got {item!r}")
+        key, value = item.split("=", 1)
+        out.setdefault(key.strip(), []).extend(v.strip() for v in value.split(",") if v.strip())
+    return out
+
+
+def make_context(results: Path, out: Path, frames: int, reps: int, seed: int, min_seeds: int = 2,
+                 experiment_map: Optional[list[str]] = None, tsne_n: int = 1000, render_envs: bool = True):
+    """Load the results root into a Context, or fail with one line."""
+    from analysis.context import Context
+    from analysis.load import ResultsRootError, load_results
+
+    if frames <= 0 or reps <= 0 or tsne_n <= 1 or min_seeds < 1:
+        _fail("--frames and --reps must be positive, --tsne-n > 1 and --min-seeds >= 1")
+    if results == DEFAULT_RESULTS and not results.exists():
+        # A fresh checkout before any training: show the paper-only view rather than an error.
+        results.mkdir(parents=True, exist_ok=True)
+    try:
+        loaded = load_results(results)
+    except ResultsRootError as exc:
+        _fail(f"{exc} (pass --results ROOT)")
+    return Context(results=loaded, out_dir=out, budget=frames, reps=reps, seed=seed, min_seeds=min_seeds,
+                   experiment_map=_experiment_map(experiment_map), tsne_n=tsne_n, render_envs=render_envs)
+
+
+def summarize_load(ctx) -> None:
+    """One line on what was loaded, and every problem file."""
+    res = ctx.results
+    if res.empty:
+        typer.echo(f"No runs found under {res.root}: rendering the paper-only view (the paper's reported numbers).")
+    else:
+        done = int((res.runs["status"] == "done").sum())
+        typer.echo(f"Loaded {len(res.runs)} runs ({done} done) from {res.root}; budget {ctx.budget_text()}.")
+    for problem in res.problems:
+        typer.echo(f"  {problem}", err=True)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``figures``, ``claims``, ``audit`` and ``report`` to ``app``."""
+
+    @app.command("figures")
+    def figures_cmd(
+        ids: Optional[list[str]] = typer.Argument(None, help="Artifact ids, e.g. F8 T1 (F7 = F7a F7b)."),
+        all_: bool = typer.Option(False, "--all", help="Render every table and figure."),
+        list_: bool = typer.Option(False, "--list", help="List the artifact ids and exit."),
+        results: Path = RESULTS_OPT,
+        out: Path = OUT_OPT,
+        frames: int = FRAMES_OPT,
+        reps: int = REPS_OPT,
+        seed: int = SEED_OPT,
+        experiment_map: Optional[list[str]] = MAP_OPT,
+        tsne_n: int = TSNE_OPT,
+        render_envs: bool = RENDER_OPT,
+    ) -> None:
+        """Render the paper's tables (CSV, Markdown, LaTeX) and figures (PNG, PDF) from the runs."""
+        from paper_figures.registry import REGISTRY, UnknownArtifactError, ordered_ids, resolve
+        from paper_figures.render import render_artifacts
+
+        if list_:
+            for aid in ordered_ids():
+                a = REGISTRY[aid]
+                typer.echo(f"{aid:<4} {a.kind:<6} {a.paper_label:<32} {a.title}")
+            return
+        if not all_ and not ids:
+            _fail("name artifact ids (e.g. 'repro figures F8 T1'), or pass --all or --list")
+        try:
+            arts = resolve(ordered_ids() if all_ else ids)
+        except UnknownArtifactError as exc:
+            _fail(str(exc))
+        ctx = make_context(results, out, frames, reps, seed, experiment_map=experiment_map, tsne_n=tsne_n,
+                           render_envs=render_envs)
+        summarize_load(ctx)
+        done = render_artifacts(ctx, arts, progress=lambda aid: typer.echo(f"  rendering {aid}"))
+        for r in done:
+            files = [p.name for p in r.figures] + [t.files[0].stem + ".{csv,md,tex}" for t in r.tables]
+            flag = "" if r.has_runs else " (no run data used)"
+            typer.echo(f"{r.id}: {', '.join(files)}{flag}")
+        typer.echo(f"Wrote {len(done)} artifacts to {out}")
+
+    @app.command("claims")
+    def claims_cmd(
+        results: Path = RESULTS_OPT,
+        out: Path = OUT_OPT,
+        frames: int = FRAMES_OPT,
+        reps: int = REPS_OPT,
+        seed: int = SEED_OPT,
+        min_seeds: int = MIN_SEEDS_OPT,
+        experiment_map: Optional[list[str]] = MAP_OPT,
+        tsne_n: int = TSNE_OPT,
+    ) -> None:
+        """A verdict (supported / refuted / not enough data) on each claim of the paper, with its numbers."""
+        from analysis.claims import evaluate_claims, write_claims
+
+        ctx = make_context(results, out, frames, reps, seed, min_seeds, experiment_map, tsne_n)
+        summarize_load(ctx)
+        verdicts = evaluate_claims(ctx)
+        for v in verdicts:
+            typer.echo(f"{v.id:<26} {v.verdict:<16} {v.evidence}")
+        table = write_claims(ctx, verdicts)
+        typer.echo(f"Wrote {', '.join(str(p) for p in table.files)}")
+
+    @app.command("audit")
+    def audit_cmd(
+        out: Path = OUT_OPT,
+        show_all: bool = typer.Option(False, "--all", help="Also list the checks that agree."),
+    ) -> None:
+        """Recompute the paper's derived numbers from its own tables and list every mismatch."""
+        from analysis.audit import mismatches, run_audit, write_audit
+
+        findings = run_audit()
+        bad = mismatches(findings)
+        for f in findings if show_all else bad:
+            status = "MISMATCH" if f in bad else ("ok" if f.kind == "check" else "info")
+            typer.echo(f"{status:<8} [{f.where}] {f.description}: paper {f.printed} | recomputed {f.recomputed}")
+        table = write_audit(out, findings)
+        typer.echo(f"{len(bad)} mismatches in {sum(f.kind == 'check' for f in findings)} checks; wrote {table.files[1]}")
+
+    @app.command("report")
+    def report_cmd(
+        results: Path = RESULTS_OPT,
+        out: Path = OUT_OPT,
+        frames: int = FRAMES_OPT,
+        reps: int = REPS_OPT,
+        seed: int = SEED_OPT,
+        min_seeds: int = MIN_SEEDS_OPT,
+        experiment_map: Optional[list[str]] = MAP_OPT,
+        tsne_n: int = TSNE_OPT,
+        render_envs: bool = RENDER_OPT,
+    ) -> None:
+        """Render everything and write REPORT.md and REPORT.html (tables, figures, claims, audit, provenance)."""
+        from analysis.report import build_report
+
+        ctx = make_context(results, out, frames, reps, seed, min_seeds, experiment_map, tsne_n, render_envs)
+        summarize_load(ctx)
+        md, html = build_report(ctx, progress=lambda aid: typer.echo(f"  rendering {aid}"))
+        typer.echo(f"Wrote {md} and {html}")

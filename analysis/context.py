@@ -1,0 +1,68 @@
+"""Shared inputs of every artifact and claim: loaded runs, frame budget, bootstrap settings, paper data."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import pandas as pd
+
+from analysis.load import Results
+from analysis.paper import PaperData
+from analysis.scores import DEFAULT_BUDGET, final_scores, learning_curves
+from analysis.stats import DEFAULT_REPS, DEFAULT_SEED
+
+CURVE_REPS = 2_000  # bootstrap repetitions for per-frame learning-curve bands (one CI per grid point)
+
+
+@dataclass
+class Context:
+    """Settings and cached derived tables shared by artifacts, claims and the report.
+
+    Attributes:
+        results: the loaded results root.
+        budget: frame budget of "score at N frames" (the paper's 1M).
+        reps: bootstrap repetitions of table CIs and rliable aggregates (rliable's default 50,000).
+        curve_reps: repetitions of the per-frame CI bands of learning curves.
+        seed: the bootstrap random state.
+        experiment_map: canonical experiment -> actual experiment names (see analysis.select).
+        out_dir: where artifacts are written.
+        tsne_n: noisy copies per centroid in F6 (the paper's 1000).
+        tsne_iter: t-SNE iterations (scikit-learn's default 1000).
+        render_envs: whether F13 may build environments to render frames.
+        min_seeds: seeds per cell a claim needs before it gets a verdict.
+        cache: results shared between artifacts and claims (e.g. the t-SNE of F6).
+    """
+
+    results: Results
+    paper: PaperData = field(default_factory=PaperData)
+    budget: int = DEFAULT_BUDGET
+    reps: int = DEFAULT_REPS
+    curve_reps: int = CURVE_REPS
+    seed: int = DEFAULT_SEED
+    experiment_map: dict[str, list[str]] = field(default_factory=dict)
+    out_dir: Path = Path("results/report")
+    tsne_n: int = 1000
+    tsne_iter: int = 1000
+    render_envs: bool = True
+    min_seeds: int = 2
+    cache: dict = field(default_factory=dict)
+
+    @cached_property
+    def scores(self) -> pd.DataFrame:
+        """Per-run score at the budget (see analysis.scores.final_scores)."""
+        return final_scores(self.results, self.budget)
+
+    @cached_property
+    def curves(self) -> pd.DataFrame:
+        """Every run's learning curve on a common frame grid."""
+        return learning_curves(self.results)
+
+    @property
+    def no_runs(self) -> bool:
+        return self.results.empty
+
+    def budget_text(self) -> str:
+        b = self.budget
+        return f"{b / 1e6:g}M frames" if b >= 1_000_000 else f"{b:,} frames"

@@ -1,0 +1,116 @@
+"""Names: method labels as the paper prints them, task display names, action dimensions."""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from typing import Any
+
+# agent.name (normalised: lower case, alphanumerics only) -> the paper's label
+ALGO_LABELS: dict[str, str] = {
+    "taco": "TACO",
+    "drqv2": "DrQ-v2",
+    "alix": "A-LIX",
+    "drq": "DrQ",
+    "curl": "CURL",
+    "dreamerv3": "DreamerV3",
+    "tdmpc": "TD-MPC",
+    "spr": "SPR",
+    "atc": "ATC",
+    "driml": "DRIML",
+    "td3bc": "TD3+BC",
+    "cql": "CQL",
+    "iql": "IQL",
+    "bc": "BC",
+    "dt": "DT",
+}
+OFFLINE_ALGOS = frozenset({"td3bc", "cql", "iql", "bc", "dt"})
+
+# True action dimensions of DMC domains (fallback when repro.envs is not importable).
+_DMC_ACTION_DIMS: dict[str, int] = {
+    "quadruped": 12,
+    "hopper": 4,
+    "walker": 6,
+    "cheetah": 6,
+    "finger": 2,
+    "acrobot": 1,
+    "reacher": 2,
+    "manipulator": 5,
+    "cartpole": 1,
+}
+
+# Names the paper prints that a plain title-casing would get wrong.
+_TASK_NAMES: dict[str, str] = {
+    "reach_duplo": "Reach Duplo",
+    "manipulator_bring_ball": "Manipulator Bring Ball",
+    "pick-place-wall": "Pick Place Wall",
+    "stick-pull": "Stick Pull",
+    "hand-insert": "Hand Insert",
+}
+
+DATASETS = ("medium", "medium-replay", "full-replay")
+
+
+def algo_key(name: Any) -> str:
+    """Normalise an ``agent.name`` ("DrQ-v2", "drqv2", "td3_bc") to a lookup key ("drqv2", "td3bc")."""
+    return re.sub(r"[^a-z0-9]", "", str(name).lower())
+
+
+def enabled_objectives(objectives: Mapping[str, Any] | None) -> tuple[str, ...]:
+    """Names of the auxiliary objectives with a non-zero weight, sorted."""
+    if not objectives:
+        return ()
+    out = []
+    for name, weight in objectives.items():
+        try:
+            on = float(weight) != 0.0
+        except (TypeError, ValueError):
+            on = bool(weight)
+        if on:
+            out.append(str(name))
+    return tuple(sorted(out))
+
+
+def method_label(algo: Any, objectives: tuple[str, ...] = ()) -> str:
+    """The paper's label of a method: ``TACO``, ``DrQ-v2``, ``CQL+TACO`` (offline algorithm with TACO)."""
+    key = algo_key(algo)
+    label = ALGO_LABELS.get(key, str(algo))
+    if key in OFFLINE_ALGOS and "taco" in objectives:
+        label += "+TACO"
+    return label
+
+
+def task_display(task: str) -> str:
+    """The paper's name of a task: ``quadruped_run`` -> ``Quadruped Run``, ``stick-pull`` -> ``Stick Pull``."""
+    if task in _TASK_NAMES:
+        return _TASK_NAMES[task]
+    return " ".join(part.capitalize() for part in re.split(r"[_\-]+", str(task)) if part)
+
+
+def normalize_dataset(name: Any) -> str | None:
+    """``medium_replay`` / ``Medium-replay`` -> ``medium-replay``; ``replay`` (Table 6's name) -> ``full-replay``."""
+    if name is None or (isinstance(name, float) and math.isnan(name)):
+        return None
+    text = str(name).strip().lower().replace("_", "-")
+    if text in ("replay", "full"):
+        return "full-replay"
+    return text or None
+
+
+def action_dim(task: str) -> int | None:
+    """True action dimension of ``task`` (without distracting dimensions), or None if unknown."""
+    try:
+        from repro.envs import get_task  # cheap: a static table, no simulator import
+
+        return int(get_task(task).action_dim)
+    except (ImportError, KeyError, AttributeError):
+        pass
+    domain = str(task).split("_", 1)[0]
+    return _DMC_ACTION_DIMS.get(domain)
+
+
+def default_latent_dim(task: str) -> int | None:
+    """TACO's default latent action dimension ceil(1.25 |A|) (paper, Appendix D)."""
+    dim = action_dim(task)
+    return None if dim is None else math.ceil(1.25 * dim)

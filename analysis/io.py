@@ -1,0 +1,44 @@
+"""Atomic file writing: every output is written to a temporary file in the same folder, then renamed."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+
+def _atomic_replace(path: Path, write) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_text(path: Path | str, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    return _atomic_replace(Path(path), lambda fh: fh.write(text.encode("utf-8")))
+
+
+def atomic_write_bytes(path: Path | str, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically."""
+    return _atomic_replace(Path(path), lambda fh: fh.write(data))
+
+
+def atomic_savefig(fig: "Figure", path: Path | str, **kwargs) -> Path:
+    """Save a matplotlib figure atomically; the format comes from the suffix of ``path``."""
+    path = Path(path)
+    fmt = path.suffix.lstrip(".")
+    return _atomic_replace(path, lambda fh: fig.savefig(fh, format=fmt, **kwargs))

@@ -1,0 +1,363 @@
+"""Walk a results root, validate every run directory (docs/run-format.md) and build tidy tables.
+
+A run directory is any folder holding ``config.yaml``. Identity columns come from the config, never
+from the path. A malformed or truncated CSV is reported as a :class:`Problem` (with its path) and
+skipped; loading never raises because of one bad run.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import yaml
+from omegaconf import OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from analysis.identity import algo_key, enabled_objectives, method_label, normalize_dataset
+
+EVAL_REQUIRED = ("frame", "step", "episode", "episode_reward")
+EVAL_COLUMNS = (
+    "frame",
+    "step",
+    "episode",
+    "episode_reward",
+    "episode_reward_std",
+    "episode_length",
+    "success",
+    "eval_episodes",
+    "total_time",
+)
+TRAIN_REQUIRED = ("frame", "fps")
+
+# Identity columns of every row of the tidy tables (run_id is the run directory relative to the root).
+IDENTITY = (
+    "run_id",
+    "experiment",
+    "variant",
+    "algo",
+    "method",
+    "task",
+    "suite",
+    "seed",
+    "K",
+    "batch_size",
+    "latent_action_dim",
+    "action_encoder",
+    "objectives",
+    "action_repeat",
+    "distracting_dims",
+    "train_frames",
+    "dataset",
+    "cql_alpha",
+    "status",
+)
+_SKIP_DIRS = {"replay", "__pycache__", ".git"}
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Something wrong with one file; the file (or run) was skipped or partly used."""
+
+    path: str
+    message: str
+    level: str = "error"  # "error": skipped; "warning": used with a caveat
+
+    def __str__(self) -> str:
+        return f"{self.level}: {self.path}: {self.message}"
+
+
+@dataclass
+class Results:
+    """Everything loaded from one results root.
+
+    Attributes:
+        root: the results root.
+        runs: one row per valid run: identity columns, status, number of eval rows, last eval frame,
+            median training FPS, provenance (git sha, device, host, cpu, versions).
+        eval: one row per evaluation: identity columns + the eval.csv columns.
+        problems: every file that was skipped or is suspicious.
+        benches: parsed ``{root}/bench/*.json`` files, each with its ``path``.
+    """
+
+    root: Path
+    runs: pd.DataFrame
+    eval: pd.DataFrame
+    problems: list[Problem] = field(default_factory=list)
+    benches: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def empty(self) -> bool:
+        return self.runs.empty
+
+
+class ResultsRootError(FileNotFoundError):
+    """The results root does not exist or is not a directory."""
+
+
+def _get(cfg: dict[str, Any], dotted: str, default: Any = None) -> Any:
+    node: Any = cfg
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return default
+        node = node[part]
+    return node
+
+
+def _first(cfg: dict[str, Any], *keys: str) -> Any:
+    for key in keys:
+        value = _get(cfg, key)
+        if value is not None:
+            return value
+    return None
+
+
+def identity_from_config(cfg: dict[str, Any]) -> dict[str, Any]:
+    """The identity columns of a run from its resolved config (tolerant to missing optional keys)."""
+    algo = _get(cfg, "agent.name")
+    objectives = enabled_objectives(_get(cfg, "agent.objectives") or {})
+    dataset = normalize_dataset(
+        _first(cfg, "dataset", "offline.dataset", "data.dataset", "task.dataset", "agent.dataset")
+    )
+    action_encoder = _get(cfg, "agent.action_encoder")
+    return {
+        "experiment": str(_get(cfg, "experiment", "")),
+        "variant": str(_get(cfg, "variant", "base") or "base"),
+        "algo": algo_key(algo) if algo is not None else None,
+        "method": method_label(algo, objectives) if algo is not None else None,
+        "task": _get(cfg, "task.name"),
+        "suite": _get(cfg, "task.suite"),
+        "seed": _int_or_none(_get(cfg, "seed")),
+        "K": _int_or_none(_get(cfg, "agent.K")),
+        "batch_size": _int_or_none(_get(cfg, "agent.batch_size")),
+        "latent_action_dim": _int_or_none(_get(cfg, "agent.latent_action_dim")),
+        "action_encoder": None if action_encoder is None else bool(action_encoder),
+        "objectives": "+".join(objectives),
+        "action_repeat": _int_or_none(_get(cfg, "env.action_repeat")),
+        "distracting_dims": _int_or_none(_get(cfg, "env.distracting_dims")) or 0,
+        "train_frames": _int_or_none(_get(cfg, "train.frames")),
+        "dataset": dataset,
+        "cql_alpha": _float_or_none(_first(cfg, "agent.cql_alpha", "agent.alpha_cql", "agent.cql.alpha")),
+    }
+
+
+def _int_or_none(value: Any) -> int | None:
+    if value is None:
+        return None
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def _float_or_none(value: Any) -> float | None:
+    try:
+        return None if value is None else float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def read_csv_strict(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
+    """Read a run CSV, raising ValueError with a reason if it is malformed or truncated.
+
+    Checks: non-empty header with the ``required`` columns, every row with the header's field count,
+    a final newline (a missing one means the last row was cut), numeric required columns, and strictly
+    increasing ``frame``.
+    """
+    text = path.read_text(encoding="utf-8", errors="strict")
+    if not text.strip():
+        raise ValueError("empty file (no header)")
+    if not text.endswith("\n"):
+        raise ValueError("truncated: the last line has no newline")
+    rows = list(csv.reader(io.StringIO(text)))
+    header = rows[0]
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise ValueError(f"missing column(s) {', '.join(missing)}")
+    for lineno, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            raise ValueError(f"line {lineno} has {len(row)} fields, header has {len(header)}")
+    df = pd.read_csv(io.StringIO(text))
+    for col in required:
+        converted = pd.to_numeric(df[col], errors="coerce")
+        if converted.isna().any():
+            bad = int(converted.isna().idxmax()) + 2
+            raise ValueError(f"non-numeric or empty {col!r} at line {bad}")
+        df[col] = converted
+    for col in df.columns:
+        if col not in required and df[col].dtype == object:
+            df[col] = pd.to_numeric(df[col], errors="coerce")
+    if len(df) > 1 and not df["frame"].is_monotonic_increasing or df["frame"].duplicated().any():
+        raise ValueError("frame is not strictly increasing (duplicated or reordered rows)")
+    return df
+
+
+def read_config(path: Path) -> Any:
+    """The run's resolved config as plain containers (libyaml when available; OmegaConf resolves any
+    interpolation left in the file)."""
+    text = path.read_text(encoding="utf-8")
+    data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+    if "${" in text and isinstance(data, dict):
+        data = OmegaConf.to_container(OmegaConf.create(data), resolve=True)
+    return data
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    data = json.loads(path.read_text(encoding="utf-8"))
+    if not isinstance(data, dict):
+        raise ValueError("not a JSON object")
+    return data
+
+
+def _provenance(meta: dict[str, Any]) -> dict[str, Any]:
+    """Flatten the provenance fields of meta.json that the report shows."""
+    git = meta.get("git") if isinstance(meta.get("git"), dict) else {}
+    versions = meta.get("versions") or meta.get("package_versions") or {}
+    return {
+        "git_sha": meta.get("git_sha") or git.get("sha"),
+        "git_dirty": meta.get("git_dirty", git.get("dirty")),
+        "host": meta.get("host"),
+        "device": meta.get("device"),
+        "cpu": meta.get("cpu"),
+        "python": meta.get("python"),
+        "versions": json.dumps(versions, sort_keys=True) if isinstance(versions, dict) else str(versions),
+        "resumes": len(meta.get("resumes") or []),
+    }
+
+
+def _fps_summary(train: pd.DataFrame) -> float:
+    """Median FPS over training episodes once updates have started (all episodes if none did)."""
+    fps = pd.to_numeric(train["fps"], errors="coerce")
+    if "critic_loss" in train.columns:
+        updating = pd.to_numeric(train["critic_loss"], errors="coerce").notna()
+        if updating.any():
+            fps = fps[updating]
+    fps = fps.dropna()
+    return float(fps.median()) if len(fps) else math.nan
+
+
+def find_run_dirs(root: Path) -> list[Path]:
+    """Every folder under ``root`` holding a ``config.yaml`` (replay folders are not entered)."""
+    found = []
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames[:] = sorted(d for d in dirnames if d not in _SKIP_DIRS)
+        if Path(dirpath) == root and "bench" in dirnames:
+            dirnames.remove("bench")
+        if "config.yaml" in filenames:
+            found.append(Path(dirpath))
+            dirnames[:] = []  # a run directory has no nested runs
+        elif "eval.csv" in filenames:
+            found.append(Path(dirpath))  # reported below: a run without its config
+    return found
+
+
+def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataFrame | None, list[Problem]]:
+    """Load one run directory: (run row, eval rows, problems). Run row is None if the run is unusable."""
+    problems: list[Problem] = []
+    rel = str(run_dir.relative_to(root))
+    cfg_path = run_dir / "config.yaml"
+    if not cfg_path.exists():
+        return None, None, [Problem(str(run_dir / "eval.csv"), "run directory without config.yaml; skipped")]
+    try:
+        cfg = read_config(cfg_path)
+    except (OmegaConfBaseException, yaml.YAMLError, OSError, ValueError, UnicodeDecodeError) as exc:
+        return None, None, [Problem(str(cfg_path), f"unreadable config: {exc}; run skipped")]
+    if not isinstance(cfg, dict):
+        return None, None, [Problem(str(cfg_path), "config is not a mapping; run skipped")]
+    ident = identity_from_config(cfg)
+    missing = [k for k in ("algo", "task", "seed") if ident[k] is None]
+    if missing:
+        return None, None, [Problem(str(cfg_path), f"config lacks {', '.join(missing)}; run skipped")]
+    done = (run_dir / "DONE").exists()
+    ident["run_id"] = rel
+    ident["status"] = "done" if done else ("partial" if (run_dir / "checkpoint.pt").exists() else "incomplete")
+
+    row: dict[str, Any] = dict(ident)
+    meta_path = run_dir / "meta.json"
+    meta: dict[str, Any] = {}
+    if meta_path.exists():
+        try:
+            meta = _read_json(meta_path)
+        except (ValueError, OSError, UnicodeDecodeError) as exc:
+            problems.append(Problem(str(meta_path), f"unreadable meta.json: {exc}", "warning"))
+    else:
+        problems.append(Problem(str(meta_path), "missing meta.json (no provenance)", "warning"))
+    row.update(_provenance(meta))
+
+    eval_df: pd.DataFrame | None = None
+    eval_path = run_dir / "eval.csv"
+    if not eval_path.exists():
+        problems.append(Problem(str(eval_path), "missing eval.csv; run has no scores", "warning"))
+    else:
+        try:
+            eval_df = read_csv_strict(eval_path, EVAL_REQUIRED)
+        except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
+            problems.append(Problem(str(eval_path), f"malformed eval.csv ({exc}); skipped"))
+    if eval_df is not None:
+        for col in EVAL_COLUMNS:
+            if col not in eval_df.columns:
+                eval_df[col] = math.nan
+        eval_df = eval_df[list(EVAL_COLUMNS)].assign(run_id=rel)
+    row["eval_rows"] = 0 if eval_df is None else len(eval_df)
+    row["last_frame"] = math.nan if eval_df is None or eval_df.empty else float(eval_df["frame"].max())
+
+    train_path = run_dir / "train.csv"
+    row["fps"] = math.nan
+    if train_path.exists():
+        try:
+            row["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED))
+        except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
+            problems.append(Problem(str(train_path), f"malformed train.csv ({exc}); FPS not used"))
+    return row, eval_df, problems
+
+
+def load_benches(root: Path) -> tuple[list[dict[str, Any]], list[Problem]]:
+    """Parse ``{root}/bench/*.json`` speed benchmarks."""
+    out, problems = [], []
+    for path in sorted((root / "bench").glob("*.json")):
+        try:
+            data = _read_json(path)
+            if not isinstance(data.get("results"), list):
+                raise ValueError("no 'results' list")
+        except (ValueError, OSError, UnicodeDecodeError) as exc:
+            problems.append(Problem(str(path), f"malformed benchmark JSON ({exc}); skipped"))
+            continue
+        data["path"] = str(path)
+        out.append(data)
+    return out, problems
+
+
+def load_results(root: Path | str) -> Results:
+    """Load every run under ``root``. Raises :class:`ResultsRootError` only if ``root`` is not a folder."""
+    root = Path(root)
+    if not root.is_dir():
+        raise ResultsRootError(f"results root {root} does not exist or is not a directory")
+    rows, evals, problems = [], [], []
+    for run_dir in find_run_dirs(root):
+        row, eval_df, probs = load_run(run_dir, root)
+        problems.extend(probs)
+        if row is not None:
+            rows.append(row)
+        if eval_df is not None and not eval_df.empty:
+            evals.append(eval_df)
+    benches, bench_problems = load_benches(root)
+    problems.extend(bench_problems)
+    runs = pd.DataFrame(rows)
+    if runs.empty:
+        runs = pd.DataFrame(columns=[*IDENTITY, "eval_rows", "last_frame", "fps"])
+    else:
+        dup = runs.duplicated(["experiment", "algo", "variant", "task", "seed"], keep=False)
+        for run_id in runs.loc[dup, "run_id"]:
+            problems.append(Problem(str(root / run_id), "same experiment/algo/variant/task/seed as another run", "warning"))
+    if evals and not runs.empty:
+        eval_all = pd.concat(evals, ignore_index=True).merge(runs[list(IDENTITY)], on="run_id", how="left")
+    else:
+        eval_all = pd.DataFrame(columns=[*IDENTITY, *EVAL_COLUMNS])
+    return Results(root=root, runs=runs, eval=eval_all, problems=problems, benches=benches)

@@ -1,0 +1,101 @@
+"""The paper's own numbers (a copy of ``shared/paper`` in ``analysis/paper_data``), as printed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import pandas as pd
+
+from analysis.identity import normalize_dataset
+
+PAPER_DIR = Path(__file__).resolve().parent / "paper_data"
+
+# The nine DMC tasks of Table 1 in the paper's row order.
+DMC9 = (
+    "quadruped_run",
+    "hopper_hop",
+    "walker_run",
+    "quadruped_walk",
+    "cheetah_run",
+    "finger_turn_hard",
+    "acrobot_swingup",
+    "reacher_hard",
+    "reach_duplo",
+)
+METAWORLD6 = ("hammer", "assembly", "disassemble", "stick-pull", "pick-place-wall", "hand-insert")
+OFFLINE_TASKS = ("hopper_hop", "cheetah_run", "walker_run", "quadruped_run")
+
+
+@dataclass
+class PaperData:
+    """Read-only access to the paper's tables; ``root`` holds the CSVs and ``taco_paper.tex``."""
+
+    root: Path = PAPER_DIR
+
+    def _csv(self, name: str) -> pd.DataFrame:
+        return pd.read_csv(self.root / name)
+
+    @cached_property
+    def online(self) -> pd.DataFrame:
+        """Table 1: task, method, mean, std, frames, seeds, family."""
+        return self._csv("online_rl_table.csv")
+
+    @cached_property
+    def repr_objectives(self) -> pd.DataFrame:
+        """Table 2: task, method, mean, std (DRIML empty where N/A)."""
+        return self._csv("representation_objectives_table.csv")
+
+    @cached_property
+    def offline(self) -> pd.DataFrame:
+        """Table 3: task, dataset, method, normalized_mean, normalized_std."""
+        df = self._csv("offline_rl_table.csv")
+        df["dataset"] = df["dataset"].map(normalize_dataset)
+        return df
+
+    @cached_property
+    def offline_average(self) -> pd.DataFrame:
+        """Table 3's average row as printed: method, average_normalized."""
+        return self._csv("offline_average.csv")
+
+    @cached_property
+    def time_efficiency(self) -> pd.DataFrame:
+        """Tables 4 and 5: method, batch_size, fps, hardware."""
+        return self._csv("time_efficiency.csv")
+
+    @cached_property
+    def cql_alpha(self) -> pd.DataFrame:
+        """Table 6: task, dataset, alpha_cql (dataset names normalised to Table 3's)."""
+        df = self._csv("cql_alpha.csv")
+        df["dataset_as_printed"] = df["dataset"]
+        df["dataset"] = df["dataset"].map(normalize_dataset)
+        return df
+
+    @cached_property
+    def claims(self) -> pd.DataFrame:
+        """claims.csv: id, where, claim, evidence."""
+        return self._csv("claims.csv")
+
+    @cached_property
+    def tex(self) -> str:
+        """The paper's LaTeX source."""
+        return (self.root / "taco_paper.tex").read_text(encoding="utf-8")
+
+    def online_value(self, task: str, method: str) -> tuple[float, float] | None:
+        """(mean, std) of Table 1 for ``task`` and ``method``, or None."""
+        return _lookup(self.online, task=task, method=method)
+
+    def repr_value(self, task: str, method: str) -> tuple[float, float] | None:
+        """(mean, std) of Table 2, or None (also where the paper prints N/A)."""
+        return _lookup(self.repr_objectives, task=task, method=method)
+
+
+def _lookup(df: pd.DataFrame, **where: str) -> tuple[float, float] | None:
+    mask = pd.Series(True, index=df.index)
+    for col, val in where.items():
+        mask &= df[col] == val
+    rows = df[mask]
+    if rows.empty or pd.isna(rows.iloc[0]["mean"]):
+        return None
+    return float(rows.iloc[0]["mean"]), float(rows.iloc[0]["std"])

@@ -1,0 +1,134 @@
+"""REPORT.md and REPORT.html: every table and figure, the claims, the audit and the provenance of the runs."""
+
+from __future__ import annotations
+
+import datetime as dt
+import html
+import importlib.metadata
+import platform
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+import pandas as pd
+
+from analysis.audit import mismatches, run_audit, write_audit
+from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims, write_claims
+from analysis.context import Context
+from analysis.io import atomic_write_text
+from analysis.tables import to_markdown
+
+PACKAGES = ("numpy", "pandas", "scipy", "rliable", "arch", "scikit-learn", "matplotlib", "seaborn", "torch", "taco-repro")
+
+
+def _git(*args: str) -> str | None:
+    try:
+        out = subprocess.run(["git", *args], cwd=Path(__file__).resolve().parent, capture_output=True, text=True,
+                             timeout=10, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip()
+
+
+def tool_provenance() -> dict[str, str]:
+    """Git sha (and dirty flag) of this checkout, Python, platform and package versions."""
+    info = {"analysis git sha": _git("rev-parse", "HEAD") or "unknown"}
+    status = _git("status", "--porcelain")
+    info["analysis git dirty"] = "unknown" if status is None else str(bool(status))
+    info["python"] = platform.python_version()
+    info["platform"] = platform.platform()
+    for pkg in PACKAGES:
+        try:
+            info[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            info[pkg] = "not installed"
+    return info
+
+
+def runs_provenance(ctx: Context) -> pd.DataFrame:
+    """Runs grouped by experiment, git sha, dirty flag, device and host, with counts."""
+    runs = ctx.results.runs
+    if runs.empty:
+        return pd.DataFrame()
+    cols = ["experiment", "git_sha", "git_dirty", "device", "cpu", "host", "versions"]
+    present = [c for c in cols if c in runs.columns]
+    g = runs.fillna({c: "unknown" for c in present}).astype({c: str for c in present})
+    g = g.groupby(present).agg(runs=("run_id", "count"), done=("status", lambda s: int((s == "done").sum())))
+    return g.reset_index()
+
+
+def _section(title: str, body: str) -> str:
+    return f"\n## {title}\n\n{body.strip()}\n"
+
+
+def build_markdown(ctx: Context, artifacts, verdicts, findings) -> str:
+    res = ctx.results
+    lines = ["# TACO reproduction report", "",
+             f"Generated {dt.datetime.now().astimezone().isoformat(timespec='seconds')} from `{res.root}`; "
+             f"scores at {ctx.budget_text()}; bootstrap: {ctx.reps:,} repetitions, random state {ctx.seed}; "
+             "std over seeds with ddof=1."]
+    if res.empty:
+        lines.append("\n**No runs were found under the results root: every table and figure shows the paper's "
+                     "reported numbers only, and every claim is 'not enough data'.**")
+    else:
+        lines.append(f"\n{len(res.runs)} runs loaded ({int((res.runs['status'] == 'done').sum())} done); "
+                     f"{len(res.problems)} problem files (listed under Provenance).")
+    counts = {k: sum(v.verdict == k for v in verdicts) for k in (SUPPORTED, REFUTED, NO_DATA)}
+    n_bad = len(mismatches(findings))
+    lines.append(f"\n**Claims:** {counts[SUPPORTED]} supported, {counts[REFUTED]} refuted, {counts[NO_DATA]} not "
+                 f"enough data. **Audit of the paper's own numbers:** {n_bad} mismatches.")
+    claims_md = to_markdown(pd.DataFrame({"Claim": [v.id for v in verdicts], "Verdict": [v.verdict for v in verdicts],
+                                          "Numbers": [v.evidence for v in verdicts], "Rule": [v.rule for v in verdicts]}))
+    lines.append(_section("Claims", claims_md))
+    bad = [f for f in findings if f.kind == "check" and not f.match]
+    audit_md = to_markdown(pd.DataFrame({"Where": [f.where for f in bad], "What": [f.description for f in bad],
+                                         "Paper prints": [f.printed for f in bad], "Recomputed": [f.recomputed for f in bad]}))
+    lines.append(_section("Audit: mismatches in the paper's derived numbers",
+                          audit_md + f"\nAll {len(findings)} checks, including those that agree: [audit.md](audit.md)."))
+    for art in artifacts:
+        body = [f"_{art.caption}_", ""] if art.figures else []
+        for png in art.figures:
+            body.append(f"![{art.id}]({png.name})  \n[PDF]({png.with_suffix('.pdf').name})")
+        for table in art.tables:
+            body.append(table.markdown())
+            body.append(f"Files: {', '.join(f'[{p.suffix[1:]}]({p.name})' for p in table.files)}")
+        extra = [n for n in art.notes if all(n not in t.notes for t in art.tables)]
+        body += [f"_{n}_" for n in extra]
+        lines.append(_section(f"{art.id}: {art.title}", "\n\n".join(body)))
+    prov = tool_provenance()
+    prov_md = to_markdown(pd.DataFrame({"Item": list(prov), "Value": list(prov.values())}))
+    runs_md = to_markdown(runs_provenance(ctx)) if not res.empty else "No runs.\n"
+    probs = "\n".join(f"- `{p.path}`: {p.level}: {p.message}" for p in res.problems) or "None."
+    lines.append(_section("Provenance", f"### This analysis\n\n{prov_md}\n### Runs (from meta.json)\n\n{runs_md}\n"
+                                        f"### Problem files (skipped or used with a caveat)\n\n{probs}\n"))
+    return "\n".join(lines) + "\n"
+
+
+_CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
+table{border-collapse:collapse;font-size:0.85em;margin:0.5em 0}th,td{border:1px solid #ccc;padding:3px 6px}
+th{background:#f2f2f2}img{max-width:100%}code{background:#f5f5f5}"""
+
+
+def markdown_to_html(md: str, title: str = "TACO reproduction report") -> str:
+    """Render the report's Markdown (GFM tables) to a standalone HTML page."""
+    from markdown_it import MarkdownIt
+
+    body = MarkdownIt("commonmark", {"html": False}).enable("table").render(md)
+    return (f"<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
+            f"<style>{_CSS}</style></head><body>\n{body}</body></html>\n")
+
+
+def build_report(ctx: Context, progress: Callable[[str], None] | None = None) -> tuple[Path, Path]:
+    """Render every artifact, the claims and the audit into ``ctx.out_dir`` and write REPORT.md/.html."""
+    from paper_figures.registry import ordered_ids, resolve
+    from paper_figures.render import render_artifacts
+
+    artifacts = render_artifacts(ctx, resolve(ordered_ids()), progress)
+    verdicts = evaluate_claims(ctx)
+    write_claims(ctx, verdicts)
+    findings = run_audit(ctx.paper)
+    write_audit(ctx.out_dir, findings)
+    md = build_markdown(ctx, artifacts, verdicts, findings)
+    md_path = atomic_write_text(ctx.out_dir / "REPORT.md", md)
+    html_path = atomic_write_text(ctx.out_dir / "REPORT.html", markdown_to_html(md))
+    return md_path, html_path

@@ -1,0 +1,43 @@
+"""Seed robustness (F11) and task solving (F12) summaries from per-run scores and curves."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+BROKEN_FRACTION = 0.5  # a seed is "broken" if its score is below half the median of its cell's seeds
+SOLVED_RETURN = 500.0  # manipulator bring_ball counts as solved once an evaluation return reaches this
+
+
+def seed_spread(df: pd.DataFrame, keys: tuple[str, ...] = ("task", "label")) -> pd.DataFrame:
+    """Per cell over the runs that reached the budget: n, mean, std (ddof=1), min, max, broken seeds."""
+    rows = []
+    ok = df[df["reached"].astype(bool)] if not df.empty else df
+    for key, cell in ok.groupby(list(keys)) if not ok.empty else []:
+        s = cell["score"].astype(float)
+        med = s.median()
+        rows.append(
+            {
+                **dict(zip(keys, key if isinstance(key, tuple) else (key,))),
+                "n": len(s),
+                "mean": s.mean(),
+                "std": s.std(ddof=1) if len(s) > 1 else float("nan"),
+                "min": s.min(),
+                "max": s.max(),
+                "broken": int((s < BROKEN_FRACTION * med).sum()) if med > 0 else 0,
+            }
+        )
+    return pd.DataFrame(rows, columns=[*keys, "n", "mean", "std", "min", "max", "broken"])
+
+
+def solved_counts(curves_or_eval: pd.DataFrame, max_frame: float, threshold: float = SOLVED_RETURN,
+                  value: str = "value") -> pd.DataFrame:
+    """Per label: runs, runs that reached ``threshold`` at some frame <= ``max_frame``, last frame seen."""
+    rows = []
+    if curves_or_eval.empty:
+        return pd.DataFrame(columns=["label", "runs", "solved", "last_frame"])
+    for label, cell in curves_or_eval.groupby("label"):
+        within = cell[cell["frame"] <= max_frame]
+        per_run = within.groupby("run_id")[value].max()
+        rows.append({"label": label, "runs": cell["run_id"].nunique(), "solved": int((per_run >= threshold).sum()),
+                     "last_frame": float(cell["frame"].max())})
+    return pd.DataFrame(rows, columns=["label", "runs", "solved", "last_frame"])

@@ -1,0 +1,240 @@
+"""Statistics: mean +- std over seeds, bootstrap CIs and rliable aggregates.
+
+* ``std`` is the sample standard deviation over seeds, ``ddof=1`` (:data:`DDOF`); undefined for n < 2.
+* Every confidence interval is a 95% percentile stratified-bootstrap CI computed by rliable's own
+  ``rliable.library.get_interval_estimates`` (per-cell CIs of a mean over seeds are the one-task case:
+  cells with the same number of seeds are bootstrapped together as the columns of one matrix, so each
+  column is resampled over its own runs).
+* Reproducibility: rliable draws its bootstrap indices from NumPy's *global* generator
+  (``np.random.choice``), so :func:`seeded` seeds that generator (and passes a ``RandomState`` with the
+  same seed, as rliable allows) before each call and restores the previous global state afterwards.
+  Each method / cell group is seeded separately, so adding a method does not change another's CI.
+* Aggregates (IQM, mean, optimality gap with gamma = 1) are over normalised scores: DMC returns / 1000
+  (the maximum episode return of a DMC task), Meta-world success rates / 100.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from rliable import library as rly
+from rliable import metrics
+
+DDOF = 1
+DEFAULT_REPS = 50_000  # rliable's default for get_interval_estimates
+PROFILE_REPS = 2_000  # rliable's default for create_performance_profile
+# rliable's probability of improvement runs scipy's Mann-Whitney U per task per repetition (about 20 ms per
+# repetition for 9 tasks on one CPU core), so its CI uses fewer repetitions.
+POI_REPS = 1_000
+DEFAULT_SEED = 0
+CI_SIZE = 0.95
+SCORE_SCALE = {"episode_reward": 1000.0, "success": 100.0}
+
+
+@contextlib.contextmanager
+def seeded(seed: int) -> Iterator[np.random.RandomState]:
+    """Seed NumPy's global generator (which rliable uses) for the duration of the block."""
+    state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        with warnings.catch_warnings():
+            # arch deprecates its random_state argument, which rliable passes through.
+            warnings.simplefilter("ignore", FutureWarning)
+            yield np.random.RandomState(seed)
+    finally:
+        np.random.set_state(state)
+
+
+@dataclass(frozen=True)
+class CellStats:
+    """Summary of one table cell: seeds, mean, std (ddof=1) and the 95% CI of the mean."""
+
+    n: int
+    mean: float
+    std: float
+    ci_low: float
+    ci_high: float
+
+    def contains(self, value: float | None) -> bool | None:
+        """Whether ``value`` lies inside the CI (None if the CI or the value is undefined)."""
+        if value is None or math.isnan(value) or math.isnan(self.ci_low):
+            return None
+        return bool(self.ci_low <= value <= self.ci_high)
+
+
+def mean_std(values: Sequence[float] | np.ndarray) -> tuple[int, float, float]:
+    """(n, mean, std with ddof=1) of the finite values; NaN mean for n = 0 and NaN std for n < 2."""
+    arr = np.asarray(values, dtype=float)
+    arr = arr[np.isfinite(arr)]
+    n = len(arr)
+    mean = float(arr.mean()) if n else math.nan
+    std = float(arr.std(ddof=DDOF)) if n > DDOF else math.nan
+    return n, mean, std
+
+
+def _column_mean(x: np.ndarray) -> np.ndarray:
+    return np.mean(x, axis=0)
+
+
+def mean_cis(
+    columns: Sequence[np.ndarray], reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
+) -> list[tuple[float, float]]:
+    """95% bootstrap CI of the mean of each column (values over seeds) using rliable.
+
+    Columns are grouped by their number of finite values; each group is one rliable call on a
+    (n_seeds x n_columns) matrix with a per-column mean as the statistic. Columns with fewer than 2
+    values get (NaN, NaN).
+    """
+    clean = [np.asarray(c, dtype=float)[np.isfinite(np.asarray(c, dtype=float))] for c in columns]
+    out: list[tuple[float, float]] = [(math.nan, math.nan)] * len(clean)
+    by_n: dict[int, list[int]] = {}
+    for i, col in enumerate(clean):
+        if len(col) >= 2:
+            by_n.setdefault(len(col), []).append(i)
+    for n in sorted(by_n):
+        idx = by_n[n]
+        matrix = np.stack([clean[i] for i in idx], axis=1)
+        with seeded(seed) as rs:
+            _, cis = rly.get_interval_estimates(
+                {"cells": matrix}, _column_mean, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
+            )
+        lows, highs = cis["cells"]
+        for j, i in enumerate(idx):
+            out[i] = (float(lows[j]), float(highs[j]))
+    return out
+
+
+def cell_stats(cells: Mapping[object, Sequence[float]], reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED) -> dict:
+    """:class:`CellStats` for each key of ``cells`` (values over seeds)."""
+    keys = list(cells)
+    cis = mean_cis([np.asarray(cells[k], dtype=float) for k in keys], reps=reps, seed=seed)
+    out = {}
+    for key, (lo, hi) in zip(keys, cis):
+        n, mean, std = mean_std(cells[key])
+        out[key] = CellStats(n, mean, std, lo, hi)
+    return out
+
+
+def _aggregates(x: np.ndarray) -> np.ndarray:
+    return np.array(
+        [metrics.aggregate_iqm(x), metrics.aggregate_mean(x), metrics.aggregate_optimality_gap(x)]
+    )
+
+
+AGGREGATE_NAMES = ("IQM", "Mean", "Optimality Gap")
+
+
+def aggregate_estimates(
+    score_dict: Mapping[str, np.ndarray], reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
+) -> pd.DataFrame:
+    """rliable IQM, mean and optimality gap with 95% stratified-bootstrap CIs.
+
+    ``score_dict`` maps a method to a normalised (n_runs x n_tasks) matrix. Returns a long table:
+    method, metric, value, ci_low, ci_high.
+    """
+    rows = []
+    for method, scores in score_dict.items():
+        with seeded(seed) as rs:
+            points, cis = rly.get_interval_estimates(
+                {method: scores}, _aggregates, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
+            )
+        for k, name in enumerate(AGGREGATE_NAMES):
+            rows.append(
+                {
+                    "method": method,
+                    "metric": name,
+                    "value": float(points[method][k]),
+                    "ci_low": float(cis[method][0][k]),
+                    "ci_high": float(cis[method][1][k]),
+                }
+            )
+    return pd.DataFrame(rows, columns=["method", "metric", "value", "ci_low", "ci_high"])
+
+
+def performance_profiles(
+    score_dict: Mapping[str, np.ndarray],
+    taus: np.ndarray,
+    reps: int = PROFILE_REPS,
+    seed: int = DEFAULT_SEED,
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """rliable run-score performance profiles: method -> (profile over ``taus``, 2 x len(taus) CI)."""
+    out = {}
+    for method, scores in score_dict.items():
+        with seeded(seed):
+            profiles, cis = rly.create_performance_profile({method: scores}, taus, reps=reps)
+        out[method] = (np.asarray(profiles[method]), np.asarray(cis[method]))
+    return out
+
+
+def _poi(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.array([metrics.probability_of_improvement(x, y)])
+
+
+def probability_of_improvement(
+    x: np.ndarray, y: np.ndarray, reps: int = POI_REPS, seed: int = DEFAULT_SEED
+) -> tuple[float, float, float]:
+    """P(X > Y) over tasks (rliable) with its 95% CI: (value, ci_low, ci_high).
+
+    ``x`` and ``y`` are (n_runs x n_tasks) matrices over the same tasks; runs may differ in number.
+    """
+    with seeded(seed) as rs:
+        points, cis = rly.get_interval_estimates(
+            {"poi": [x, y]}, _poi, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
+        )
+    return float(points["poi"][0]), float(cis["poi"][0][0]), float(cis["poi"][1][0])
+
+
+def ratio_of_means(
+    x: np.ndarray, y: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
+) -> tuple[float, float, float]:
+    """mean(x) / mean(y) over all runs and tasks, with a 95% stratified-bootstrap CI (rliable)."""
+
+    def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.array([np.mean(a) / np.mean(b)])
+
+    with seeded(seed) as rs:
+        points, cis = rly.get_interval_estimates(
+            {"ratio": [x, y]}, ratio, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
+        )
+    return float(points["ratio"][0]), float(cis["ratio"][0][0]), float(cis["ratio"][1][0])
+
+
+def score_matrix(
+    scores: pd.DataFrame, tasks: Sequence[str], value: str = "score"
+) -> tuple[np.ndarray | None, str]:
+    """A (n_runs x n_tasks) matrix from one method's per-run rows, as rliable needs.
+
+    If tasks have different numbers of seeds, every task keeps its ``min`` lowest seeds and the note
+    says how many runs were left out; None if a task has no run.
+    """
+    per_task = []
+    for task in tasks:
+        rows = scores[(scores["task"] == task) & scores[value].notna()].sort_values("seed")
+        per_task.append(rows[value].to_numpy(dtype=float))
+    counts = [len(v) for v in per_task]
+    if not counts or min(counts) == 0:
+        missing = [t for t, c in zip(tasks, counts) if c == 0]
+        return None, f"no runs on {', '.join(missing)}"
+    k = min(counts)
+    dropped = sum(counts) - k * len(counts)
+    note = f"{k} runs per task" + (f"; {dropped} extra runs left out to balance seeds across tasks" if dropped else "")
+    return np.stack([v[:k] for v in per_task], axis=1), note
+
+
+def _grand_mean(x: np.ndarray) -> np.ndarray:
+    return np.array([metrics.aggregate_mean(x)])
+
+
+def grand_mean_ci(matrix: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED) -> tuple[float, float, float]:
+    """Mean over runs and tasks of a (n_runs x n_tasks) matrix with its 95% stratified-bootstrap CI."""
+    with seeded(seed) as rs:
+        points, cis = rly.get_interval_estimates(
+            {"mean": matrix}, _grand_mean, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
+        )
+    return float(points["mean"][0]), float(cis["mean"][0][0]), float(cis["mean"][1][0])

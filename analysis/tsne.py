@@ -1,0 +1,186 @@
+"""F6: do latent actions of a trained TACO action encoder cluster where raw actions do not?
+
+Following the paper (Section 5.1): pick 4 centroid actions in the true action space, make ``n`` copies
+of each with standard Gaussian noise in the distracting dimensions, embed raw actions and their latent
+actions (the encoder's per-step MLP) with t-SNE, and score how well the 4 groups separate with the
+silhouette coefficient (``sklearn.metrics.silhouette_score``, in [-1, 1]; higher = better separated),
+on the 2-D t-SNE embeddings and on the original spaces.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sklearn.manifold import TSNE
+from sklearn.metrics import silhouette_score
+
+N_CENTROIDS = 4
+CLUSTER_THRESHOLD = 0.5  # silhouette at or above this counts as "forms clusters" (claim tsne_clusters)
+_PREFIXES = ("agent.action_encoder.step.", "action_encoder.step.", "step.")
+
+
+class ActionEncoderNotFound(KeyError):
+    """The checkpoint has no action-encoder state dict of the expected layout."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def find_action_encoder_state(ckpt: Mapping[str, Any]) -> dict[str, Any]:
+    """The per-step MLP parameters ``{"0.weight", "0.bias", "2.weight", "2.bias"}`` from a checkpoint.
+
+    Accepted layouts: ``ckpt["agent"]["action_encoder"]`` or ``ckpt["agent"]["agent.action_encoder"]``
+    (a module state dict with ``step.0.weight`` ...), ``ckpt["agent.action_encoder"]``, or flat keys
+    ``[agent.]action_encoder.step.0.weight`` in ``ckpt["agent"]`` or ``ckpt``.
+    """
+    candidates: list[Mapping[str, Any]] = []
+    agent = ckpt.get("agent") if isinstance(ckpt, Mapping) else None
+    for holder in (agent, ckpt):
+        if isinstance(holder, Mapping):
+            for key in ("action_encoder", "agent.action_encoder"):
+                if isinstance(holder.get(key), Mapping):
+                    candidates.append(holder[key])
+            candidates.append(holder)
+    for sd in candidates:
+        for prefix in _PREFIXES:
+            keys = {f"{i}.{p}": f"{prefix}{i}.{p}" for i in (0, 2) for p in ("weight", "bias")}
+            if all(k in sd for k in keys.values()):
+                return {short: sd[full] for short, full in keys.items()}
+    raise ActionEncoderNotFound("no action encoder (step.0.weight ... step.2.bias) in the checkpoint")
+
+
+def build_step_mlp(state: Mapping[str, Any]):
+    """The encoder's per-step MLP Linear(|A| -> hidden), Tanh, Linear(hidden -> d_u) with ``state`` loaded."""
+    import torch
+    from torch import nn
+
+    w0, w2 = state["0.weight"], state["2.weight"]
+    mlp = nn.Sequential(nn.Linear(w0.shape[1], w0.shape[0]), nn.Tanh(), nn.Linear(w2.shape[1], w2.shape[0]))
+    mlp.load_state_dict({k: torch.as_tensor(v) for k, v in state.items()})
+    return mlp.eval()
+
+
+def load_step_mlp(checkpoint: Path):
+    """Load ``checkpoint.pt`` (weights only) and build the action encoder's per-step MLP."""
+    import torch
+
+    ckpt = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    return build_step_mlp(find_action_encoder_state(ckpt))
+
+
+def make_actions(true_dim: int, distracting_dims: int, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """4 centroids uniform in [-1, 1]^true_dim (zero in the distracting dims), n copies each with N(0, 1)
+    noise added to the distracting dims. Returns (actions (4n x (true+distracting)), labels)."""
+    rng = np.random.default_rng(seed)
+    centroids = rng.uniform(-1.0, 1.0, size=(N_CENTROIDS, true_dim))
+    blocks = []
+    for c in centroids:
+        noise = rng.standard_normal((n, distracting_dims))
+        blocks.append(np.hstack([np.repeat(c[None, :], n, axis=0), noise]))
+    labels = np.repeat(np.arange(N_CENTROIDS), n)
+    return np.vstack(blocks).astype(np.float32), labels
+
+
+def tsne_2d(x: np.ndarray, seed: int = 0, max_iter: int = 1000) -> np.ndarray:
+    """2-D t-SNE (scikit-learn, PCA init, perplexity 30 or less for small inputs)."""
+    perplexity = min(30.0, (len(x) - 1) / 3.0)
+    return TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed, max_iter=max_iter).fit_transform(x)
+
+
+@dataclass
+class TsneResult:
+    """Embeddings and cluster scores; ``latent`` fields are None when no encoder was given."""
+
+    labels: np.ndarray
+    raw_2d: np.ndarray
+    latent_2d: np.ndarray | None
+    silhouette_raw_2d: float
+    silhouette_latent_2d: float | None
+    silhouette_raw: float
+    silhouette_latent: float | None
+    n_per_centroid: int
+    true_dim: int
+    distracting_dims: int
+
+
+def run_tsne(true_dim: int, distracting_dims: int, mlp=None, n: int = 1000, seed: int = 0,
+             max_iter: int = 1000) -> TsneResult:
+    """Embed raw (and, with ``mlp``, latent) actions and score the clusters."""
+    actions, labels = make_actions(true_dim, distracting_dims, n, seed)
+    raw_2d = tsne_2d(actions, seed, max_iter)
+    latent = latent_2d = None
+    if mlp is not None:
+        import torch
+
+        with torch.no_grad():
+            latent = mlp(torch.as_tensor(actions)).numpy()
+        latent_2d = tsne_2d(latent, seed, max_iter)
+    return TsneResult(
+        labels=labels,
+        raw_2d=raw_2d,
+        latent_2d=latent_2d,
+        silhouette_raw_2d=float(silhouette_score(raw_2d, labels)),
+        silhouette_latent_2d=None if latent_2d is None else float(silhouette_score(latent_2d, labels)),
+        silhouette_raw=float(silhouette_score(actions, labels)),
+        silhouette_latent=None if latent is None else float(silhouette_score(latent, labels)),
+        n_per_centroid=n,
+        true_dim=true_dim,
+        distracting_dims=distracting_dims,
+    )
+
+
+def find_tsne_run(runs) -> Any:
+    """The TACO run with distracting action dims and a checkpoint to embed: experiment 'tsne' and
+    cheetah_run preferred, then the most distracting dims; None if there is none."""
+    import pandas as pd
+
+    if runs.empty:
+        return None
+    cand = runs[(runs["algo"] == "taco") & (pd.to_numeric(runs["distracting_dims"], errors="coerce").fillna(0) > 0)]
+    if cand.empty:
+        return None
+    cand = cand.assign(
+        _exp=(cand["experiment"] != "tsne").astype(int),
+        _task=(cand["task"] != "cheetah_run").astype(int),
+        _done=(cand["status"] != "done").astype(int),
+    ).sort_values(["_exp", "_task", "_done", "distracting_dims", "seed"], ascending=[True, True, True, False, True])
+    return cand.iloc[0]
+
+
+def tsne_for_context(ctx) -> tuple[TsneResult, dict[str, Any]]:
+    """The F6 t-SNE for a :class:`analysis.context.Context` (cached in ``ctx.cache``).
+
+    Returns the result and info: ``run_id`` (None if no trained run), ``reason`` when the latent panel
+    is missing.
+    """
+    if "tsne" in ctx.cache:
+        return ctx.cache["tsne"]
+    from analysis.identity import action_dim
+
+    info: dict[str, Any] = {"run_id": None, "reason": None}
+    run = find_tsne_run(ctx.results.runs)
+    mlp, true_dim, distract = None, 6, 20  # the paper's cheetah_run (|A| = 6) + 20 distracting dims
+    if run is None:
+        info["reason"] = ("no trained TACO run with distracting action dims (experiment 'tsne': cheetah_run, "
+                          "env.distracting_dims=20) found")
+    else:
+        ckpt = ctx.results.root / run["run_id"] / "checkpoint.pt"
+        info["run_id"] = run["run_id"]
+        try:
+            mlp = load_step_mlp(ckpt)
+        except (OSError, RuntimeError, ValueError, KeyError) as exc:
+            info["reason"] = f"cannot use {ckpt}: {exc}"
+            info["run_id"] = None
+        if mlp is not None:
+            in_dim = mlp[0].in_features
+            distract = int(run["distracting_dims"])
+            true_dim = action_dim(run["task"]) or in_dim - distract
+            if true_dim + distract != in_dim:
+                true_dim = in_dim - distract
+    result = run_tsne(true_dim, distract, mlp, n=ctx.tsne_n, seed=ctx.seed, max_iter=ctx.tsne_iter)
+    ctx.cache["tsne"] = (result, info)
+    return result, info

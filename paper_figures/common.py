@@ -1,0 +1,218 @@
+"""Plotting and table helpers shared by the artifact modules."""
+
+from __future__ import annotations
+
+import math
+import textwrap
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+import seaborn as sns  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+from matplotlib.ticker import FuncFormatter  # noqa: E402
+
+from analysis.context import Context  # noqa: E402
+from analysis.identity import task_display  # noqa: E402
+from analysis.io import atomic_savefig  # noqa: E402
+from analysis.stats import mean_cis  # noqa: E402
+from analysis.tables import Cell, TableOutput, comparison_frames, write_table  # noqa: E402
+
+METHOD_COLORS = {
+    "TACO": "#d62728",
+    "DrQ-v2": "#1f77b4",
+    "A-LIX": "#2ca02c",
+    "DrQ": "#9467bd",
+    "CURL": "#8c564b",
+    "DreamerV3": "#e377c2",
+    "TD-MPC": "#7f7f7f",
+    "SPR": "#bcbd22",
+    "ATC": "#17becf",
+    "DRIML": "#ff7f0e",
+    "TACO w/o action repr": "#ff9896",
+}
+PAPER_MARK = dict(marker="D", color="black", markersize=6, linestyle="none", zorder=5)
+NO_RUNS_TEXT = "no runs found: paper values only"
+
+
+def setup_style() -> None:
+    sns.set_theme(context="notebook", style="whitegrid", font_scale=0.95)
+    plt.rcParams.update({"figure.dpi": 100, "savefig.dpi": 150, "axes.titleweight": "bold"})
+
+
+def palette(labels: Sequence[str]) -> dict[str, str]:
+    """A stable colour per label: the paper methods' fixed colours, then seaborn's palette."""
+    others = [lab for lab in labels if lab not in METHOD_COLORS]
+    extra = dict(zip(others, sns.color_palette("Set2", max(len(others), 1)).as_hex()))
+    return {lab: METHOD_COLORS.get(lab, extra.get(lab, "#333333")) for lab in labels}
+
+
+def save_figure(fig: plt.Figure, ctx: Context, name: str) -> Path:
+    """Write ``{name}.png`` and ``{name}.pdf`` atomically and close the figure; returns the PNG path."""
+    png = atomic_savefig(fig, ctx.out_dir / f"{name}.png", bbox_inches="tight")
+    atomic_savefig(fig, ctx.out_dir / f"{name}.pdf", bbox_inches="tight")
+    plt.close(fig)
+    return png
+
+
+def banner(fig: plt.Figure, text: str) -> None:
+    """A visible note across the top of a figure (e.g. that no runs were found)."""
+    fig.text(0.5, 1.0, text, ha="center", va="bottom", fontsize=10, color="#b22222", style="italic")
+
+
+def placeholder(ax: plt.Axes, text: str) -> None:
+    """Mark an axis as having no data, with the reason."""
+    ax.text(0.5, 0.5, textwrap.fill(text, 45), ha="center", va="center", transform=ax.transAxes, fontsize=9,
+            color="#555555")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def bar_caption(ctx: Context, extra: str = "") -> str:
+    return (
+        f"Bars: reproduced mean over seeds at {ctx.budget_text()}; error bars: 95% stratified-bootstrap CI of "
+        f"the mean (rliable percentile bootstrap, {ctx.reps:,} repetitions, random state {ctx.seed}); "
+        "black diamonds: the paper's reported value (where the paper gives one); n: seeds that reached the "
+        "budget; 'no runs' marks an empty cell." + (" " + extra if extra else "")
+    )
+
+
+def grouped_bars(
+    ax: plt.Axes,
+    cf: pd.DataFrame,
+    x: str,
+    hue: str,
+    x_order: Sequence,
+    hue_order: Sequence[str],
+    x_labels: Sequence[str] | None = None,
+    colors: dict[str, str] | None = None,
+) -> None:
+    """Bars of reproduced means with 95% CI error bars, paper diamonds, n labels and empty-cell marks.
+
+    ``cf`` is :func:`analysis.compare.cells_frame` output with columns ``x``, ``hue``, paper, n,
+    mean, ci_low, ci_high.
+    """
+    colors = colors or palette(list(hue_order))
+    n_h = max(len(hue_order), 1)
+    width = 0.8 / n_h
+    top = np.nanmax(np.r_[cf["ci_high"].to_numpy(dtype=float), cf["mean"].to_numpy(dtype=float), cf["paper"].to_numpy(dtype=float), 1.0]) if not cf.empty else 1.0
+    for i, xv in enumerate(x_order):
+        for j, hv in enumerate(hue_order):
+            pos = i - 0.4 + width * (j + 0.5)
+            row = cf[(cf[x] == xv) & (cf[hue] == hv)]
+            if row.empty:
+                continue
+            r = row.iloc[0]
+            if r["n"] > 0 and not math.isnan(r["mean"]):
+                err = None
+                if not math.isnan(r["ci_low"]):
+                    err = [[r["mean"] - r["ci_low"]], [r["ci_high"] - r["mean"]]]
+                ax.bar(pos, r["mean"], width * 0.92, color=colors[hv], yerr=err, capsize=2, ecolor="#222222", zorder=3)
+                ax.text(pos, (r["ci_high"] if not math.isnan(r["ci_high"]) else r["mean"]) + 0.015 * top,
+                        f"n={int(r['n'])}", ha="center", va="bottom", fontsize=6.5, rotation=90)
+            else:
+                ax.text(pos, 0.01 * top, "no runs", ha="center", va="bottom", fontsize=6.5, rotation=90, color="#777777")
+            if not math.isnan(r["paper"]):
+                ax.plot([pos], [r["paper"]], **PAPER_MARK)
+    ax.set_xticks(range(len(x_order)))
+    ax.set_xticklabels(list(x_labels) if x_labels is not None else [str(v) for v in x_order])
+    ax.set_xlim(-0.6, len(x_order) - 0.4)
+    ax.set_ylim(0, top * 1.15)
+    handles = [Patch(color=colors[h], label=str(h)) for h in hue_order]
+    handles.append(Line2D([], [], label="paper (reported)", **PAPER_MARK))
+    ax.legend(handles=handles, fontsize=7.5, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+
+
+def comparison_table(
+    ctx: Context,
+    name: str,
+    cells: Sequence[Cell],
+    caption: str,
+    notes: Sequence[str] = (),
+    digits: int = 1,
+    hide: Sequence[str] = (),
+    stats_note: str | None = None,
+) -> TableOutput:
+    """Write a comparison table (paper beside reproduced, n, CI, difference, paper-in-CI).
+
+    ``hide`` drops display columns (e.g. a constant key); ``stats_note`` replaces the standard note on
+    what the reproduced columns are.
+    """
+    raw, display = comparison_frames(cells, digits)
+    display = display.drop(columns=[c for c in hide if c in display.columns])
+    if "Task" in display.columns:
+        display["Task"] = display["Task"].map(lambda t: task_display(t) if t != "Average" else t)
+    full_notes = list(notes) + [stats_note or (
+        f"Reproduced: mean ± std over seeds (std with ddof=1) at {ctx.budget_text()}; 95% CI: stratified "
+        f"bootstrap of the mean (rliable, {ctx.reps:,} repetitions, random state {ctx.seed}); Δ = reproduced − "
+        "paper; n: seeds that reached the budget (+k short: runs that stopped earlier, not used); — : no data."
+    )]
+    if ctx.no_runs:
+        full_notes.insert(0, "No runs were found under the results root: only the paper's values are shown.")
+    return write_table(ctx.out_dir, name, raw, caption, display, full_notes)
+
+
+def curve_panel(
+    ax: plt.Axes,
+    curves: pd.DataFrame,
+    labels: Sequence[str],
+    colors: dict[str, str],
+    reps: int,
+    seed: int,
+    per_seed: bool = False,
+) -> None:
+    """Mean learning curve with a 95% bootstrap CI band per label (or one thin line per seed)."""
+    for lab in labels:
+        rows = curves[curves["label"] == lab]
+        if rows.empty:
+            continue
+        n_seeds = rows["seed"].nunique()
+        if per_seed:
+            for i, (_, s) in enumerate(rows.groupby("seed")):
+                s = s.sort_values("frame")
+                ax.plot(s["frame"], s["value"], color=colors[lab], lw=0.9, alpha=0.75,
+                        label=f"{lab} (per seed, n={n_seeds})" if i == 0 else None)
+            continue
+        pivot = rows.pivot_table(index="frame", columns="seed", values="value")
+        frames = pivot.index.to_numpy(dtype=float)
+        mean = pivot.mean(axis=1).to_numpy()
+        cis = mean_cis([pivot.loc[f].to_numpy() for f in pivot.index], reps=reps, seed=seed)
+        lo = np.array([c[0] for c in cis])
+        hi = np.array([c[1] for c in cis])
+        ax.plot(frames, mean, color=colors[lab], lw=1.6, label=f"{lab} (n={n_seeds})")
+        ax.fill_between(frames, lo, hi, color=colors[lab], alpha=0.2, lw=0)
+    ax.xaxis.set_major_formatter(FuncFormatter(frames_label))
+
+
+def frames_label(value: float, _pos: object = None) -> str:
+    """Axis label of a frame count: 0, 20k, 1.5M."""
+    if abs(value) < 1000:
+        return f"{value:g}"
+    return f"{value / 1e6:g}M" if abs(value) >= 1e6 else f"{value / 1e3:g}k"
+
+
+def panel_grid(n: int, ncols: int = 3, size: tuple[float, float] = (4.0, 3.0)) -> tuple[plt.Figure, list[plt.Axes]]:
+    nrows = max(1, math.ceil(n / ncols))
+    fig, axes = plt.subplots(nrows, ncols, figsize=(size[0] * ncols, size[1] * nrows), squeeze=False)
+    flat = list(axes.ravel())
+    for ax in flat[n:]:
+        ax.set_visible(False)
+    return fig, flat[:n]
+
+
+def relabel(df: pd.DataFrame, name: str) -> pd.DataFrame:
+    """Make the selection's ``label`` column the key column ``name`` (replacing any column of that name)."""
+    if "label" not in df.columns:
+        return df.assign(**{name: pd.Series(dtype=object)})
+    return df.drop(columns=[name], errors="ignore").rename(columns={"label": name})
+
+
+def has_data(cells: Sequence[Cell]) -> bool:
+    return any(c.stats.n > 0 or c.n_short > 0 for c in cells)

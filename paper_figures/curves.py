@@ -1,0 +1,90 @@
+"""One renderer for the learning-curve figures (F4, F5, F11, F12)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import pandas as pd
+
+from matplotlib.lines import Line2D
+from matplotlib.ticker import FuncFormatter
+
+from analysis.context import Context
+from analysis.identity import task_display
+from paper_figures.common import (
+    NO_RUNS_TEXT,
+    PAPER_MARK,
+    banner,
+    curve_panel,
+    frames_label,
+    palette,
+    panel_grid,
+    placeholder,
+    save_figure,
+)
+from paper_figures.registry import ArtifactResult
+
+
+def render_curves(
+    ctx: Context,
+    artifact_id: str,
+    title: str,
+    curves: pd.DataFrame,
+    tasks: Sequence[str],
+    labels: Sequence[str],
+    caption: str,
+    ylabel: str,
+    per_seed: bool = False,
+    paper_marks: dict[tuple[str, str], float] | None = None,
+    ncols: int = 3,
+    hline: tuple[float, str] | None = None,
+) -> ArtifactResult:
+    """One panel per task; mean + 95% CI band per label (or per-seed lines); paper diamonds at 1M."""
+    paper_marks = paper_marks or {}
+    extra = sorted(set(curves["label"]) - set(labels)) if not curves.empty else []
+    labels = [*labels, *extra]
+    colors = palette(labels)
+    ncols = min(ncols, len(tasks))
+    fig, axes = panel_grid(len(tasks), ncols=ncols, size=(4.0, 3.0) if len(tasks) > 1 else (6.5, 4.2))
+    any_data = False
+    for ax, task in zip(axes, tasks):
+        rows = curves[curves["task"] == task] if not curves.empty else curves
+        if not rows.empty:
+            any_data = True
+            curve_panel(ax, rows, labels, colors, ctx.curve_reps, ctx.seed, per_seed=per_seed)
+        marks = {lab: v for (t, lab), v in paper_marks.items() if t == task}
+        show_marks = marks and (rows.empty or rows["frame"].max() >= 0.5e6)
+        if show_marks:
+            for lab, v in marks.items():
+                ax.plot([1e6], [v], **{**PAPER_MARK, "color": colors.get(lab, "black"), "markeredgecolor": "black"})
+        if rows.empty and not show_marks:
+            placeholder(ax, f"no runs for {task_display(task)}")
+        elif rows.empty:
+            ax.text(0.5, 0.95, "no runs", transform=ax.transAxes, ha="center", va="top", color="#777777")
+            ax.set_xlim(0, 1.1e6)
+            handles = [Line2D([], [], **{**PAPER_MARK, "color": colors.get(lab, "black"), "markeredgecolor": "black"},
+                              label=f"{lab} (paper, 1M)") for lab in marks]
+            ax.legend(handles=handles, fontsize=7, loc="center left")
+        ax.xaxis.set_major_formatter(FuncFormatter(frames_label))
+        if hline is not None and not rows.empty:
+            ax.axhline(hline[0], color="#555555", ls="--", lw=1, label=hline[1])
+        ax.set_title(task_display(task), fontsize=10)
+        ax.set_xlabel("frames")
+        ax.set_ylabel(ylabel)
+        if not rows.empty:
+            ax.legend(fontsize=7, loc="upper left")
+    if ctx.no_runs:
+        banner(fig, NO_RUNS_TEXT)
+    elif not any_data:
+        banner(fig, f"no runs for {artifact_id} under the results root")
+    if len(tasks) > 1:
+        fig.suptitle(title, y=1.04 if ctx.no_runs or not any_data else 1.0)
+    fig.tight_layout()
+    png = save_figure(fig, ctx, artifact_id)
+    bands = ("thin lines: individual seeds" if per_seed else
+             f"lines: mean over seeds; bands: 95% stratified-bootstrap CI of the mean at each frame (rliable, "
+             f"{ctx.curve_reps:,} repetitions, random state {ctx.seed}); curves are interpolated on a common "
+             "frame grid and not extrapolated past a run's last evaluation")
+    marks = " Diamonds at 1M frames: the paper's Table 1 values." if paper_marks else ""
+    return ArtifactResult(artifact_id, title, f"{caption} {bands[0].upper() + bands[1:]}.{marks}", figures=[png],
+                          has_runs=any_data)

@@ -1,0 +1,340 @@
+"""Analysis: loading and validation, scores, statistics (against rliable), claims, audit, CLI errors."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import typer
+from rliable import library as rly
+from rliable import metrics
+from typer.testing import CliRunner
+
+from analysis import select
+from analysis.audit import mismatches, run_audit
+from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims
+from analysis.cli import register
+from analysis.context import Context
+from analysis.load import load_results
+from analysis.scores import best_online_returns, final_scores, learning_curves, normalize_offline
+from analysis.speed import hardware_label, speed_measurements
+from analysis.stats import (
+    aggregate_estimates,
+    mean_cis,
+    mean_std,
+    probability_of_improvement,
+    seeded,
+)
+from analysis_fixtures import DMC9, FRAMES, write_run
+
+REPS = 200
+pytestmark = pytest.mark.filterwarnings("ignore:random_state is deprecated:FutureWarning")
+
+
+def _ctx(root: Path, **kw) -> Context:
+    return Context(results=load_results(root), out_dir=root / "_out", budget=FRAMES, reps=REPS, **kw)
+
+
+# ---------------------------------------------------------------- loading
+def test_identity_comes_from_config_not_path(tmp_path):
+    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=3, final=100.0, K=1,
+              path=tmp_path / "somewhere" / "else")
+    res = load_results(tmp_path)
+    row = res.runs.iloc[0]
+    assert (row["experiment"], row["algo"], row["method"], row["task"], row["seed"], row["K"]) == (
+        "main", "taco", "TACO", "hopper_hop", 3, 1)
+    assert row["objectives"] == "curl+reward+taco"
+    assert row["run_id"] == "somewhere/else"
+    assert set(res.eval["run_id"]) == {"somewhere/else"}
+
+
+def test_malformed_files_are_reported_with_path_and_skipped(tmp_path):
+    good = write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=100.0)
+    extra_field = write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=1, final=100.0)
+    with open(extra_field / "eval.csv", "a") as fh:
+        fh.write("120000,60000,7,1.0,0.0,500,,10,7,EXTRA\n")
+    truncated = write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=2, final=100.0)
+    text = (truncated / "eval.csv").read_text()
+    (truncated / "eval.csv").write_text(text[:-9])  # cut inside the last row
+    bad_train = write_run(tmp_path, experiment="main", algo="drqv2", task="hopper_hop", seed=0, final=50.0)
+    (bad_train / "train.csv").write_text("frame,step\n1,2\n")
+    no_config = tmp_path / "orphan"
+    no_config.mkdir()
+    (no_config / "eval.csv").write_text((good / "eval.csv").read_text())
+    bad_yaml = write_run(tmp_path, experiment="main", algo="taco", task="walker_run", seed=0, final=1.0)
+    (bad_yaml / "config.yaml").write_text("experiment: [unclosed\n")
+
+    res = load_results(tmp_path)
+    paths = {p.path: p.message for p in res.problems}
+    assert str(extra_field / "eval.csv") in paths and "fields" in paths[str(extra_field / "eval.csv")]
+    assert str(truncated / "eval.csv") in paths and "truncated" in paths[str(truncated / "eval.csv")]
+    assert str(bad_train / "train.csv") in paths
+    assert str(no_config / "eval.csv") in paths
+    assert str(bad_yaml / "config.yaml") in paths
+    # the good run keeps its rows; the malformed eval files contribute none
+    assert set(res.eval["run_id"]) == {str(good.relative_to(tmp_path)), str(bad_train.relative_to(tmp_path))}
+    assert math.isnan(res.runs.set_index("run_id").loc[str(bad_train.relative_to(tmp_path)), "fps"])
+
+
+def test_missing_root_raises_clear_error(tmp_path):
+    from analysis.load import ResultsRootError
+
+    with pytest.raises(ResultsRootError, match="does not exist"):
+        load_results(tmp_path / "nope")
+
+
+# ---------------------------------------------------------------- scores
+def test_score_at_budget_takes_largest_frame_not_past_budget(tmp_path):
+    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=500.0)
+    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=1, final=500.0, frames=60_000, done=False)
+    res = load_results(tmp_path)
+    s = final_scores(res, 100_000).set_index("seed")
+    assert s.loc[0, "score"] == pytest.approx(500.0) and bool(s.loc[0, "reached"])
+    assert s.loc[1, "score"] == pytest.approx(500.0) and s.loc[1, "frame"] == 60_000  # its last evaluation
+    assert not bool(s.loc[1, "reached"])  # flagged short
+    s70 = final_scores(res, 70_000).set_index("seed")
+    assert s70.loc[0, "frame"] == 60_000 and s70.loc[0, "score"] == pytest.approx(300.0)
+    assert bool(s70.loc[0, "reached"])
+
+
+def test_learning_curves_interpolate_and_do_not_extrapolate(tmp_path):
+    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=100.0)
+    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=1, final=100.0, frames=40_000)
+    res = load_results(tmp_path)
+    curves = learning_curves(res, grid=np.array([0.0, 10_000.0, 50_000.0]))
+    by_seed = {s: dict(zip(g["frame"], g["value"])) for s, g in curves.groupby("seed")}
+    assert by_seed[0] == {0.0: 0.0, 10_000.0: pytest.approx(10.0), 50_000.0: pytest.approx(50.0)}
+    assert 50_000.0 not in by_seed[1]  # past its last evaluation
+
+
+def test_metaworld_score_is_success_percent(tmp_path):
+    write_run(tmp_path, experiment="metaworld", algo="taco", task="hammer", seed=0, final=0.8, success=True)
+    s = final_scores(load_results(tmp_path), FRAMES)
+    assert s.iloc[0]["metric"] == "success" and s.iloc[0]["score"] == pytest.approx(80.0)
+
+
+def test_offline_normalisation_uses_best_online_taco_return(tmp_path):
+    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=400.0)
+    write_run(tmp_path, experiment="horizon", algo="taco", task="hopper_hop", seed=0, final=900.0)
+    write_run(tmp_path, experiment="offline", algo="cql", task="hopper_hop", seed=0, final=100.0,
+              dataset="medium_replay", objectives={"taco": 1.0})
+    res = load_results(tmp_path)
+    norm = best_online_returns(res)
+    assert norm == {"hopper_hop": 400.0}  # main preferred over other experiments
+    off = normalize_offline(final_scores(res, FRAMES), norm)
+    row = off.iloc[0]
+    assert (row["method"], row["dataset"]) == ("CQL+TACO", "medium-replay")
+    assert row["normalized"] == pytest.approx(25.0)
+
+
+# ---------------------------------------------------------------- statistics vs rliable
+def test_mean_std_uses_ddof_1():
+    n, mean, std = mean_std([530.0, 540.0, 550.0])
+    assert (n, mean, std) == (3, 540.0, 10.0)
+    assert math.isnan(mean_std([1.0])[2])
+
+
+def test_cell_cis_equal_rliables_own():
+    rng = np.random.default_rng(1)
+    cols = [rng.uniform(0, 1000, 5) for _ in range(3)]
+    ours = mean_cis(cols, reps=REPS, seed=7)
+    np.random.seed(7)
+    _, cis = rly.get_interval_estimates({"cells": np.stack(cols, axis=1)}, lambda x: np.mean(x, axis=0), reps=REPS,
+                                        random_state=np.random.RandomState(7))
+    assert ours == [(float(cis["cells"][0][j]), float(cis["cells"][1][j])) for j in range(3)]
+    assert mean_cis([np.array([3.0])], reps=REPS) == [(math.nan, math.nan)] or math.isnan(mean_cis([np.array([3.0])])[0][0])
+
+
+def test_aggregates_and_poi_equal_rliables_own():
+    rng = np.random.default_rng(2)
+    x, y = rng.uniform(0, 1, (4, 3)), rng.uniform(0, 1, (5, 3))
+    df = aggregate_estimates({"A": x}, reps=REPS, seed=3).set_index("metric")
+
+    def agg(s):
+        return np.array([metrics.aggregate_iqm(s), metrics.aggregate_mean(s), metrics.aggregate_optimality_gap(s)])
+
+    np.random.seed(3)
+    points, cis = rly.get_interval_estimates({"A": x}, agg, reps=REPS, random_state=np.random.RandomState(3))
+    for k, name in enumerate(["IQM", "Mean", "Optimality Gap"]):
+        assert df.loc[name, "value"] == pytest.approx(points["A"][k], abs=0)
+        assert (df.loc[name, "ci_low"], df.loc[name, "ci_high"]) == (cis["A"][0][k], cis["A"][1][k])
+    p, lo, hi = probability_of_improvement(x, y, reps=REPS, seed=4)
+    np.random.seed(4)
+    pt, ci = rly.get_interval_estimates({"p": [x, y]}, lambda a, b: np.array([metrics.probability_of_improvement(a, b)]),
+                                        reps=REPS, random_state=np.random.RandomState(4))
+    assert (p, lo, hi) == (pt["p"][0], ci["p"][0][0], ci["p"][1][0])
+
+
+def test_seeded_restores_global_numpy_state():
+    np.random.seed(123)
+    expected = np.random.rand()
+    np.random.seed(123)
+    with seeded(0):
+        np.random.rand(10)
+    assert np.random.rand() == expected
+
+
+# ---------------------------------------------------------------- artifacts: exact cells
+def test_t1_cells_exact(tmp_path):
+    for s, v in enumerate((530.0, 540.0, 550.0)):
+        write_run(tmp_path, experiment="main", algo="taco", task="quadruped_run", seed=s, final=v)
+    write_run(tmp_path, experiment="main", algo="drqv2", task="quadruped_run", seed=0, final=400.0, frames=60_000,
+              done=False)
+    from paper_figures.t1_online import render
+
+    ctx = _ctx(tmp_path)
+    table = render(ctx).tables[0]
+    t = table.data.set_index(["task", "method"])
+    taco = t.loc[("quadruped_run", "TACO")]
+    assert (taco["n"], taco["repro_mean"], taco["repro_std"], taco["paper_mean"], taco["diff"]) == (3, 540.0, 10.0, 541.0, -1.0)
+    lo, hi = mean_cis([np.array([530.0, 540.0, 550.0])], reps=REPS, seed=0)[0]
+    assert (taco["ci_low"], taco["ci_high"]) == (lo, hi)
+    assert taco["paper_in_ci"] == (lo <= 541.0 <= hi)
+    drq = t.loc[("quadruped_run", "DrQ-v2")]
+    assert (drq["n"], drq["n_short"]) == (0, 1) and math.isnan(drq["repro_mean"])  # short run counted, not used
+    assert t.loc[("hopper_hop", "DreamerV3"), "n"] == 0  # empty cells are kept
+    md = (ctx.out_dir / "T1.md").read_text()
+    assert "| Quadruped Run | TACO | 541 ± 38 | 540 ± 10 | 3 |" in md
+    assert "| Quadruped Run | DrQ-v2 | 407 ± 21 | no runs | 0 (+1 short) |" in md
+    assert (ctx.out_dir / "T1.tex").read_text().count(r"\\") > 60 and (ctx.out_dir / "T1.csv").exists()
+
+
+def test_experiment_map_reads_other_experiment_names(tmp_path):
+    write_run(tmp_path, experiment="tiny", algo="taco", task="hopper_hop", seed=0, final=10.0)
+    ctx = _ctx(tmp_path)
+    assert select.online_main(ctx.scores).empty
+    mapped = select.online_main(ctx.scores, {"main": ["tiny"]})
+    assert list(mapped["label"]) == ["TACO"]
+
+
+def test_speed_from_runs_and_bench(tmp_path):
+    write_run(tmp_path, experiment="speed", algo="taco", task="hopper_hop", seed=0, final=1.0, fps=12.0,
+              device="cuda:NVIDIA A100")
+    (tmp_path / "bench").mkdir()
+    (tmp_path / "bench" / "b.json").write_text('{"hardware": "CPU: X", "results": [{"algo": "drqv2", '
+                                               '"batch_size": 256, "update_seconds": 0.1, "fps_estimate": 40.0}]}')
+    (tmp_path / "bench" / "broken.json").write_text("{")
+    res = load_results(tmp_path)
+    m = speed_measurements(res).set_index("method")
+    assert m.loc["TACO", "fps"] == 12.0 and m.loc["TACO", "hardware"] == "NVIDIA A100 (GPU)"
+    assert m.loc["DrQ-v2", "fps"] == 40.0 and m.loc["DrQ-v2", "hardware"] == "CPU: X"
+    assert any(p.path.endswith("broken.json") for p in res.problems)
+    assert hardware_label("cpu", "Intel Xeon") == "CPU: Intel Xeon"
+
+
+# ---------------------------------------------------------------- claims
+def _main_grid(root: Path, taco: dict[str, float], seeds: int = 2) -> None:
+    for task in DMC9:
+        for s in range(seeds):
+            write_run(root, experiment="main", algo="drqv2", task=task, seed=s, final=400.0 + s)
+            if task in taco:
+                write_run(root, experiment="main", algo="taco", task=task, seed=s, final=taco[task] + s)
+
+
+def _verdicts(ctx: Context) -> dict[str, object]:
+    return {v.id: v for v in evaluate_claims(ctx)}
+
+
+def test_claim_verdicts_supported_refuted_and_not_enough_data(tmp_path):
+    good = tmp_path / "good"
+    _main_grid(good, {t: 600.0 for t in DMC9})
+    v = _verdicts(_ctx(good))
+    assert v["online_beats_drqv2_all"].verdict == SUPPORTED
+    assert v["online_avg_gain"].verdict == SUPPORTED and "1.49" in v["online_avg_gain"].evidence
+    assert v["manipulator"].verdict == NO_DATA and v["tsne_clusters"].verdict == NO_DATA
+
+    bad = tmp_path / "bad"
+    _main_grid(bad, {**{t: 600.0 for t in DMC9}, "hopper_hop": 300.0})
+    v = _verdicts(_ctx(bad))
+    assert v["online_beats_drqv2_all"].verdict == REFUTED and "hopper_hop" in v["online_beats_drqv2_all"].evidence
+
+    partial = tmp_path / "partial"
+    _main_grid(partial, {"hopper_hop": 300.0})  # a counterexample refutes a universal claim even with gaps
+    v = _verdicts(_ctx(partial))
+    assert v["online_beats_drqv2_all"].verdict == REFUTED
+    assert v["online_avg_gain"].verdict == NO_DATA
+
+    gaps = tmp_path / "gaps"
+    _main_grid(gaps, {"hopper_hop": 700.0})
+    assert _verdicts(_ctx(gaps))["online_beats_drqv2_all"].verdict == NO_DATA
+
+
+def test_claim_min_seeds(tmp_path):
+    _main_grid(tmp_path, {t: 600.0 for t in DMC9}, seeds=1)
+    assert _verdicts(_ctx(tmp_path))["online_beats_drqv2_all"].verdict == NO_DATA
+    assert _verdicts(_ctx(tmp_path, min_seeds=1))["online_beats_drqv2_all"].verdict == SUPPORTED
+
+
+def test_action_repeat_claim_refuted_when_best_k_differs(tmp_path):
+    for ar in (1, 2, 4):
+        for k in (1, 3, 5):
+            for s in range(2):
+                write_run(tmp_path, experiment="action_repeat", algo="taco", task="hopper_hop", K=k, action_repeat=ar,
+                          variant=f"ar{ar}_K{k}", seed=s, final=100.0 * k + s)  # K=5 always best
+    v = _verdicts(_ctx(tmp_path))["action_repeat"]
+    assert v.verdict == REFUTED and "AR4: K=5" in v.evidence
+
+
+# ---------------------------------------------------------------- audit of the paper's numbers
+def test_audit_finds_the_papers_real_mismatches():
+    findings = run_audit()
+    bad = {(f.check, f.description.split(":")[0]) for f in mismatches(findings)}
+    by_desc = {f.description: f for f in findings}
+    # Table 3's printed average row swaps DT and BC: DT's 12 cells average 54.9, BC's 48.4
+    dt = next(f for f in findings if f.check == "offline_average_row" and ", DT:" in f.description)
+    assert not dt.match and dt.printed == "48.4" and "54.9" in dt.recomputed and "BC" in dt.description
+    bc = next(f for f in findings if f.check == "offline_average_row" and ", BC:" in f.description)
+    assert not bc.match and bc.printed == "54.9" and "48.4" in bc.recomputed
+    assert all(f.match for f in findings if f.check == "offline_average_row" and "DT" not in f.description
+               and ", BC:" not in f.description)
+    # Table 2 repeats Table 1's TACO/DrQ-v2 entries, three of them differently
+    t12 = {f.description.split(":")[0]: f for f in findings if f.check == "t1_vs_t2" and not f.match}
+    assert set(t12) == {"walker_run TACO", "hopper_hop DrQ-v2", "acrobot_swingup DrQ-v2"}
+    assert t12["walker_run TACO"].printed == "T2: 637 ± 21" and t12["walker_run TACO"].recomputed == "T1: 637 ± 11"
+    assert "DreamerV3" in t12["acrobot_swingup DrQ-v2"].description
+    # 130 / 35 = 3.71, printed as "3.6 times"
+    speed = next(f for f in findings if f.check == "speed_ratio")
+    assert not speed.match and speed.recomputed.startswith("3.714")
+    # checks that agree
+    assert next(f for f in findings if f.check == "online_gain_ratio").match  # 1.397 -> 1.4x
+    assert next(f for f in findings if f.check == "t4_vs_t5").match
+    assert next(f for f in findings if f.check == "beats_model_based").match
+    assert all(f.match for f in findings if f.check == "csv_vs_tex")
+    assert ("action_repr_reacher", "reacher_hard") in bad
+    assert len(by_desc) == len(findings)
+
+
+# ---------------------------------------------------------------- CLI
+def _app() -> typer.Typer:
+    app = typer.Typer()
+    register(app)
+    return app
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["figures", "F99"], "unknown artifact 'F99'"),
+        (["figures", "T1", "--results", "/nonexistent/root"], "does not exist"),
+        (["claims", "--results", "/nonexistent/root"], "does not exist"),
+        (["figures"], "--all or --list"),
+        (["report", "--results", "/nonexistent/root"], "does not exist"),
+    ],
+)
+def test_cli_bad_input_is_one_line_and_nonzero(args, needle):
+    result = CliRunner().invoke(_app(), args)
+    assert result.exit_code == 2
+    lines = [ln for ln in result.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and needle in lines[0] and "Traceback" not in result.output
+
+
+def test_cli_list_and_audit(tmp_path):
+    runner = CliRunner()
+    listed = runner.invoke(_app(), ["figures", "--list"])
+    assert listed.exit_code == 0 and "F7a" in listed.output and "T6" in listed.output
+    audit = runner.invoke(_app(), ["audit", "--out", str(tmp_path)])
+    assert audit.exit_code == 0 and "MISMATCH" in audit.output and (tmp_path / "audit.md").exists()
+    assert pd.read_csv(tmp_path / "audit.csv")["match"].eq(False).sum() >= 7

@@ -1,0 +1,138 @@
+"""Every artifact renders on a synthetic full-coverage results root and on an empty one; F6 helpers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+import torch
+import typer
+from analysis_fixtures import FRAMES, full_coverage_root
+from typer.testing import CliRunner
+
+import paper_figures
+from analysis.claims import REFUTED, SUPPORTED
+from analysis.cli import register
+from analysis.context import Context
+from analysis.load import load_results
+from analysis.report import build_report
+from analysis.tsne import build_step_mlp, find_action_encoder_state, run_tsne
+
+REPS = 200
+EXPECTED = ["T1", "T2", "T3", "T4", "T5", "T6", "F1", "F3", "F4", "F5", "F6", "F7a", "F7b", "F8", "F9", "F10",
+            "F11", "F12", "F13"]
+
+
+def assert_png_not_blank(path: Path) -> None:
+    assert path.exists() and path.stat().st_size > 2000, path
+    img = mpimg.imread(path)[..., :3]
+    assert img.shape[0] > 100 and img.shape[1] > 100
+    assert float(img.var()) > 1e-3, f"{path} looks blank"
+    assert path.with_suffix(".pdf").stat().st_size > 1000
+
+
+@pytest.fixture(scope="module")
+def full_report(tmp_path_factory):
+    root = full_coverage_root(tmp_path_factory.mktemp("results"))
+    ctx = Context(results=load_results(root), out_dir=tmp_path_factory.mktemp("report"), budget=FRAMES, reps=REPS,
+                  tsne_n=30, tsne_iter=250, render_envs=False)
+    md, html = build_report(ctx)
+    return ctx, md, html
+
+
+def test_registry_has_every_artifact():
+    assert paper_figures.ordered_ids() == EXPECTED
+    assert [a.id for a in paper_figures.resolve(["f7", "T1"])] == ["F7a", "F7b", "T1"]
+    with pytest.raises(paper_figures.UnknownArtifactError):
+        paper_figures.resolve(["F2"])
+
+
+def test_every_figure_renders_non_blank_on_full_coverage(full_report):
+    ctx, _, _ = full_report
+    manifest = {m["id"]: m for m in json.loads((ctx.out_dir / "manifest.json").read_text())}
+    assert list(manifest) == EXPECTED
+    for aid, entry in manifest.items():
+        for png in entry["figures"]:
+            assert_png_not_blank(ctx.out_dir / png)
+        for suffix in ("csv", "md", "tex"):
+            if aid.startswith("T"):
+                assert (ctx.out_dir / f"{aid}.{suffix}").stat().st_size > 100
+        if aid not in ("F13",):
+            assert entry["has_runs"], f"{aid} found no runs in the full-coverage root"
+
+
+def test_full_coverage_tables_and_claims(full_report):
+    ctx, md, html = full_report
+    import pandas as pd
+
+    t2 = pd.read_csv(ctx.out_dir / "T2.csv").set_index(["task", "method"])
+    assert t2.loc[("hopper_hop", "SPR"), "repro_mean"] == pytest.approx(245.0)  # 300 * 0.5 + 100 - 5 (2 seeds)
+    assert t2.loc[("hopper_hop", "TACO"), "n"] == 2
+    f9 = pd.read_csv(ctx.out_dir / "F9.csv").set_index(["ar", "k"])
+    assert f9.loc[(1, "K=5"), "repro_mean"] == pytest.approx(395.0)
+    f6 = pd.read_csv(ctx.out_dir / "F6.csv").set_index("space")
+    assert f6.loc["latent", "silhouette_tsne_2d"] > 0.5 > f6.loc["raw", "silhouette_tsne_2d"]
+    claims = pd.read_csv(ctx.out_dir / "claims.csv").set_index("id")
+    for cid in ("online_beats_drqv2_all", "horizon_choice", "action_repeat", "batch_size", "objective_removal",
+                "action_dim", "tsne_clusters", "speed", "metaworld", "offline_gain", "vs_repr_objectives"):
+        assert claims.loc[cid, "verdict"] == SUPPORTED, (cid, claims.loc[cid, "evidence"])
+    assert claims.loc["offline_average", "verdict"] == REFUTED  # synthetic averages are far from 71.0 etc.
+    text = md.read_text()
+    for aid in EXPECTED:
+        assert f"## {aid}:" in text
+    for section in ("## Claims", "## Audit", "## Provenance", "abc1234"):
+        assert section in text
+    page = html.read_text()
+    assert "<table>" in page and 'src="F1.png"' in page
+
+
+def test_paper_only_view_with_no_runs(tmp_path):
+    app = typer.Typer()
+    register(app)
+    (tmp_path / "empty").mkdir()
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["figures", "--all", "--results", str(tmp_path / "empty"), "--out", str(out),
+                                      "--reps", "50", "--tsne-n", "20", "--no-render-envs"])
+    assert result.exit_code == 0, result.output
+    assert "No runs found" in result.output
+    for aid in EXPECTED:
+        if aid.startswith("F"):
+            assert_png_not_blank(out / f"{aid}.png")
+    t1 = (out / "T1.md").read_text()
+    assert "No runs were found" in t1 and "| Quadruped Run | TACO | 541 ± 38 | no runs | 0 |" in t1
+
+
+# ---------------------------------------------------------------- F6 helpers
+def _encoder_state(true_dim=6, distract=20, latent=8):
+    g = torch.Generator().manual_seed(1)
+    w0 = torch.randn(64, true_dim + distract, generator=g)
+    w0[:, true_dim:] = 0.0
+    return {"step.0.weight": w0, "step.0.bias": torch.randn(64, generator=g),
+            "step.2.weight": torch.randn(latent, 64, generator=g), "step.2.bias": torch.randn(latent, generator=g)}
+
+
+@pytest.mark.parametrize("layout", ["nested", "dotted", "flat"])
+def test_action_encoder_found_in_checkpoint_layouts(layout):
+    sd = _encoder_state()
+    ckpt = {
+        "nested": {"agent": {"action_encoder": {**sd, "seq.weight": torch.zeros(1)}, "critic": {}}},
+        "dotted": {"agent": {"agent.action_encoder": sd}},
+        "flat": {"agent": {f"action_encoder.{k}": v for k, v in sd.items()}},
+    }[layout]
+    state = find_action_encoder_state(ckpt)
+    mlp = build_step_mlp(state)
+    x = torch.randn(5, 26)
+    expected = torch.tanh(x @ sd["step.0.weight"].T + sd["step.0.bias"]) @ sd["step.2.weight"].T + sd["step.2.bias"]
+    assert torch.allclose(mlp(x), expected, atol=1e-6)
+
+
+def test_tsne_scores_latent_clusters_above_raw():
+    mlp = build_step_mlp(find_action_encoder_state({"agent": {"action_encoder": _encoder_state()}}))
+    res = run_tsne(6, 20, mlp, n=30, seed=0, max_iter=250)
+    assert res.raw_2d.shape == (120, 2) and res.latent_2d.shape == (120, 2)
+    assert res.silhouette_latent > 0.9 and res.silhouette_raw < 0.2
+    assert res.silhouette_latent_2d > res.silhouette_raw_2d
+    assert np.bincount(res.labels).tolist() == [30, 30, 30, 30]
