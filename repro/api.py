@@ -78,7 +78,8 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo)
         bar = _progress(rc, progress)
         trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
-                          lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None)
+                          lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
+                          save_frames=lambda frames: _save_frames(path / "frames.npz", frames))
         if state is not None:
             trainer.restore(state)
             episodes.prune({rec[0] for rec in state["buffer"]["episodes"]})
@@ -96,6 +97,22 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         env.close()
         eval_env.close()
     return path
+
+
+def _save_frames(path: Path, frames) -> None:
+    """Frames of one evaluation episode, uint8 (T, H, W, 3), compressed and written atomically."""
+    import io
+
+    import numpy as np
+
+    from repro.fsutil import atomic_write
+
+    def write(f) -> None:
+        buf = io.BytesIO()
+        np.savez_compressed(buf, frames=frames)
+        f.write(buf.getvalue())
+
+    atomic_write(path, write)
 
 
 def train(overrides: list[str], echo: Callable[[str], None] = print, progress: bool | None = False) -> Path:

@@ -71,6 +71,7 @@ class TrainConfig:
     eval_every_frames: int = 10_000
     eval_episodes: int = 10
     checkpoint_every_episodes: int = 1
+    save_frames: bool = True
 
 
 @dataclass

@@ -32,11 +32,13 @@ class Counters:
 class Trainer:
     def __init__(self, cfg: TrainConfig, seed: int, action_repeat: int, env: Env, eval_env: Env, agent: Agent,
                  buffer: ReplayBuffer, logger: RunLogger, episodes: EpisodeStore,
-                 save_checkpoint: Callable[[dict], None], progress=None):
+                 save_checkpoint: Callable[[dict], None], progress=None,
+                 save_frames: Callable[[np.ndarray], None] | None = None):
         self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
         self.env, self.eval_env, self.agent, self.buffer = env, eval_env, agent, buffer
         self.logger, self.episodes, self._save = logger, episodes, save_checkpoint
         self.progress = progress
+        self.save_frames = save_frames
         self.counters = Counters()
         self.batch_size = agent.cfg.batch_size
         self.has_success = env.spec.has_success
@@ -76,30 +78,38 @@ class Trainer:
         self._t0 = time.time()
 
     # ----------------------------------------------------------------- evaluation
-    def evaluate(self) -> None:
+    def evaluate(self, final: bool = False) -> None:
         started = time.time()
         try:
-            self._evaluate()
+            self._evaluate(record=final and self.cfg.save_frames)
         finally:
             self._eval_seconds += time.time() - started
 
-    def _evaluate(self) -> None:
+    def _evaluate(self, record: bool = False) -> None:
+        """Evaluate with the policy mean; ``record`` saves the first episode's frames (frames.npz, for F13)."""
         returns, lengths, successes = [], [], []
+        frames: list[np.ndarray] = []
         eval_index = self.counters.step
         self.agent.train(False)
         for ep in range(self.cfg.eval_episodes):
             ts = self.eval_env.reset(seed=episode_seed(self.seed, 1, eval_index, ep))
             total, length, success = 0.0, 0, 0.0
+            if record and ep == 0:
+                frames.append(ts.observation[-3:].transpose(1, 2, 0))
             while not ts.last:
                 action = self.agent.act(ts.observation, self.counters.step, eval_mode=True)
                 ts = self.eval_env.step(action)
                 total += ts.reward
                 length += 1
                 success = max(success, float(ts.info.get("success", 0.0)))
+                if record and ep == 0:
+                    frames.append(ts.observation[-3:].transpose(1, 2, 0))
             returns.append(total)
             lengths.append(length * self.action_repeat)  # in frames, as upstream
             successes.append(success)
         self.agent.train(True)
+        if frames and self.save_frames is not None:
+            self.save_frames(np.stack(frames))
         mean = float(np.mean(returns)) if returns else float("nan")
         self.last_eval = mean
         self.logger.log_eval({
@@ -134,7 +144,7 @@ class Trainer:
         while True:
             if self.counters.step % eval_every == 0 or self.counters.step >= total_steps:
                 if cfg.eval_episodes > 0:
-                    self.evaluate()
+                    self.evaluate(final=self.counters.step >= total_steps)
             if self.progress is not None:
                 self.progress(self.frame, self.last_eval)
             if self.counters.step >= total_steps:

@@ -51,6 +51,10 @@ def test_run_directory_contract(reference: Path):
     assert tr["taco_loss"].iloc[1:].notna().all() and tr["critic_loss"].iloc[1:].notna().all()
     ckpt = torch.load(reference / "checkpoint.pt", weights_only=True)
     assert "action_encoder" in ckpt["agent"] and "step.0.weight" in ckpt["agent"]["action_encoder"]
+    import numpy as np
+
+    frames = np.load(reference / "frames.npz")["frames"]
+    assert frames.shape == (51, 84, 84, 3) and frames.dtype == np.uint8 and frames.std() > 0
     done = json.loads((reference / "DONE").read_text())
     assert done["frame"] == 400
 
