@@ -1,0 +1,242 @@
+"""Commands ``repro sweeps``, ``repro sweep`` and ``repro status`` (added to the main app by ``register``)."""
+
+from __future__ import annotations
+
+import os
+import sys
+from enum import Enum
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from repro.launch import spec as specs
+from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
+
+STATE_STYLE = {"done": "green", "partial": "yellow", "absent": "dim", "mismatch": "red", "running": "cyan",
+               "queued": "blue", "failed": "red", "pending": "dim"}
+
+
+class Launcher(str, Enum):
+    local = "local"
+    slurm = "slurm"
+
+
+def _console(stderr: bool = False) -> Console:
+    out = sys.stderr if stderr else sys.stdout
+    if out.isatty():
+        return Console(stderr=stderr)
+    return Console(stderr=stderr, width=240, soft_wrap=True)
+
+
+def _fail(message: str, code: int = 2) -> typer.Exit:
+    _console(stderr=True).print(f"[red]error:[/] {escape(message)}", highlight=False)
+    return typer.Exit(code)
+
+
+def _shown_overrides(p: PlannedRun) -> str:
+    return " ".join(o for o in p.overrides if not o.startswith("runtime.results_root="))
+
+
+def _rel(path: Path, root: Path) -> str:
+    return os.path.relpath(path, root)
+
+
+def print_plan(planned: list[PlannedRun], spec: SweepSpec, root: Path, force: bool) -> None:
+    con = _console()
+    for p in planned:
+        state = p.state + (" (--force: move aside)" if p.state == "mismatch" and force else "")
+        style = STATE_STYLE.get(p.state, "")
+        con.print(f"[{style}]{state:<9}[/] {escape(_rel(p.run_dir, root))}  {escape(_shown_overrides(p))}",
+                  highlight=False)
+    by_state = {s: sum(1 for p in planned if p.state == s) for s in ("done", "partial", "absent", "mismatch")}
+    dims = (f"{len({p.run.task for p in planned})} task(s) x {len({p.run.agent for p in planned})} agent(s) x "
+            f"{len({p.run.variant for p in planned})} variant(s) x {len({p.run.seed for p in planned})} seed(s)")
+    summary = ", ".join(f"{n} {s}" for s, n in by_state.items() if n)
+    con.print(f"{len(planned)} runs of sweep '{spec.name}' ({dims}): {summary}. Results root: {root}",
+              highlight=False)
+
+
+def _mismatch_error(planned: list[PlannedRun], root: Path) -> str:
+    bad = [p for p in planned if p.state == "mismatch"]
+    first = bad[0]
+    return (f"{len(bad)} run dir(s) hold a run with another config (e.g. {_rel(first.run_dir, root)}: "
+            f"{first.diff[0]}); rerun with --force to move them aside to {root / '.replaced'}.")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``sweeps``, ``sweep`` and ``status`` to ``app``."""
+
+    @app.command("sweeps")
+    def sweeps_cmd() -> None:
+        """List the paper's experiment sweeps with their run counts."""
+        con = _console()
+        table = Table(title="Sweeps (sweeps/*.yaml)")
+        for col in ("name", "artifacts", "runs", "tasks", "agents", "variants", "seeds", "frames", "status"):
+            table.add_column(col, overflow="fold")
+        try:
+            all_specs = specs.load_all()
+        except SweepError as exc:
+            raise _fail(str(exc)) from None
+        for s in all_specs:
+            reason = specs.unavailable_reason(s)
+            agents = {a for v in s.variants.values() for a in
+                      [specs.override_value(o) for o in v if specs.override_key(o) == "agent"] or s.agents}
+            if reason:
+                runs = len(s.tasks) * len(s.seeds) * sum(
+                    1 if any(specs.override_key(o) == "agent" for o in v) else len(s.agents)
+                    for v in s.variants.values())
+                status = "[red]refused:[/] " + escape(reason.split(": ", 1)[1])
+            else:
+                runs = len(specs.expand(s))
+                status = "[green]ok[/]"
+            frames = f"{s.frames:,}" if s.frames else "default"
+            table.add_row(s.name, ",".join(s.artifacts), str(runs), str(len(s.tasks)), ",".join(sorted(agents)),
+                          str(len(s.variants)), str(len(s.seeds)), frames, status)
+        con.print(table)
+
+    @app.command("sweep")
+    def sweep_cmd(
+        name: str = typer.Argument(..., help="Sweep name (see `repro sweeps`) or path to a sweep YAML."),
+        tasks: Optional[str] = typer.Option(None, "--tasks", help="Comma-separated tasks instead of the sweep's."),
+        seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Use seeds 1..N."),
+        frames: Optional[int] = typer.Option(None, "--frames", min=1, help="Frame budget of every run."),
+        sets: Optional[List[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
+        dry_run: bool = typer.Option(False, "--dry-run", help="Print the grid (run dir, overrides, state); launch nothing."),
+        launcher: Launcher = typer.Option(Launcher.local, "--launcher", help="Where to run."),
+        max_parallel: Optional[int] = typer.Option(None, "--max-parallel", min=1,
+                                                   help="Local: runs at once (default: cores / 2)."),
+        force: bool = typer.Option(False, "--force", help="Move aside run dirs whose saved config differs, then rerun."),
+        cluster_config: Optional[Path] = typer.Option(
+            None, "--cluster-config", help="SLURM launcher YAML (default: $REPRO_SLURM_CONFIG or "
+                                           "~/.config/taco-repro/slurm.yaml)."),
+    ) -> None:
+        """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
+        from repro.launch.local import default_parallel, run_local
+        from repro.launch.state import record_launch, state_dir
+
+        try:
+            spec = specs.load(name)
+            task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
+            sel = Selection(tasks=task_list, seeds=seeds, frames=frames, sets=tuple(sets or ()))
+            runs = specs.expand(spec, sel)
+            planned = specs.plan(runs)
+            root = specs.results_root_of(planned)
+            if dry_run:
+                print_plan(planned, spec, root, force)
+                return
+            if any(p.state == "mismatch" for p in planned) and not force:
+                raise SweepError(_mismatch_error(planned, root))
+            sdir = state_dir(root, spec.name)
+            grid = {p.key: {"run_dir": str(p.run_dir), "overrides": list(p.overrides)} for p in planned}
+            say = _console().print
+            if launcher == Launcher.slurm:
+                from repro.launch.slurm import cluster_config_path, load_cluster_config, submit
+
+                cpath = cluster_config_path(cluster_config)
+                cluster = load_cluster_config(cpath)
+                report = submit(planned, spec.name, sdir, cluster, force, say)
+                record_launch(sdir, spec.name, spec.path, "slurm", grid, report.job_ids,
+                              {"cluster_config": str(cpath) if cpath else None})
+            else:
+                parallel = max_parallel or default_parallel()
+                record_launch(sdir, spec.name, spec.path, "local", grid, extra={"max_parallel": parallel})
+                report = run_local(planned, spec.name, sdir, parallel, force, say)
+        except SweepError as exc:
+            raise _fail(str(exc)) from None
+        _print_report(report, launcher, spec.name)
+        if report.interrupted:
+            raise typer.Exit(130)
+        if report.failed or report.mismatch:
+            raise typer.Exit(1)
+
+    @app.command("status")
+    def status_cmd(
+        name: Optional[str] = typer.Argument(None, help="Sweep name; all launched sweeps when omitted."),
+        results_root: Optional[Path] = typer.Option(
+            None, "--results-root", help="Results root the sweeps ran under (default: the config's runtime.results_root)."),
+    ) -> None:
+        """Per sweep: done / running / queued / failed / pending per run, last frame and eval return."""
+        from repro.launch.state import state_dir
+
+        try:
+            root = (results_root or _default_results_root()).expanduser().absolute()
+            base = root / ".sweeps"
+            launched = sorted(d.name for d in base.iterdir() if (d / "state.json").exists()) if base.is_dir() else []
+            if name is None:
+                names = launched
+                if not names:
+                    _console().print(f"no sweep launched under {root}", highlight=False)
+                    return
+            elif name in launched:
+                names = [name]
+            else:
+                known = set(specs.sweep_names()) | set(launched)
+                if name not in known:
+                    raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, known))
+                _console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
+                return
+            for n in names:
+                _print_status(n, root, state_dir(root, n))
+        except SweepError as exc:
+            raise _fail(str(exc)) from None
+
+
+def _default_results_root() -> Path:
+    from repro.config import ConfigError, compose_base
+
+    try:
+        return Path(str(compose_base().runtime.results_root))
+    except ConfigError as exc:
+        raise SweepError(str(exc)) from None
+
+
+def _print_report(report, launcher: Launcher, sweep: str) -> None:  # type: ignore[no-untyped-def]
+    con = _console()
+    parts = [f"{len(report.started)} {'submitted' if launcher == Launcher.slurm else 'started'}"]
+    if launcher == Launcher.local:
+        parts.append(f"{len(report.finished)} finished")
+    parts += [f"{len(report.done)} already done", f"{len(report.locked)} held elsewhere",
+              f"{len(report.failed)} failed"]
+    if report.mismatch:
+        parts.append(f"{len(report.mismatch)} refused (config mismatch; --force)")
+    con.print(f"sweep '{sweep}': " + ", ".join(parts), highlight=False)
+    if report.job_ids:
+        con.print(f"SLURM job ids: {', '.join(report.job_ids)}; follow with `repro status {sweep}`",
+                  highlight=False)
+    for key, log in report.failed:
+        con.print(f"[red]failed[/] {escape(key)}: log {escape(log)}", highlight=False)
+
+
+def _print_status(name: str, root: Path, sdir: Path) -> None:
+    from repro.launch.status import collect, counts, sweep_runs
+
+    statuses = collect(sweep_runs(sdir), root, sdir)
+    n = counts(statuses)
+    table = Table(title=f"{name}: " + ", ".join(f"{v} {k}" for k, v in n.items()), title_justify="left")
+    for col in ("run", "status", "frame", "eval return", "job", "detail"):
+        table.add_column(col, overflow="fold")
+    for s in statuses:
+        style = STATE_STYLE.get(s.status, "")
+        table.add_row(escape(_rel(s.run_dir, root)), f"[{style}]{s.status}[/]",
+                      "" if s.frame is None else f"{s.frame:,}",
+                      "" if s.eval_return is None else f"{s.eval_return:.1f}", s.job_id or "", escape(s.detail))
+    con = _console()
+    con.print(table)
+    for s in statuses:
+        if s.status == "failed" and s.log:
+            con.print(f"[red]failed[/] {escape(_rel(s.run_dir, root))}: {escape(s.log)}", highlight=False)
+
+
+def main() -> None:
+    """Stand-alone entry point (``python -m repro.launch.cli``) until the main CLI registers these."""
+    app = typer.Typer(add_completion=False, no_args_is_help=True)
+    register(app)
+    app()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,187 @@
+"""Local launcher: run a sweep's runs as parallel ``repro train`` subprocesses on this machine."""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+from rich.markup import escape
+
+from repro.launch import lock
+from repro.launch.runner import Claim, claim, train_command
+from repro.launch.spec import PlannedRun
+from repro.launch.state import RunRecord, log_path, write_record
+
+POLL_S = 0.2
+TERM_GRACE_S = 10.0
+
+
+def default_parallel() -> int:
+    return max(1, (os.cpu_count() or 1) // 2)
+
+
+@dataclass
+class LaunchReport:
+    """What a launch did, run key by run key."""
+
+    started: list[str] = field(default_factory=list)
+    finished: list[str] = field(default_factory=list)
+    failed: list[tuple[str, str]] = field(default_factory=list)  # (key, log path)
+    done: list[str] = field(default_factory=list)  # skipped: already DONE
+    locked: list[tuple[str, str]] = field(default_factory=list)  # (key, owner) held by another launcher
+    mismatch: list[str] = field(default_factory=list)
+    moved: list[tuple[str, str]] = field(default_factory=list)  # (key, new location)
+    job_ids: list[str] = field(default_factory=list)
+    interrupted: bool = False
+
+    def add_claim(self, c: Claim) -> None:
+        if c.status == "done":
+            self.done.append(c.planned.key)
+        elif c.status == "locked":
+            self.locked.append((c.planned.key, c.info.describe() if c.info else "unreadable lock"))
+        elif c.status == "mismatch":
+            self.mismatch.append(c.planned.key)
+        if c.moved_to is not None:
+            self.moved.append((c.planned.key, str(c.moved_to)))
+
+
+class Interrupted(Exception):
+    """SIGINT or SIGTERM reached the launcher."""
+
+
+def _die_with_parent() -> None:
+    """In the child: get SIGTERM when the launcher dies, even by SIGKILL (Linux prctl)."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+def child_env(max_parallel: int) -> dict[str, str]:
+    env = dict(os.environ)
+    env.setdefault("MUJOCO_GL", "egl")
+    threads = str(max(1, (os.cpu_count() or 1) // max(1, max_parallel)))
+    env.setdefault("OMP_NUM_THREADS", threads)
+    env.setdefault("MKL_NUM_THREADS", threads)
+    return env
+
+
+@dataclass
+class _Active:
+    claim: Claim
+    proc: subprocess.Popen
+    log: Path
+    record: RunRecord
+    started: float
+
+
+def _start(c: Claim, sdir: Path, env: dict[str, str]) -> _Active:
+    p = c.planned
+    log = log_path(sdir, p.key)
+    log.parent.mkdir(parents=True, exist_ok=True)
+    cmd = train_command(p.overrides)
+    with open(log, "a") as fh:
+        fh.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} {' '.join(cmd)}\n")
+        fh.flush()
+        proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
+                                preexec_fn=_die_with_parent)
+    assert c.info is not None
+    lock.update(c.lock_path, c.info.token, child_pid=proc.pid, child_start=lock.process_start(proc.pid))
+    record = RunRecord(key=p.key, run_dir=str(p.run_dir), overrides=list(p.overrides), launcher="local",
+                       status="running", log=str(log), stderr=str(log), pid=proc.pid)
+    write_record(sdir, record)
+    return _Active(c, proc, log, record, time.time())
+
+
+def _finish(a: _Active, sdir: Path, rc: int, report: LaunchReport, say: Callable[[str], None]) -> None:
+    from repro.rundir import run_state
+
+    key = a.claim.planned.key
+    done = run_state(a.claim.planned.run_dir) == "done"
+    a.record.returncode = rc
+    a.record.status = "done" if (rc == 0 and done) else "failed"
+    if rc == 0 and not done:
+        a.record.error = "exited 0 without writing DONE"
+    write_record(sdir, a.record)
+    assert a.claim.info is not None
+    lock.release(a.claim.lock_path, a.claim.info.token)
+    minutes = (time.time() - a.started) / 60
+    if a.record.status == "done":
+        report.finished.append(key)
+        say(f"[green]done[/] {key} ({minutes:.1f} min)")
+    else:
+        report.failed.append((key, str(a.log)))
+        say(f"[red]FAILED[/] {key} (exit {rc}); log: {escape(str(a.log))}")
+
+
+def _stop_all(active: dict[str, _Active], sdir: Path) -> None:
+    for a in active.values():
+        if a.proc.poll() is None:
+            a.proc.terminate()
+    deadline = time.time() + TERM_GRACE_S
+    for a in active.values():
+        try:
+            a.proc.wait(timeout=max(0.1, deadline - time.time()))
+        except subprocess.TimeoutExpired:
+            a.proc.kill()
+            a.proc.wait()
+        a.record.status = "interrupted"
+        a.record.returncode = a.proc.returncode
+        write_record(sdir, a.record)
+        assert a.claim.info is not None
+        lock.release(a.claim.lock_path, a.claim.info.token)
+
+
+def run_local(planned: Sequence[PlannedRun], sweep: str, sdir: Path, max_parallel: int, force: bool,
+              say: Callable[[str], None]) -> LaunchReport:
+    """Run every not-yet-done run, at most ``max_parallel`` at a time; keep going past failures.
+
+    Each run is claimed (locked, state re-read) just before it starts, so a concurrent launcher on
+    the same grid never runs it twice. SIGINT/SIGTERM stop the children and release their locks; the
+    runs resume from their checkpoints on the next launch.
+    """
+    report = LaunchReport()
+    env = child_env(max_parallel)
+    queue = [p for p in planned if p.state != "done"]
+    report.done.extend(p.key for p in planned if p.state == "done")
+    active: dict[str, _Active] = {}
+
+    def on_term(signum: int, frame: object) -> None:
+        raise Interrupted()
+
+    old = signal.signal(signal.SIGTERM, on_term)
+    try:
+        while queue or active:
+            while queue and len(active) < max_parallel:
+                p = queue.pop(0)
+                c = claim(p, "local", sweep, force)
+                report.add_claim(c)
+                if c.status == "locked":
+                    say(f"[yellow]skip[/] {p.key}: held by {report.locked[-1][1]}")
+                if c.status != "claimed":
+                    continue
+                if c.moved_to is not None:
+                    say(f"[yellow]moved[/] old run dir of {p.key} to {escape(str(c.moved_to))}")
+                active[p.key] = _start(c, sdir, env)
+                report.started.append(p.key)
+                say(f"[cyan]start[/] {p.key} ({len(active)} running, {len(queue)} queued)")
+            for key, a in list(active.items()):
+                rc = a.proc.poll()
+                if rc is not None:
+                    del active[key]
+                    _finish(a, sdir, rc, report, say)
+            time.sleep(POLL_S)
+    except (KeyboardInterrupt, Interrupted):
+        report.interrupted = True
+        say(f"[red]interrupted[/]: stopping {len(active)} run(s); they resume on the next launch")
+        _stop_all(active, sdir)
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    return report

@@ -1,0 +1,72 @@
+"""Steps shared by the launchers: claim a run (lock + fresh state check), move a mismatched run dir
+aside, and the ``repro train`` command line."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from repro.launch import lock
+from repro.launch.slurm_query import job_states
+from repro.launch.spec import PlannedRun
+
+
+@dataclass
+class Claim:
+    """The outcome of trying to claim a run for execution."""
+
+    planned: PlannedRun
+    status: str  # claimed | done | locked | mismatch
+    info: lock.LockInfo | None = None  # our lock when claimed, the other owner when locked
+    moved_to: Path | None = None
+
+    @property
+    def lock_path(self) -> Path:
+        return lock.lock_path(self.planned.results_root, self.planned.run_dir)
+
+
+def train_command(overrides: tuple[str, ...] | list[str]) -> list[str]:
+    """``repro train OVERRIDES`` with the interpreter running this process."""
+    script = Path(sys.executable).with_name("repro")
+    if script.exists():
+        return [str(script), "train", *overrides]
+    return [sys.executable, "-c", "import sys; from repro.cli import main; sys.argv[0] = 'repro'; main()",
+            "train", *overrides]
+
+
+def move_aside(planned: PlannedRun) -> Path:
+    """Move a run directory to ``{results_root}/.replaced/{time}/...`` (never deleted)."""
+    rel = Path(os.path.relpath(planned.run_dir, planned.results_root))
+    dest = planned.results_root / ".replaced" / time.strftime("%Y%m%dT%H%M%S") / rel
+    n = 1
+    while dest.exists():
+        dest = dest.with_name(f"{rel.name}.{n}")
+        n += 1
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    shutil.move(str(planned.run_dir), str(dest))
+    return dest
+
+
+def claim(planned: PlannedRun, launcher: str, sweep: str, force: bool) -> Claim:
+    """Lock the run, then re-read its state under the lock (another launcher may have finished it)."""
+    from repro.rundir import config_diff, run_state
+
+    info = lock.LockInfo.mine(launcher, sweep)
+    path = lock.lock_path(planned.results_root, planned.run_dir)
+    ok, owner = lock.acquire(path, info, job_states)
+    if not ok:
+        return Claim(planned, "locked", owner)
+    state = run_state(planned.run_dir)
+    diff = config_diff(planned.run_dir, planned.cfg) if state != "absent" else []
+    if diff and not force:
+        lock.release(path, info.token)
+        return Claim(planned, "mismatch")
+    if state == "done" and not diff:
+        lock.release(path, info.token)
+        return Claim(planned, "done")
+    moved = move_aside(planned) if diff else None
+    return Claim(planned, "claimed", info, moved)

@@ -1,0 +1,123 @@
+"""``repro status``: where every run of a sweep stands (done / running / queued / failed / pending)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from repro.launch import lock
+from repro.launch.slurm_query import FAILED, QUEUED, job_states
+from repro.launch.state import read_record, read_state
+
+STATUSES = ("done", "running", "queued", "failed", "pending")
+
+
+@dataclass
+class RunStatus:
+    key: str
+    run_dir: Path
+    status: str  # one of STATUSES
+    frame: int | None
+    eval_return: float | None
+    job_id: str | None
+    detail: str  # failed: log path; running: where; pending: partial or not started
+    log: str | None = None  # failed runs: the file holding the error (local log or SLURM stderr)
+
+
+def last_row(path: Path, tail_bytes: int = 8192) -> dict[str, str] | None:
+    """The header-keyed last data row of a CSV file, reading only its head and tail."""
+    try:
+        with open(path, "rb") as fh:
+            header = fh.readline().decode()
+            size = fh.seek(0, os.SEEK_END)
+            fh.seek(max(len(header), size - tail_bytes))
+            tail = fh.read().decode(errors="replace")
+    except OSError:
+        return None
+    lines = [ln for ln in tail.splitlines() if ln.strip()]
+    if not header.strip() or not lines or lines[-1] == header.strip():
+        return None
+    row = next(csv.reader(io.StringIO(lines[-1])))
+    names = next(csv.reader(io.StringIO(header)))
+    return dict(zip(names, row)) if len(row) == len(names) else None
+
+
+def _num(value: str | None) -> float | None:
+    try:
+        return float(value) if value not in (None, "") else None
+    except ValueError:
+        return None
+
+
+def progress(run_dir: Path) -> tuple[int | None, float | None]:
+    """(last frame seen in train.csv or eval.csv, last evaluation return)."""
+    ev = last_row(run_dir / "eval.csv")
+    tr = last_row(run_dir / "train.csv")
+    frames = [f for f in (_num(ev and ev.get("frame")), _num(tr and tr.get("frame"))) if f is not None]
+    return (int(max(frames)) if frames else None, _num(ev and ev.get("episode_reward")))
+
+
+def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
+               slurm_states: dict[str, str] | None) -> RunStatus:
+    from repro.rundir import run_state
+
+    frame, ret = progress(run_dir)
+    state = run_state(run_dir)
+    record = read_record(sdir, key)
+    try:
+        owner = lock.read(lock.lock_path(results_root, run_dir))
+    except ValueError:
+        owner = None
+    job = (owner.job_id if owner and owner.job_id else None) or (record.job_id if record else None)
+
+    def make(status: str, detail: str) -> RunStatus:
+        return RunStatus(key, run_dir, status, frame, ret, job, detail)
+
+    if state == "done":
+        return make("done", "")
+    if owner is not None and not lock.is_stale(owner, slurm_states):
+        if owner.job_id:
+            sstate = (slurm_states or {}).get(owner.job_id, "UNKNOWN")
+            status = "queued" if sstate in QUEUED else "running"
+            shown = "" if sstate in ("PENDING", "RUNNING") else f"SLURM {sstate}"
+            return make(status, ", ".join(x for x in (shown, "partial" if state == "partial" else "") if x))
+        return make("running", f"pid {owner.child_pid or owner.pid} on {owner.host}")
+    if record is not None:
+        sstate = (slurm_states or {}).get(record.job_id or "", "")
+        if record.status == "failed" or sstate in FAILED:
+            why = record.error or (f"SLURM {sstate}" if sstate else f"exit {record.returncode}")
+            failed = make("failed", why)
+            failed.log = record.stderr or record.log
+            return failed
+    return make("pending", "partial: resumes from checkpoint" if state == "partial" else "not started")
+
+
+def sweep_runs(sdir: Path) -> dict[str, Path]:
+    """Run key -> run dir of every run ever launched by the sweep (from state.json)."""
+    runs = read_state(sdir).get("runs", {})
+    return {k: Path(v["run_dir"]) for k, v in sorted(runs.items())}
+
+
+def collect(runs: dict[str, Path], results_root: Path, sdir: Path) -> list[RunStatus]:
+    """Status of each run, asking SLURM once for all job ids involved."""
+    jobs: list[str] = []
+    for key, run_dir in runs.items():
+        record = read_record(sdir, key)
+        if record and record.job_id:
+            jobs.append(record.job_id)
+        try:
+            owner = lock.read(lock.lock_path(results_root, run_dir))
+        except ValueError:
+            owner = None
+        if owner and owner.job_id:
+            jobs.append(owner.job_id)
+    states = job_states(jobs) if jobs else {}
+    return [run_status(k, d, results_root, sdir, states) for k, d in runs.items()]
+
+
+def counts(statuses: Sequence[RunStatus]) -> dict[str, int]:
+    return {s: sum(1 for r in statuses if r.status == s) for s in STATUSES}
