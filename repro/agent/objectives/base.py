@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import abc
 from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar
 
@@ -95,7 +96,7 @@ class AuxBatch:
         return self.batch["reward"] if self.reward_target == "nstep" else self.batch["reward_ksum"]
 
 
-class Objective(nn.Module):
+class Objective(nn.Module, abc.ABC):
     """Base class: subclasses build parameters from the context and implement ``forward``."""
 
     name: ClassVar[str] = ""
@@ -110,8 +111,9 @@ class Objective(nn.Module):
         super().__init__()
         self.ctx = ctx
 
-    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:  # pragma: no cover
-        raise NotImplementedError
+    @abc.abstractmethod
+    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:
+        """The objective's loss on this batch and its metrics (floats, keys from ``metric_keys``)."""
 
     def after_update(self) -> None:
         """Called after the auxiliary optimizer step (e.g. to move an EMA target). Default: nothing."""
