@@ -366,3 +366,21 @@ def test_local_launcher_keeps_going_after_a_failure(tmp_path):
     assert f"failed {bad.key}: log {log}" in out and log.exists() and log.read_text().strip()
     code, out = run_cli("status", "fail", "--results-root", str(root))
     assert "1 done" in out and "1 failed" in out and f"failed {os.path.relpath(bad.run_dir, root)}: {log}" in out
+
+
+def test_repr_objectives_marks_driml_na_on_k1_tasks():
+    spec = specs.load("repr_objectives")
+    runs = specs.expand(spec)
+    assert len(runs) == (5 * 5 - 2) * 6
+    assert not any(r.agent == "driml" and r.task in ("quadruped_run", "walker_run") for r in runs)
+    assert any(r.agent == "driml" and r.task == "hopper_hop" for r in runs)
+    assert {(a, t) for a, _, t, _ in specs.excluded(spec)} == {("driml", "quadruped_run"), ("driml", "walker_run")}
+
+
+def test_exclude_must_have_a_reason(tmp_path):
+    data = yaml.safe_load((specs.sweeps_dir() / "tiny.yaml").read_text())
+    data["exclude"] = [{"agents": ["taco"]}]
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(specs.SweepError, match="reason"):
+        specs.load_file(path)

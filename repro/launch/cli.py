@@ -45,8 +45,12 @@ def _rel(path: Path, root: Path) -> str:
     return os.path.relpath(path, root)
 
 
-def print_plan(planned: list[PlannedRun], spec: SweepSpec, root: Path, force: bool) -> None:
+def print_plan(planned: list[PlannedRun], spec: SweepSpec, root: Path, force: bool,
+               excluded: list[tuple[str, str, str, str]] = ()) -> None:
     con = _console()
+    for agent, variant, task, reason in excluded:
+        con.print(f"[dim]{'n/a':<9}[/] {escape(f'{spec.experiment}/{agent}/{variant}/{task}')}  "
+                  f"not run: {escape(reason)}", highlight=False)
     for p in planned:
         state = p.state + (" (--force: move aside)" if p.state == "mismatch" and force else "")
         style = STATE_STYLE.get(p.state, "")
@@ -56,7 +60,8 @@ def print_plan(planned: list[PlannedRun], spec: SweepSpec, root: Path, force: bo
     dims = (f"{len({p.run.task for p in planned})} task(s) x {len({p.run.agent for p in planned})} agent(s) x "
             f"{len({p.run.variant for p in planned})} variant(s) x {len({p.run.seed for p in planned})} seed(s)")
     summary = ", ".join(f"{n} {s}" for s, n in by_state.items() if n)
-    con.print(f"{len(planned)} runs of sweep '{spec.name}' ({dims}): {summary}. Results root: {root}",
+    skipped = f" {len(excluded)} cell(s) n/a (not run)." if excluded else ""
+    con.print(f"{len(planned)} runs of sweep '{spec.name}' ({dims}): {summary}.{skipped} Results root: {root}",
               highlight=False)
 
 
@@ -126,7 +131,7 @@ def register(app: typer.Typer) -> None:
             planned = specs.plan(runs)
             root = specs.results_root_of(planned)
             if dry_run:
-                print_plan(planned, spec, root, force)
+                print_plan(planned, spec, root, force, specs.excluded(spec, sel))
                 return
             if any(p.state == "mismatch" for p in planned) and not force:
                 raise SweepError(_mismatch_error(planned, root))

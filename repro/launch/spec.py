@@ -22,7 +22,8 @@ from omegaconf import DictConfig
 ENV_SWEEPS_DIR = "REPRO_SWEEPS_DIR"
 NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
 FIELDS = {"name", "description", "artifacts", "experiment", "tasks", "agents", "seeds", "frames", "eval",
-          "common", "variants", "product"}
+          "common", "variants", "product", "exclude"}
+EXCLUDE_FIELDS = {"agents", "variants", "tasks", "reason"}
 REQUIRED = {"name", "description", "artifacts", "tasks", "agents", "seeds", "frames", "eval", "variants"}
 
 
@@ -94,6 +95,7 @@ class SweepSpec:
     common: tuple[str, ...]
     variants: dict[str, tuple[str, ...]]
     path: Path
+    exclude: tuple["Exclusion", ...] = ()
 
     def budget_overrides(self) -> tuple[str, ...]:
         """Frame budget and evaluation schedule as overrides (fields left null are not set)."""
@@ -105,6 +107,52 @@ class SweepSpec:
         if self.eval_episodes is not None:
             out.append(f"train.eval_episodes={self.eval_episodes}")
         return tuple(out)
+
+
+@dataclass(frozen=True)
+class Exclusion:
+    """Grid cells a sweep does not run (shown as n/a), e.g. DRIML where K=1 (there it equals TACO).
+
+    An empty ``agents``/``variants``/``tasks`` matches every value of that axis.
+    """
+
+    agents: tuple[str, ...]
+    variants: tuple[str, ...]
+    tasks: tuple[str, ...]
+    reason: str
+
+    def matches(self, agent: str, variant: str, task: str) -> bool:
+        return ((not self.agents or agent in self.agents) and (not self.variants or variant in self.variants)
+                and (not self.tasks or task in self.tasks))
+
+
+def _exclusions(data: dict, path: Path) -> tuple[Exclusion, ...]:
+    raw = data.get("exclude") or []
+    if not isinstance(raw, list):
+        raise SweepError(f"{path}: 'exclude' must be a list of mappings.")
+    out = []
+    for i, item in enumerate(raw):
+        if not isinstance(item, dict) or set(item) - EXCLUDE_FIELDS or "reason" not in item:
+            raise SweepError(f"{path}: exclude[{i}] must be a mapping of agents/variants/tasks lists and a reason.")
+        lists = {k: _str_list(item, k, path) if k in item else () for k in ("agents", "variants", "tasks")}
+        out.append(Exclusion(reason=str(item["reason"]), **lists))
+    return tuple(out)
+
+
+def excluded(spec: SweepSpec, sel: "Selection | None" = None) -> list[tuple[str, str, str, str]]:
+    """(agent, variant, task, reason) of every cell the sweep leaves out."""
+    tasks = tuple(sel.tasks) if sel and sel.tasks else spec.tasks
+    cells = []
+    for vname, vovers in spec.variants.items():
+        named = {override_key(o): override_value(o) for o in vovers}
+        variant = named.get("variant", vname)
+        for agent in ((named["agent"],) if "agent" in named else spec.agents):
+            for task in tasks:
+                for ex in spec.exclude:
+                    if ex.matches(agent, variant, task):
+                        cells.append((agent, variant, task, ex.reason))
+                        break
+    return cells
 
 
 @dataclass(frozen=True)
@@ -236,7 +284,7 @@ def load_file(path: Path) -> SweepSpec:
         frames=_optional_int(data["frames"], "'frames'", path),
         eval_every_frames=_optional_int(ev.get("every_frames"), "eval.every_frames", path),
         eval_episodes=episodes, common=_overrides(data.get("common"), "'common'", path),
-        variants=_variants(data, path), path=path)
+        variants=_variants(data, path), path=path, exclude=_exclusions(data, path))
 
 
 def load(name: str) -> SweepSpec:
@@ -351,6 +399,8 @@ def expand(spec: SweepSpec, sel: Selection = Selection()) -> list[Run]:
         variant = named.get("variant", vname)
         for agent in agents:
             for task in tasks:
+                if any(ex.matches(agent, variant, task) for ex in spec.exclude):
+                    continue
                 for seed in seeds:
                     identity = (f"experiment={spec.experiment}", f"agent={agent}", f"task={task}",
                                 f"seed={seed}", f"variant={variant}")
