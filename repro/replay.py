@@ -189,9 +189,10 @@ class ReplayBuffer:
         frames = self.frames[slots]  # (B, F, 3, H, W)
         return frames.flatten(1, 2)
 
-    def sample(self, batch_size: int) -> dict[str, torch.Tensor]:
+    def sample(self, batch_size: int, future_seq: bool = False) -> dict[str, torch.Tensor]:
         """A batch: obs_t, a_t, a_t..a_{t+K-1}, n-step reward and discount, obs_{t+n}, obs_{t+K},
-        and the plain sum of the K rewards r_t..r_{t+K-1}."""
+        and the plain sum of the K rewards r_t..r_{t+K-1}; with ``future_seq`` also the observations
+        obs_{t+1}..obs_{t+K} as ``future_obs_seq`` (B, K, C, H, W) for multi-step objectives (SPR)."""
         idx = self.sample_indices(batch_size)
         cap = self.capacity
         steps = (idx[:, None] + np.arange(self.horizon)[None, :]) % cap
@@ -203,7 +204,7 @@ class ReplayBuffer:
         for k in range(self.nstep):
             ret = ret + disc * rewards[:, k]
             disc = disc * self.gamma * discounts[:, k]
-        return {
+        batch = {
             "obs": self._stack(idx),
             "action": self.actions[steps_t[:, 0]],
             "action_seq": self.actions[steps_t[:, : self.K]],
@@ -213,3 +214,6 @@ class ReplayBuffer:
             "future_obs": self._stack((idx + self.K) % cap),
             "reward_ksum": rewards[:, : self.K].sum(1, keepdim=True),
         }
+        if future_seq:
+            batch["future_obs_seq"] = torch.stack([self._stack((idx + k) % cap) for k in range(1, self.K + 1)], 1)
+        return batch

@@ -152,7 +152,7 @@ class Trainer:
             step = self.counters.step
             action = self.agent.act(ts.observation, step, eval_mode=False)
             if step >= seed_steps and step % cfg.update_every_steps == 0:
-                metrics = self.agent.update(self.buffer.sample(self.batch_size), step)
+                metrics = self.agent.update(self.buffer.sample(self.batch_size, **self.agent.sample_options), step)
                 for k, v in metrics.items():
                     sums[k] = sums.get(k, 0.0) + v
                 n_updates += 1

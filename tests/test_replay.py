@@ -118,3 +118,17 @@ def test_empty_or_too_short_buffer_raises_clearly():
     fill(buf, [2])
     with pytest.raises(ValueError, match="no transition"):
         buf.sample(4)
+
+
+def test_future_sequence_holds_every_step_up_to_K():
+    buf = ReplayBuffer(500, (3, 4, 4), A, frame_stack=3, nstep=1, K=4, discount=0.9, seed=2)
+    fill(buf, [9, 7, 11])
+    batch = buf.sample(128, future_seq=True)
+    assert batch["future_obs_seq"].shape == (128, 4, 9, 4, 4)
+    for i in range(128):
+        ep, t = decode(batch["obs"][i].numpy())[-1]
+        for k in range(1, 5):
+            stack = decode(batch["future_obs_seq"][i, k - 1].numpy())
+            assert stack[-1] == (ep, t + k) and all(e == ep for e, _ in stack)
+        assert torch.equal(batch["future_obs_seq"][i, -1], batch["future_obs"][i])
+    assert "future_obs_seq" not in buf.sample(4)

@@ -29,7 +29,8 @@ def make_batch(B: int = 6, K: int = 3, seed: int = 0) -> dict[str, torch.Tensor]
     u8 = lambda: torch.randint(0, 256, (B, *OBS), dtype=torch.uint8, generator=g)  # noqa: E731
     return {"obs": u8(), "next_obs": u8(), "future_obs": u8(), "action": torch.rand(B, A, generator=g) * 2 - 1,
             "action_seq": torch.rand(B, K, A, generator=g) * 2 - 1, "reward": torch.rand(B, 1, generator=g),
-            "discount": torch.full((B, 1), 0.99 ** 3), "reward_ksum": torch.rand(B, 1, generator=g) * 3}
+            "discount": torch.full((B, 1), 0.99 ** 3), "reward_ksum": torch.rand(B, 1, generator=g) * 3,
+            "future_obs_seq": torch.stack([u8() for _ in range(K)], 1)}
 
 
 def agent_for(overrides: list[str], seed: int = 0) -> Agent:
@@ -39,7 +40,8 @@ def agent_for(overrides: list[str], seed: int = 0) -> Agent:
 
 
 def aux_for(agent: Agent, batch: dict[str, torch.Tensor]) -> AuxBatch:
-    return AuxBatch(batch, agent.encoder, agent.aug, agent.encode_action_sequence, agent.cfg.reward_target)
+    return AuxBatch(batch, agent.encoder, agent.aug, agent.encode_action_sequence, agent.cfg.reward_target,
+                    agent.encode_action_steps)
 
 
 def grad_norm(module: nn.Module) -> float:
@@ -196,11 +198,49 @@ def test_spr_default_momentum_zero_is_the_online_network_without_gradient():
     assert spr.momentum == 0.0 and spr.target is None  # SPR with augmentation: tau = 0
     aux = aux_for(agent, make_batch())
     target = spr.target_projection(aux)
-    assert not target.requires_grad
-    assert torch.equal(target, spr.projection(agent.shared.state_proj(aux.future())))
+    assert not target.requires_grad and target.shape[:2] == (6, 3)  # one target per rollout step
+    for k in (1, 2, 3):
+        assert torch.equal(target[:, k - 1], spr.projection(agent.shared.state_proj(aux.future_at(k))))
     own = {id(p) for p in spr.parameters()} - {id(p) for p in agent.shared.parameters()}
     heads = [spr.transition, spr.projection, spr.prediction]
     assert own == {id(p) for mod in heads for p in mod.parameters()}  # no copy of the encoder
+
+
+def test_spr_rollout_predicts_every_step_with_per_step_actions():
+    agent = agent_for(["agent=spr"])
+    spr = agent.objectives["spr"]
+    assert spr.rollout and spr.needs_future_seq and agent.sample_options == {"future_seq": True}
+    assert spr.transition[0].in_features == agent.cfg.feature_dim + agent.action_encoder.latent_dim
+    aux = aux_for(agent, make_batch())
+    pred, target = spr.predict(aux), spr.target_projection(aux)
+    assert pred.shape == target.shape and pred.shape[1] == 3
+    loss, _ = spr(aux)
+    per_step = [negative_cosine(pred[:, k], target[:, k]).item() for k in range(3)]
+    assert loss.item() == pytest.approx(sum(per_step) / 3, rel=1e-5)
+    # the k-th prediction depends on a_t..a_{t+k-1} only (identity augmentation: deterministic views)
+    batch = make_batch()
+    changed = {k: v.clone() for k, v in batch.items()}
+    changed["action_seq"][:, 2] = -changed["action_seq"][:, 2]
+
+    def plain(b):
+        return AuxBatch(b, agent.encoder, lambda x: x, agent.encode_action_sequence, "nstep",
+                        agent.encode_action_steps)
+
+    p1, p2 = spr.predict(plain(batch)), spr.predict(plain(changed))
+    assert torch.equal(p1[:, :2], p2[:, :2]) and not torch.allclose(p1[:, 2], p2[:, 2])
+
+
+def test_spr_one_shot_variant_and_replay_without_future_seq():
+    agent = agent_for(["agent=spr", "agent.objective_params.spr.rollout=false"])
+    spr = agent.objectives["spr"]
+    assert not spr.rollout and agent.sample_options == {"future_seq": False}
+    assert spr.transition[0].in_features == agent.cfg.feature_dim + 3 * agent.action_encoder.latent_dim
+    batch = make_batch()
+    del batch["future_obs_seq"]
+    loss, _ = spr(aux_for(agent, batch))
+    assert -1.0 <= loss.item() <= 1.0
+    with pytest.raises(ValueError, match="future_obs_seq"):
+        agent_for(["agent=spr"]).objectives["spr"](aux_for(agent_for(["agent=spr"]), batch))
 
 
 def test_spr_projection_dim_and_unknown_keys():

@@ -48,6 +48,7 @@ class Agent:
             critic_action_dim, seq_dim = latent, cfg.K * latent
         else:
             critic_action_dim, seq_dim = action_dim, cfg.K * action_dim
+        step_dim = critic_action_dim
         self.actor = Actor(repr_dim, action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
         self.critic = Critic(repr_dim, critic_action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
         self.critic_target = Critic(repr_dim, critic_action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
@@ -56,7 +57,8 @@ class Agent:
 
         active = [name for name, w in cfg.objectives.items() if w]
         ctx = ObjectiveContext(repr_dim=repr_dim, feature_dim=cfg.feature_dim, hidden_dim=cfg.hidden_dim,
-                               action_dim=action_dim, K=cfg.K, seq_dim=seq_dim, encoder=self.encoder)
+                               action_dim=action_dim, K=cfg.K, seq_dim=seq_dim, step_dim=step_dim,
+                               encoder=self.encoder)
         objectives = OrderedDict()
         for name in active:
             ctx.params = dict(cfg.objective_params.get(name, {}))
@@ -64,6 +66,8 @@ class Agent:
         self.objectives = nn.ModuleDict(objectives).to(self.device)
         self.shared = ctx._shared.to(self.device) if ctx._shared is not None else None
         self.weights = {name: float(cfg.objectives[name]) for name in active}
+        # what the replay must return for these objectives (passed to ReplayBuffer.sample)
+        self.sample_options = {"future_seq": any(o.needs_future_seq for o in self.objectives.values())}
 
         lr = cfg.lr
         self.encoder_opt = torch.optim.Adam(self.encoder.parameters(), lr=lr)
@@ -140,6 +144,10 @@ class Agent:
     def encode_action(self, action: torch.Tensor) -> torch.Tensor:
         return self.action_encoder(action) if self.action_encoder is not None else action
 
+    def encode_action_steps(self, actions: torch.Tensor) -> torch.Tensor:
+        """(B, K, |A|) -> (B, K, step_dim): each action encoded alone (raw without an action encoder)."""
+        return self.action_encoder(actions) if self.action_encoder is not None else actions
+
     def encode_action_sequence(self, actions: torch.Tensor) -> torch.Tensor:
         if self.action_encoder is not None:
             return self.action_encoder.encode_sequence(actions)
@@ -214,7 +222,8 @@ class Agent:
                 "actor_ent": dist.entropy().sum(-1).mean().item()}
 
     def _update_aux(self, batch: dict[str, torch.Tensor]) -> dict[str, float]:
-        aux = AuxBatch(batch, self._encode, self.aug, self.encode_action_sequence, self.cfg.reward_target)
+        aux = AuxBatch(batch, self._encode, self.aug, self.encode_action_sequence, self.cfg.reward_target,
+                       self.encode_action_steps)
         total = torch.zeros((), device=self.device)
         metrics: dict[str, float] = {}
         with self._amp():

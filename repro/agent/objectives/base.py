@@ -35,6 +35,7 @@ class ObjectiveContext:
     action_dim: int
     K: int
     seq_dim: int  # size of the encoded action sequence (K d_u, or K |A| without action encoder)
+    step_dim: int = 0  # size of one encoded action (d_u, or |A| without action encoder)
     params: dict[str, Any] = field(default_factory=dict)  # agent.objective_params.<name>
     encoder: nn.Module | None = None  # the online conv encoder (read-only reference, e.g. to copy an EMA target)
     _shared: SharedHeads | None = None
@@ -55,11 +56,13 @@ class AuxBatch:
     """
 
     def __init__(self, batch: dict[str, torch.Tensor], encoder: nn.Module, aug: Callable,
-                 encode_actions: Callable[[torch.Tensor], torch.Tensor], reward_target: str):
+                 encode_actions: Callable[[torch.Tensor], torch.Tensor], reward_target: str,
+                 encode_action_steps: Callable[[torch.Tensor], torch.Tensor] | None = None):
         self.batch = batch
         self.encoder = encoder
         self.aug = aug
         self._encode_actions = encode_actions
+        self._encode_steps = encode_action_steps
         self.reward_target = reward_target
         self._cache: dict[str, torch.Tensor] = {}
 
@@ -87,6 +90,22 @@ class AuxBatch:
         """Encode any (B, K, |A|) action sequence with the agent's action (sequence) encoder."""
         return self._encode_actions(actions)
 
+    def action_steps(self) -> torch.Tensor:
+        """Each action a_t..a_{t+K-1} encoded on its own (no sequence encoder): (B, K, step_dim)."""
+        if self._encode_steps is None:
+            raise ValueError("this AuxBatch was built without a per-step action encoder")
+        return self.memo("u_steps", lambda: self._encode_steps(self.batch["action_seq"]))
+
+    def future_at(self, k: int) -> torch.Tensor:
+        """encoder(aug(obs_{t+k})) for k in 1..K, no gradient (needs a batch sampled with future_seq)."""
+        if "future_obs_seq" not in self.batch:
+            raise ValueError("the batch has no future_obs_seq: sample it with future_seq=True")
+
+        def fn() -> torch.Tensor:
+            with torch.no_grad():
+                return self.encoder(self.aug(self.batch["future_obs_seq"][:, k - 1].float()))
+        return self.memo(f"future_{k}", fn)
+
     def action_sequence(self) -> torch.Tensor:
         """Encoded actions a_t..a_{t+K-1}: (B, seq_dim)."""
         return self.memo("u_seq", lambda: self._encode_actions(self.batch["action_seq"]))
@@ -100,6 +119,7 @@ class Objective(nn.Module, abc.ABC):
     """Base class: subclasses build parameters from the context and implement ``forward``."""
 
     name: ClassVar[str] = ""
+    needs_future_seq: bool = False  # whether batches must carry obs_{t+1}..obs_{t+K} (future_obs_seq)
     extra_metrics: ClassVar[tuple[str, ...]] = ()  # metric suffixes besides "loss", e.g. ("acc",)
 
     @classmethod
