@@ -50,31 +50,14 @@ def make_env(
         camera: override of the task's camera (id or name).
     """
     info = get_task(task)
-    env: Env
     if info.suite in ("dmc", "manipulation"):
-        from repro.envs.dmc import DMCEnv
-
-        env = DMCEnv(
-            info,
-            seed=seed,
-            action_repeat=action_repeat,
-            frame_stack=frame_stack,
-            image_size=image_size,
-            camera=camera,
-        )
+        from repro.envs.dmc import DMCEnv as env_class
     elif info.suite == "metaworld":
-        from repro.envs.metaworld_env import MetaWorldEnv
-
-        env = MetaWorldEnv(
-            info,
-            seed=seed,
-            action_repeat=action_repeat,
-            frame_stack=frame_stack,
-            image_size=image_size,
-            camera=camera,
-        )
+        from repro.envs.metaworld_env import MetaWorldEnv as env_class
     else:  # pragma: no cover - the registry only holds the suites above
         raise ValueError(f"unsupported suite {info.suite!r} for task {task!r}")
+    env: Env = env_class(info, seed=seed, action_repeat=action_repeat, frame_stack=frame_stack,
+                         image_size=image_size, camera=camera)
     if distracting_dims:
         env = DistractingActionDims(env, distracting_dims)
     if max_episode_frames is not None:
