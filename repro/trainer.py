@@ -58,10 +58,11 @@ class Trainer:
         return max(frames // self.action_repeat, 1)
 
     def checkpoint_state(self) -> dict:
+        agent_state = self.agent.state_dict()
         return {"counters": {"step": self.counters.step, "episode": self.counters.episode,
                              "total_time": self.total_time()},
-                "agent": self.agent.state_dict()["modules"],
-                "optimizers": self.agent.state_dict()["optimizers"],
+                "agent": agent_state["modules"],
+                "optimizers": agent_state["optimizers"],
                 "rng": {"torch": torch.get_rng_state(),
                         "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else []},
                 "buffer": self.buffer.state(), "csv": self.logger.offsets(), "last_eval": self.last_eval}

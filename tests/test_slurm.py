@@ -13,15 +13,13 @@ import time
 from pathlib import Path
 
 import pytest
-import yaml
+from test_sweeps import write_sweep  # the same tiny-run sweep files as the local launcher tests
 
 pytestmark = [pytest.mark.slurm, pytest.mark.slow]
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "scripts" / "slurm_local.sh"
 CLUSTER = REPO / "sweeps" / "launchers" / "localhost.yaml"
-TINY = ["profile=tiny", "env.max_episode_frames=50", "train.seed_frames=50", "train.update_every_steps=4",
-        "train.eval_every_frames=100"]  # 50-frame episodes, updates from frame 50, evals every 100 frames
 # A private cluster for the tests (own folder and ports), so a developer's cluster is left alone.
 SLURM_ENV = {"REPRO_SLURM_DIR": "/tmp/taco-slurm-test", "REPRO_SLURM_PORT_BASE": "17817"}
 
@@ -52,16 +50,6 @@ def cli(*args: str, timeout: float = 120) -> tuple[int, str]:
     res = subprocess.run([sys.executable, "-m", "repro.launch.cli", *args], capture_output=True, text=True,
                          env=env, timeout=timeout)
     return res.returncode, res.stdout + res.stderr
-
-
-def write_sweep(tmp: Path, name: str, tasks: list[str], variants: dict[str, list[str]], seeds: int,
-                frames: int) -> Path:
-    data = {"name": name, "description": "test sweep", "artifacts": [], "experiment": name, "tasks": tasks,
-            "agents": ["taco"], "seeds": seeds, "frames": None, "eval": {"every_frames": None, "episodes": None},
-            "common": [*TINY, f"train.frames={frames}"], "variants": variants}
-    path = tmp / f"{name}.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path
 
 
 def run_dirs(root: Path, exp: str) -> list[Path]:

@@ -119,13 +119,19 @@ def read(path: Path) -> LockInfo | None:
         raise ValueError(f"unreadable lock {path}") from exc
 
 
-def update(path: Path, token: str, **changes: object) -> bool:
-    """Rewrite our own lock with ``changes`` (atomic replace); False when we no longer hold it."""
+def _own(path: Path, token: str) -> LockInfo | None:
+    """The lock's info when it is ours (its token is ``token``), else None (gone, unreadable or another's)."""
     try:
         info = read(path)
     except ValueError:
-        return False
-    if info is None or info.token != token:
+        return None
+    return info if info is not None and info.token == token else None
+
+
+def update(path: Path, token: str, **changes: object) -> bool:
+    """Rewrite our own lock with ``changes`` (atomic replace); False when we no longer hold it."""
+    info = _own(path, token)
+    if info is None:
         return False
     for key, value in changes.items():
         setattr(info, key, value)
@@ -136,11 +142,7 @@ def update(path: Path, token: str, **changes: object) -> bool:
 
 def release(path: Path, token: str) -> bool:
     """Remove our own lock; False when it is not ours (or gone)."""
-    try:
-        info = read(path)
-    except ValueError:
-        return False
-    if info is None or info.token != token:
+    if _own(path, token) is None:
         return False
     path.unlink(missing_ok=True)
     return True
