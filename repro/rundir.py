@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from repro.config import identity
 from repro.fsutil import atomic_write_text
+from repro.schema import RunConfig
 
 CONFIG, META, DONE, CHECKPOINT = "config.yaml", "meta.json", "DONE", "checkpoint.pt"
 PACKAGES = ("torch", "numpy", "mujoco", "dm-control", "metaworld", "hydra-core", "omegaconf", "submitit",
@@ -68,7 +69,20 @@ def config_diff(path: str | Path, cfg: DictConfig) -> list[str]:
             diffs.append(f"{prefix[:-1]}: {a!r} -> {b!r}")
 
     walk(saved, new, "")
-    return diffs
+    return [d for d in diffs if not _added_at_default(d)]
+
+
+def _added_at_default(diff: str) -> bool:
+    """A key that a newer version added, absent from the saved run and at its default now, is no difference
+    (so runs written before the key existed still resume)."""
+    key, _, change = diff.partition(": ")
+    old, _, new = change.partition(" -> ")
+    if old != repr("<absent>"):
+        return False
+    default = OmegaConf.select(OmegaConf.structured(RunConfig), key, default="<no default>")
+    if isinstance(default, DictConfig):
+        default = OmegaConf.to_container(default, resolve=True)
+    return repr(default) == new
 
 
 def config_matches(path: str | Path, cfg: DictConfig) -> bool:

@@ -19,8 +19,19 @@ class StdSchedule:
 
 
 @dataclass
+class CQLConfig:
+    """CQL's conservative regulariser (Kumar et al. 2020, continuous form); used by learner ``cql``."""
+
+    alpha: Optional[float] = None  # None: the paper's Table 6 value for the run's task and dataset
+    n_samples: int = 10
+    temperature: float = 1.0
+    importance_sampling: bool = False
+
+
+@dataclass
 class AgentConfig:
     name: str = "taco"
+    learner: str = "actor_critic"
     lr: float = 1e-4
     feature_dim: int = 50
     hidden_dim: int = 1024
@@ -40,6 +51,7 @@ class AgentConfig:
     objective_params: dict[str, Any] = field(default_factory=dict)
     compile: bool = False
     amp: bool = False
+    cql: CQLConfig = field(default_factory=CQLConfig)
 
 
 @dataclass
@@ -81,11 +93,24 @@ class ReplayConfig:
 
 
 @dataclass
+class OfflineConfig:
+    """Offline training (a fixed dataset, no environment interaction but evaluation)."""
+
+    dataset: Optional[str] = None
+    updates: int = 100_000
+    eval_every_updates: int = 10_000
+    eval_episodes: int = 10
+    checkpoint_every_updates: int = 5_000
+    log_every_updates: int = 1_000
+
+
+@dataclass
 class RuntimeConfig:
     results_root: str = "runs"
     device: str = "auto"
     progress: Any = "auto"
     threads: Optional[int] = None
+    record: bool = False
 
 
 @dataclass
@@ -98,4 +123,5 @@ class RunConfig:
     env: EnvConfig = field(default_factory=EnvConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
     replay: ReplayConfig = field(default_factory=ReplayConfig)
+    offline: OfflineConfig = field(default_factory=OfflineConfig)
     runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
