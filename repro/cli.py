@@ -8,6 +8,8 @@ from typing import Optional
 import typer
 from omegaconf import OmegaConf
 
+from repro.offline.cli import dataset_app
+
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -109,6 +111,7 @@ def _register_plugins() -> None:
 
 
 _register_plugins()
+app.add_typer(dataset_app, name="dataset")
 
 
 def main() -> None:

@@ -1,0 +1,405 @@
+"""Offline datasets on disk: one npz file per episode plus a ``manifest.json`` written last.
+
+Layout of a dataset folder::
+
+    manifest.json              written last, atomically: a folder without it is never a dataset
+    .incomplete.json           present while a write is in progress (what is being written)
+    episodes/ep_0000000.npz    frames (T+1, 3, H, W) uint8, actions (T, A) float32 (taken at frame t),
+                               rewards (T,) float32 (after action t), discounts (T,) float32, ep_id
+
+The episode arrays are the replay's ``end_episode()`` arrays, so a dataset episode and a recorded training
+episode are interchangeable. Every problem is a :class:`DatasetError` with a one-line message.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import re
+import zipfile
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Mapping, Union
+
+import numpy as np
+
+from repro import __version__
+from repro.fsutil import atomic_write, atomic_write_text
+
+FORMAT = 1
+MANIFEST = "manifest.json"
+PENDING = ".incomplete.json"
+EPISODES = "episodes"
+KEYS = ("frames", "actions", "rewards", "discounts", "ep_id")
+_EP_NAME = re.compile(r"^ep_(\d{7})\.npz$")
+
+Episode = dict[str, np.ndarray]
+EpisodeSource = Union[Mapping[str, np.ndarray], Callable[[], Mapping[str, np.ndarray]]]
+
+
+class DatasetError(ValueError):
+    """A dataset or an input file that cannot be used; the message is one line."""
+
+
+@dataclass(frozen=True)
+class EpisodeEntry:
+    file: str
+    sha256: str
+    transitions: int
+    return_: float
+
+
+@dataclass(frozen=True)
+class Manifest:
+    task: str
+    action_dim: int
+    frame_shape: tuple[int, int, int]
+    kind: str
+    transitions: int
+    episodes: tuple[EpisodeEntry, ...]
+    source: dict[str, Any] = field(default_factory=dict)
+    rule: dict[str, Any] = field(default_factory=dict)
+    created_by: str = f"repro {__version__}"
+    format: int = FORMAT
+
+    @property
+    def returns(self) -> np.ndarray:
+        return np.array([e.return_ for e in self.episodes], dtype=np.float64)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"format": self.format, "task": self.task, "action_dim": self.action_dim,
+                "frame_shape": list(self.frame_shape), "kind": self.kind, "transitions": self.transitions,
+                "episodes": [{"file": e.file, "sha256": e.sha256, "transitions": e.transitions,
+                              "return": e.return_} for e in self.episodes],
+                "source": self.source, "rule": self.rule, "created_by": self.created_by}
+
+    @classmethod
+    def from_json(cls, data: Any, where: str) -> "Manifest":
+        if not isinstance(data, dict):
+            raise DatasetError(f"wrong format: {where} is not a JSON object")
+        if data.get("format") != FORMAT:
+            raise DatasetError(f"wrong format: {where} has format {data.get('format')!r}, this tool reads {FORMAT}")
+        try:
+            episodes = tuple(EpisodeEntry(str(e["file"]), str(e["sha256"]), int(e["transitions"]),
+                                          float(e["return"])) for e in data["episodes"])
+            shape = tuple(int(s) for s in data["frame_shape"])
+            if len(shape) != 3:
+                raise ValueError("frame_shape")
+            return cls(task=str(data["task"]), action_dim=int(data["action_dim"]),
+                       frame_shape=shape, kind=str(data["kind"]),  # type: ignore[arg-type]
+                       transitions=int(data["transitions"]), episodes=episodes,
+                       source=dict(data.get("source") or {}), rule=dict(data.get("rule") or {}),
+                       created_by=str(data.get("created_by", "")), format=FORMAT)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DatasetError(f"wrong format: {where} lacks or mistypes field {exc}") from None
+
+
+# ---------------------------------------------------------------------------------------------- reading
+def load_manifest(directory: str | Path) -> Manifest:
+    """The manifest of a complete dataset; :class:`DatasetError` for a missing, partial or foreign folder."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise DatasetError(f"no dataset at {d} (not a folder)")
+    path = d / MANIFEST
+    if not path.exists():
+        if (d / PENDING).exists() or (d / EPISODES).is_dir():
+            raise DatasetError(f"incomplete dataset at {d}: no {MANIFEST} (its write was interrupted; "
+                               "re-run the command that made it)")
+        raise DatasetError(f"no dataset at {d} (no {MANIFEST})")
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DatasetError(f"corrupt {path}: {exc}") from None
+    return Manifest.from_json(data, str(path))
+
+
+def read_episode_file(path: Path, sha256: str | None = None) -> Episode:
+    """The arrays of one episode file; a sha256 mismatch or an unreadable file is a :class:`DatasetError`."""
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DatasetError(f"missing or unreadable episode file {path}: {exc.strerror}") from None
+    if sha256 is not None and hashlib.sha256(raw).hexdigest() != sha256:
+        raise DatasetError(f"corrupt episode file {path}: sha256 differs from the manifest")
+    return _load_npz(raw, path)
+
+
+def _load_npz(raw: bytes, path: Path) -> Episode:
+    try:
+        with np.load(io.BytesIO(raw), allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError, zlib.error) as exc:
+        raise DatasetError(f"corrupt or truncated episode file {path}: {type(exc).__name__}") from None
+
+
+def iter_episodes(directory: str | Path, *, verify: bool = True) -> Iterator[Episode]:
+    """Yield every episode of a complete dataset in order; with ``verify``, check hashes and structure."""
+    d = Path(directory)
+    m = load_manifest(d)
+    for i, entry in enumerate(m.episodes):
+        path = d / entry.file
+        ep = read_episode_file(path, entry.sha256 if verify else None)
+        if verify:
+            problems = episode_problems(ep, action_dim=m.action_dim, frame_shape=m.frame_shape, ep_id=i)
+            if ep_transitions(ep) != entry.transitions and not problems:
+                problems.append(f"{ep_transitions(ep)} transitions, the manifest says {entry.transitions}")
+            if problems:
+                raise DatasetError(f"{path}: {problems[0]}")
+        yield ep
+
+
+def ep_transitions(ep: Mapping[str, np.ndarray]) -> int:
+    return int(len(ep["frames"]) - 1)
+
+
+def episode_return(ep: Mapping[str, np.ndarray]) -> float:
+    return float(np.sum(np.asarray(ep["rewards"], dtype=np.float64)))
+
+
+def episode_problems(ep: Mapping[str, np.ndarray], *, action_dim: int | None = None,
+                     frame_shape: tuple[int, ...] | None = None, ep_id: int | None = None) -> list[str]:
+    """What is wrong with one episode's arrays (empty when nothing): keys, dtypes, shapes, finiteness."""
+    missing = [k for k in KEYS if k not in ep]
+    if missing:
+        return [f"missing arrays {', '.join(missing)}"]
+    frames, actions, rewards, discounts = (np.asarray(ep[k]) for k in KEYS[:4])
+    out: list[str] = []
+    if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[1] != 3:
+        return [f"frames must be (T+1, 3, H, W) uint8, got {frames.shape} {frames.dtype}"]
+    if frame_shape is not None and tuple(frames.shape[1:]) != tuple(frame_shape):
+        out.append(f"frame shape {list(frames.shape[1:])}, the dataset's is {list(frame_shape)}")
+    t = len(frames) - 1
+    if t < 1:
+        return out + ["an episode needs at least 2 frames (1 transition)"]
+    if actions.dtype != np.float32 or actions.ndim != 2 or len(actions) != t:
+        out.append(f"actions must be ({t}, A) float32 for {t + 1} frames, got {actions.shape} {actions.dtype}")
+    elif action_dim is not None and actions.shape[1] != action_dim:
+        out.append(f"action dim {actions.shape[1]}, the dataset's is {action_dim}")
+    elif not np.all(np.isfinite(actions)):
+        out.append("non-finite actions")
+    for name, arr in (("rewards", rewards), ("discounts", discounts)):
+        if arr.dtype != np.float32 or arr.shape != (t,):
+            out.append(f"{name} must be ({t},) float32 for {t + 1} frames, got {arr.shape} {arr.dtype}")
+        elif not np.all(np.isfinite(arr)):
+            out.append(f"non-finite {name}")
+    if discounts.shape == (t,) and np.all(np.isfinite(discounts)) and (
+            discounts.min() < 0 or discounts.max() > 1):
+        out.append("discounts outside [0, 1]")
+    ep_arr = np.asarray(ep["ep_id"])
+    if ep_arr.shape != () or not np.issubdtype(ep_arr.dtype, np.integer):
+        out.append(f"ep_id must be an integer scalar, got {ep_arr.shape} {ep_arr.dtype}")
+    elif ep_id is not None and int(ep_arr) != ep_id:
+        out.append(f"ep_id {int(ep_arr)}, its position in the dataset is {ep_id}")
+    return out
+
+
+def check_dataset(directory: str | Path) -> list[str]:
+    """Every problem found in a dataset folder, one line each (empty: the dataset is valid)."""
+    d = Path(directory)
+    try:
+        m = load_manifest(d)
+    except DatasetError as exc:
+        return [str(exc)]
+    problems: list[str] = []
+    listed: set[str] = set()
+    for i, entry in enumerate(m.episodes):
+        if entry.file in listed:
+            problems.append(f"{entry.file} is listed twice in {MANIFEST}")
+            continue
+        listed.add(entry.file)
+        if entry.file != f"{EPISODES}/ep_{i:07d}.npz":
+            problems.append(f"episode {i} is stored as {entry.file}, expected {EPISODES}/ep_{i:07d}.npz")
+        try:
+            ep = read_episode_file(d / entry.file, entry.sha256)
+        except DatasetError as exc:
+            problems.append(str(exc))
+            continue
+        found = episode_problems(ep, action_dim=m.action_dim, frame_shape=m.frame_shape, ep_id=i)
+        problems += [f"{entry.file}: {p}" for p in found]
+        if found:
+            continue
+        if ep_transitions(ep) != entry.transitions:
+            problems.append(f"{entry.file}: {ep_transitions(ep)} transitions, the manifest says {entry.transitions}")
+        if not math.isclose(episode_return(ep), entry.return_, rel_tol=1e-9, abs_tol=1e-9):
+            problems.append(f"{entry.file}: return {episode_return(ep):.6g}, the manifest says {entry.return_:.6g}")
+    total = sum(e.transitions for e in m.episodes)
+    if total != m.transitions:
+        problems.append(f"{MANIFEST} says {m.transitions} transitions, its episodes hold {total}")
+    if not m.episodes:
+        problems.append(f"{MANIFEST} lists no episode")
+    if (d / EPISODES).is_dir():
+        for p in sorted((d / EPISODES).iterdir()):
+            rel = f"{EPISODES}/{p.name}"
+            if _EP_NAME.match(p.name) and rel not in listed:
+                problems.append(f"{rel} is not listed in {MANIFEST}")
+    return problems
+
+
+# ---------------------------------------------------------------------------------------------- writing
+def write_dataset(directory: str | Path, episodes: Iterable[EpisodeSource], *, task: str, kind: str,
+                  source: Mapping[str, Any] | None = None, rule: Mapping[str, Any] | None = None,
+                  created_by: str | None = None) -> Manifest:
+    """Write a dataset folder, resumably: kill it at any moment, call it again, and it completes.
+
+    ``episodes`` yields episode arrays (as ``end_episode()``), or zero-argument callables returning them:
+    on a re-run, a callable whose episode file is already on disk and verifies is not called (so costly
+    rollouts are not redone); a given episode replaces a file on disk unless the arrays are equal. Each
+    file is written atomically, ``manifest.json`` last. ``ep_id`` is set to the episode's position.
+
+    The folder must be new, empty, or a partial write of the same ``task``/``kind``/``source``/``rule``
+    (recorded in ``.incomplete.json``); a complete dataset with those values is returned as it is.
+    Anything else raises :class:`DatasetError` without touching the folder.
+    """
+    d = Path(directory)
+    identity = _jsonable({"format": FORMAT, "task": task, "kind": kind, "source": dict(source or {}),
+                          "rule": dict(rule or {})})
+    try:
+        _claim(d, identity)
+    except _AlreadyComplete as done:
+        (d / PENDING).unlink(missing_ok=True)
+        return done.manifest
+    ep_dir = d / EPISODES
+    ep_dir.mkdir(parents=True, exist_ok=True)
+    for tmp in ep_dir.glob(".*.tmp"):
+        tmp.unlink(missing_ok=True)
+    entries: list[EpisodeEntry] = []
+    action_dim: int | None = None
+    frame_shape: tuple[int, int, int] | None = None
+    for i, item in enumerate(episodes):
+        path = ep_dir / f"ep_{i:07d}.npz"
+        ep, raw = _episode_for(path, item, i, action_dim, frame_shape)
+        if action_dim is None:
+            action_dim = int(ep["actions"].shape[1])
+            frame_shape = tuple(int(s) for s in ep["frames"].shape[1:])  # type: ignore[assignment]
+        entries.append(EpisodeEntry(f"{EPISODES}/{path.name}", hashlib.sha256(raw).hexdigest(),
+                                    ep_transitions(ep), episode_return(ep)))
+    if not entries or action_dim is None or frame_shape is None:
+        raise DatasetError(f"no episode to write to {d}")
+    for p in ep_dir.iterdir():  # files of a longer earlier attempt
+        m = _EP_NAME.match(p.name)
+        if m and int(m.group(1)) >= len(entries):
+            p.unlink()
+    manifest = Manifest(task=task, action_dim=action_dim, frame_shape=frame_shape, kind=kind,
+                        transitions=sum(e.transitions for e in entries), episodes=tuple(entries),
+                        source=identity["source"], rule=identity["rule"],
+                        created_by=created_by or f"repro {__version__}")
+    atomic_write_text(d / MANIFEST, json.dumps(manifest.to_json(), indent=1) + "\n")
+    (d / PENDING).unlink(missing_ok=True)
+    return manifest
+
+
+def _jsonable(value: dict[str, Any]) -> dict[str, Any]:
+    """``value`` as it reads back from JSON (tuples become lists), so identities compare equal."""
+    try:
+        return json.loads(json.dumps(value, sort_keys=True))
+    except (TypeError, ValueError) as exc:
+        raise DatasetError(f"dataset fields must be JSON values: {exc}") from None
+
+
+def _claim(d: Path, identity: dict[str, Any]) -> None:
+    """Make ``d`` ours to write: new, empty, or a partial write of the same identity."""
+    if (d / MANIFEST).exists():
+        m = load_manifest(d)
+        have = _jsonable({"format": m.format, "task": m.task, "kind": m.kind, "source": m.source, "rule": m.rule})
+        if have != identity:
+            raise DatasetError(f"{d} already holds a dataset ({m.task}, {m.kind}) made from other inputs; "
+                               "remove it or choose another folder")
+        raise _AlreadyComplete(m)
+    if (d / PENDING).exists():
+        try:
+            have = json.loads((d / PENDING).read_text())
+        except (OSError, json.JSONDecodeError):
+            have = None
+        if have != identity:
+            raise DatasetError(f"{d} holds a partial dataset made from other inputs; remove it or choose "
+                               "another folder")
+        return
+    if d.exists() and (not d.is_dir() or any(d.iterdir())):
+        raise DatasetError(f"{d} exists and is not a dataset being written; choose a new or empty folder")
+    d.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(d / PENDING, json.dumps(identity, sort_keys=True) + "\n")
+
+
+class _AlreadyComplete(Exception):
+    def __init__(self, manifest: Manifest):
+        super().__init__("already complete")
+        self.manifest = manifest
+
+
+def _episode_for(path: Path, item: EpisodeSource, i: int, action_dim: int | None,
+                 frame_shape: tuple[int, ...] | None) -> tuple[Episode, bytes]:
+    """The episode at position ``i`` and its file bytes: reused from disk when it verifies, else written."""
+    on_disk: tuple[Episode, bytes] | None = None
+    if path.exists():
+        raw = path.read_bytes()
+        try:
+            ep = _load_npz(raw, path)
+        except DatasetError:
+            ep = None
+        if ep is not None and not episode_problems(ep, action_dim=action_dim, frame_shape=frame_shape, ep_id=i):
+            on_disk = (ep, raw)
+    if callable(item):
+        if on_disk is not None:
+            return on_disk
+        item = item()
+    ep = {k: np.asarray(v) for k, v in item.items()}
+    ep["ep_id"] = np.array(i, dtype=np.int64)
+    problems = episode_problems(ep, action_dim=action_dim, frame_shape=frame_shape)
+    if problems:
+        raise DatasetError(f"episode {i}: {problems[0]}")
+    if on_disk is not None and all(np.array_equal(on_disk[0][k], ep[k]) for k in KEYS) \
+            and set(on_disk[0]) == set(ep):
+        return on_disk
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **ep)
+    raw = buf.getvalue()
+    atomic_write(path, lambda f: f.write(raw))
+    return ep, raw
+
+
+# ---------------------------------------------------------------------------------------------- locating
+def is_folder_value(value: str) -> bool:
+    """A dataset value naming a folder (has a '/', starts with '~', or is '.'/'..') rather than a kind."""
+    return "/" in value or value.startswith("~") or value in (".", "..")
+
+
+def dataset_path(value: str, results_root: str | Path, task: str) -> Path:
+    """Where ``value`` points, existing or not: a kind -> ``{results_root}/datasets/{task}/{kind}``."""
+    value = str(value or "").strip()
+    if not value:
+        raise DatasetError("no dataset given (set offline.dataset to a kind such as medium, or a folder)")
+    if is_folder_value(value):
+        return Path(value).expanduser()
+    return Path(results_root) / "datasets" / task / value
+
+
+def resolve_dataset(value: str, results_root: str | Path, task: str) -> Path:
+    """``offline.dataset``: a kind name -> ``{results_root}/datasets/{task}/{kind}``; with a '/', a folder.
+
+    The folder must exist (whether it holds a complete dataset is :func:`load_manifest`'s question).
+    """
+    path = dataset_path(value, results_root, task)
+    if path.is_dir():
+        return path
+    if is_folder_value(str(value).strip()):
+        raise DatasetError(f"unknown dataset: no folder {path}")
+    base = path.parent
+    known = sorted(p.name for p in base.iterdir() if p.is_dir()) if base.is_dir() else []
+    hint = f"known for {task}: {', '.join(known)}" if known else f"none made for {task} yet"
+    raise DatasetError(f"unknown dataset '{str(value).strip()}': no folder {path} ({hint}; `repro dataset make` "
+                       "or `repro dataset import` makes one)")
+
+
+def open_dataset(value: str, results_root: str | Path, task: str,
+                 action_dim: int | None = None) -> tuple[Path, Manifest]:
+    """Resolve ``value`` and load its manifest, refusing another task's or another action dim's dataset."""
+    path = resolve_dataset(value, results_root, task)
+    m = load_manifest(path)
+    if m.task != task:
+        raise DatasetError(f"dataset {path} is for task {m.task}, not {task}")
+    if action_dim is not None and m.action_dim != action_dim:
+        raise DatasetError(f"dataset {path} has action dim {m.action_dim}, the run needs {action_dim}")
+    return path, m
