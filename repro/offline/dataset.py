@@ -105,9 +105,12 @@ def load_manifest(directory: str | Path) -> Manifest:
         raise DatasetError(f"no dataset at {d} (not a folder)")
     path = d / MANIFEST
     if not path.exists():
-        if (d / PENDING).exists() or (d / EPISODES).is_dir():
+        if (d / PENDING).exists():
             raise DatasetError(f"incomplete dataset at {d}: no {MANIFEST} (its write was interrupted; "
                                "re-run the command that made it)")
+        if (d / EPISODES).is_dir():
+            raise DatasetError(f"incomplete dataset at {d}: {EPISODES}/ but no {MANIFEST} and no record of "
+                               "what was being written; remove it and make it again")
         raise DatasetError(f"no dataset at {d} (no {MANIFEST})")
     try:
         data = json.loads(path.read_text())
