@@ -346,6 +346,8 @@ def test_another_tasks_data_or_an_unknown_task_or_format_is_refused(tmp_path):
     assert_one_line_error(invoke("import", src, "--format", "vd4rl-84", "--task", "hoper_hop", "--out", out),
                           "hopper_hop")
     assert_one_line_error(invoke("import", src, "--format", "d4rl", "--task", TASK, "--out", out), "vd4rl-84")
+    assert_one_line_error(invoke("import", tmp_path / "nothere", "--format", "drqv2", "--task", TASK, "--out", out),
+                          "no such file or folder")
     assert not out.exists()
 
 
@@ -367,7 +369,8 @@ def test_existing_outputs_are_never_touched(tmp_path):
                           "already holds a dataset")
     assert (ds / "manifest.json").read_bytes() == manifest
     # the same import again is a no-op
-    assert invoke("import", src, "--format", "vd4rl-84", "--task", TASK, "--out", ds).exit_code == 0
+    result = invoke("import", src, "--format", "vd4rl-84", "--task", TASK, "--out", ds)
+    assert result.exit_code == 0 and "already imported" in result.stdout
     assert (ds / "manifest.json").read_bytes() == manifest
     # export of something that is not a dataset
     assert_one_line_error(invoke("export", tmp_path / "src", "--format", "drqv2", "--out", tmp_path / "e"),

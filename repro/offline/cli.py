@@ -13,7 +13,7 @@ import typer
 
 from repro.config import ConfigError, compose_base
 from repro.offline.convert import default_import_name, export_dataset, import_dataset
-from repro.offline.dataset import DatasetError, check_dataset, dataset_path, is_folder_value, load_manifest
+from repro.offline.dataset import MANIFEST, DatasetError, check_dataset, dataset_path, is_folder_value, load_manifest
 from repro.offline.formats import FORMATS
 from repro.offline.summary import plot_returns, summarize
 
@@ -110,11 +110,15 @@ def import_cmd(path: Path = typer.Argument(..., help="An input file or a folder 
     root = Path(".") if is_folder_value(name) else _results_root(results_root)
     try:
         target = dataset_path(name, root, task)
+        existed = (target / MANIFEST).exists()
         m = import_dataset(path, fmt, task, target)
     except DatasetError as exc:
         _fail(str(exc))
     except OSError as exc:
         _fail(_os_message(exc))
+    if existed:
+        typer.echo(f"already imported: {target} holds this import ({len(m.episodes)} episodes); nothing written")
+        return
     typer.echo(f"imported {len(m.episodes)} episodes ({m.transitions:,} transitions, return mean "
                f"{m.returns.mean():.2f}) from {path} into {target}")
 

@@ -34,12 +34,14 @@ def plot_returns(returns: np.ndarray, path: Path, title: str, bins: int = 20) ->
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     fig, ax = plt.subplots(figsize=(5, 3.2), dpi=120)
     ax.hist(returns, bins=bins, color="#4C72B0", edgecolor="white")
     ax.axvline(float(np.mean(returns)), color="black", lw=1, ls="--", label=f"mean {np.mean(returns):.1f}")
     ax.set_xlabel("episode return")
     ax.set_ylabel("episodes")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_title(title, fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
