@@ -7,6 +7,7 @@ frames, actions and rewards on import breaks :func:`assert_aligned`.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import signal
@@ -116,7 +117,7 @@ def write_drqv2(folder: Path, rolls: list[dict]) -> Path:
         f = encode(r["states"])
         prev = [f[max(t - 2, 0)] for t in range(len(f))], [f[max(t - 1, 0)] for t in range(len(f))]
         obs = np.concatenate([np.stack(prev[0]), np.stack(prev[1]), f], axis=1)  # newest frame last
-        # index 10 + i sorts after 9 only numerically: the importer must not sort by name
+        # names sort by time stamp, which is not the index order 10, 9, 11: the importer must use the index
         np.savez_compressed(folder / f"20230101T1200{i:02d}_{[10, 9, 11][i]}_{len(f) - 1}.npz",
                             observation=obs, action=action, reward=reward[:, None], discount=discount[:, None])
     return folder
@@ -463,8 +464,6 @@ def test_check_finds_wrong_shapes_dtypes_and_non_finite_rewards(tmp_path):
     write(d, dataset_episodes(2))
     bad = {**dataset_episodes(2)[1], "actions": np.zeros((6, A + 1), np.float32), "ep_id": np.array(1)}
     np.savez_compressed(d / "episodes/ep_0000001.npz", **bad)
-    import hashlib
-
     data = json.loads((d / "manifest.json").read_text())
     data["episodes"][1]["sha256"] = hashlib.sha256((d / "episodes/ep_0000001.npz").read_bytes()).hexdigest()
     (d / "manifest.json").write_text(json.dumps(data))
