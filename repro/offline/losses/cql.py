@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Callable, Sequence
 from functools import lru_cache
 from pathlib import Path
-from typing import Callable, Optional, Sequence
 
 import torch
 
@@ -40,7 +40,7 @@ def uniform_log_density(action_dim: int) -> float:
 
 
 def uniform_actions(batch: int, n: int, action_dim: int, like: torch.Tensor,
-                    generator: Optional[torch.Generator] = None) -> torch.Tensor:
+                    generator: torch.Generator | None = None) -> torch.Tensor:
     """(batch, n, action_dim) actions uniform on [-1, 1], on ``like``'s device and dtype."""
     u = torch.rand(batch, n, action_dim, generator=generator, device=like.device, dtype=like.dtype)
     return 2.0 * u - 1.0
@@ -48,9 +48,9 @@ def uniform_actions(batch: int, n: int, action_dim: int, like: torch.Tensor,
 
 def regulariser(q_data: torch.Tensor, q_uniform: torch.Tensor, q_policy: torch.Tensor,
                 q_next_policy: torch.Tensor, alpha: float, temperature: float = 1.0, *,
-                importance_sampling: bool = False, action_dim: Optional[int] = None,
-                log_prob_policy: Optional[torch.Tensor] = None,
-                log_prob_next_policy: Optional[torch.Tensor] = None,
+                importance_sampling: bool = False, action_dim: int | None = None,
+                log_prob_policy: torch.Tensor | None = None,
+                log_prob_next_policy: torch.Tensor | None = None,
                 include_data_in_logsumexp: bool = False) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """The alpha-weighted regulariser of one critic head, and its parts (detached).
 
@@ -88,8 +88,8 @@ def critic_regularisers(critic: Callable[[torch.Tensor, torch.Tensor], Sequence[
                         h: torch.Tensor, q_data: Sequence[torch.Tensor], uniform: torch.Tensor,
                         policy: torch.Tensor, next_policy: torch.Tensor, alpha: float,
                         temperature: float = 1.0, *, importance_sampling: bool = False,
-                        log_prob_policy: Optional[torch.Tensor] = None,
-                        log_prob_next_policy: Optional[torch.Tensor] = None,
+                        log_prob_policy: torch.Tensor | None = None,
+                        log_prob_next_policy: torch.Tensor | None = None,
                         include_data_in_logsumexp: bool = False,
                         ) -> tuple[tuple[torch.Tensor, ...], dict[str, float]]:
     """The regulariser of every critic head, and metrics named per head (``cql_reg_q1`` ...).

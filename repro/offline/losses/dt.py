@@ -16,7 +16,8 @@ never cross an episode boundary, left-padded near an episode's end, as the refer
 
 from __future__ import annotations
 
-from typing import Any, Iterable, Mapping, Optional
+from collections.abc import Iterable, Mapping
+from typing import Any
 
 import numpy as np
 import torch
@@ -50,7 +51,7 @@ class DecisionTransformer(nn.Module):
 
     def attention_mask(self, mask: torch.Tensor) -> torch.Tensor:
         """(B * heads, 3K, 3K) boolean, True = may not attend: causal, and padded keys hidden from others."""
-        batch, steps = mask.shape
+        steps = mask.shape[1]
         length = 3 * steps
         real_key = mask.repeat_interleave(3, dim=1)  # (B, 3K): token j belongs to step j // 3
         causal = torch.ones(length, length, dtype=torch.bool, device=mask.device).tril()
@@ -71,11 +72,17 @@ class DecisionTransformer(nn.Module):
         s = self.embed_state(h).reshape(batch, steps, -1) + time
         r = self.embed_return(rtg.to(dtype)) + time
         a = self.embed_action(actions.to(dtype)) + time
-        tokens = torch.stack([r, s, a], dim=2).reshape(batch, 3 * steps, -1)  # R_1 s_1 a_1 R_2 ...
+        tokens = interleave(r, s, a)
         x = self.embed_drop(self.embed_ln(tokens))
         x = self.transformer(x, mask=self.attention_mask(mask.bool()))
         state_out = x.reshape(batch, steps, 3, -1)[:, :, 1]
         return self.predict_action(state_out)
+
+
+def interleave(r: torch.Tensor, s: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
+    """Three (B, K, E) token sequences -> (B, 3K, E) in the order R_1 s_1 a_1 R_2 s_2 a_2 ..."""
+    batch, steps, width = s.shape
+    return torch.stack([r, s, a], dim=2).reshape(batch, 3 * steps, width)
 
 
 def action_loss(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -222,6 +229,6 @@ def make_optimizer(model: nn.Module, lr: float = 1e-4, weight_decay: float = 1e-
     return optimizer, torch.optim.lr_scheduler.LambdaLR(optimizer, LinearWarmup(warmup_steps))
 
 
-def batch_to_tensors(batch: Mapping[str, np.ndarray], device: Optional[torch.device] = None) -> dict[str, torch.Tensor]:
+def batch_to_tensors(batch: Mapping[str, np.ndarray], device: torch.device | None = None) -> dict[str, torch.Tensor]:
     """A sampler batch as tensors on ``device`` (frames stay uint8 until the model casts them)."""
     return {key: torch.as_tensor(value, device=device) for key, value in batch.items()}
