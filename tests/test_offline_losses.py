@@ -3,12 +3,14 @@ code under test), gradient paths, and the Decision Transformer's masks and seque
 
 from __future__ import annotations
 
+import inspect
 import math
 
 import numpy as np
 import pytest
 import torch
 
+from repro.offline.configs import DTConfig, IQLConfig, TD3BCConfig
 from repro.offline.losses import cql, dt, iql, td3bc
 
 F64 = torch.float64
@@ -418,6 +420,24 @@ def test_sequence_sampler_state_and_bad_episodes():
         dt.SequenceSampler([bad])
     with pytest.raises(ValueError, match="no episodes"):
         dt.SequenceSampler([])
+    with pytest.raises(ValueError, match="timestep embedding"):
+        dt.SequenceSampler(eps, max_timestep=5)
+    dt.SequenceSampler(eps, max_timestep=6)
+
+
+def test_config_defaults_match_the_functions():
+    def defaults(fn):
+        return {k: p.default for k, p in inspect.signature(fn).parameters.items() if p.default is not p.empty}
+
+    cfg = DTConfig()
+    model = defaults(dt.DecisionTransformer.__init__)
+    assert {k: getattr(cfg, k) for k in model} == model
+    assert defaults(dt.make_optimizer) == {"lr": cfg.lr, "weight_decay": cfg.weight_decay,
+                                           "warmup_steps": cfg.warmup_steps}
+    assert dt.GRAD_CLIP == cfg.grad_clip and defaults(dt.SequenceSampler.__init__)["rtg_scale"] == cfg.rtg_scale
+    assert defaults(td3bc.actor_loss) == {"alpha": TD3BCConfig().alpha, "lambda_from": TD3BCConfig().lambda_from}
+    assert defaults(iql.value_loss)["expectile"] == IQLConfig().expectile
+    assert defaults(iql.actor_loss) == {"beta": IQLConfig().beta, "max_weight": IQLConfig().max_weight}
 
 
 def test_eval_context_history():

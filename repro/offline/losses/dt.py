@@ -127,11 +127,12 @@ class SequenceSampler:
     the episode's end; shorter windows are left-padded (as kzl/decision-transformer's sampler).
     ``sample`` returns numpy arrays: ``frames`` (B, K, 3*frame_stack, H, W) uint8, ``actions`` (B, K, A)
     float32, ``rtg`` (B, K, 1) float32 (scaled), ``timesteps`` (B, K) int64, ``mask`` (B, K) bool, plus
-    ``episode`` and ``start`` (B,) int64 naming where each window came from.
+    ``episode`` and ``start`` (B,) int64 naming where each window came from. With ``max_timestep`` (the
+    model's), an episode too long for the timestep embedding is a one-line ValueError here.
     """
 
     def __init__(self, episodes: Iterable[Mapping[str, np.ndarray]], context: int = 20, frame_stack: int = 3,
-                 rtg_scale: float = 1e-3, seed: int = 0):
+                 rtg_scale: float = 1e-3, seed: int = 0, max_timestep: int | None = None):
         self.context, self.frame_stack, self.rtg_scale = context, frame_stack, rtg_scale
         self.frames: list[np.ndarray] = []
         self.actions: list[np.ndarray] = []
@@ -153,6 +154,9 @@ class SequenceSampler:
         self.lengths = np.array([a.shape[0] for a in self.actions], dtype=np.int64)
         self.offsets = np.concatenate([[0], np.cumsum(self.lengths)])
         self.max_episode_length = int(self.lengths.max())  # the model's max_timestep must be at least this
+        if max_timestep is not None and self.max_episode_length > max_timestep:
+            raise ValueError(f"an episode has {self.max_episode_length} steps but the timestep embedding only "
+                             f"{max_timestep}; raise the model's max_timestep")
         self.rng = np.random.default_rng(seed)
 
     def window(self, episode: int, start: int) -> dict[str, np.ndarray]:
