@@ -1,0 +1,45 @@
+"""Config sections of the offline learners (TD3+BC, IQL, Decision Transformer).
+
+Defined here so that the loss modules own their defaults; ``repro/schema.py`` wires them into the run
+config (CQL's section, ``CQLConfig``, already lives there). Each default names its source.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class TD3BCConfig:
+    """TD3+BC's actor loss (Fujimoto & Gu 2021, eq. 5; V-D4RL's DrQ+BC on the DrQ-v2 backbone)."""
+
+    alpha: float = 2.5  # paper section 5.2: 2.5 (no difference in [2, 3])
+    # "min": lambda and the Q term from min(Q1, Q2) (V-D4RL's DrQ+BC); "q1": from Q1 only (original paper)
+    lambda_from: str = "min"
+
+
+@dataclass
+class IQLConfig:
+    """Implicit Q-learning (Kostrikov et al. 2022)."""
+
+    expectile: float = 0.7  # paper (TACO appendix): 0.7
+    beta: float = 0.1  # inverse temperature; the TACO paper's 0.1; the IQL reference MuJoCo config uses 3
+    max_weight: float = 100.0  # exp(beta * adv) is clipped here (IQL reference code)
+
+
+@dataclass
+class DTConfig:
+    """Decision Transformer (Chen et al. 2021, the gym setting of github kzl/decision-transformer)."""
+
+    context: int = 20
+    embed_dim: int = 128
+    n_layers: int = 3
+    n_heads: int = 1
+    dropout: float = 0.1
+    lr: float = 1e-4
+    weight_decay: float = 1e-4
+    warmup_steps: int = 10_000
+    grad_clip: float = 0.25
+    batch_size: int = 64
+    rtg_scale: float = 1e-3  # returns-to-go are multiplied by this (1/1000)
+    max_timestep: int = 1000  # size of the learned timestep embedding; episodes must be shorter
