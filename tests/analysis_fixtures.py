@@ -103,10 +103,12 @@ def write_run(
     success: bool = False,
     path: Path | None = None,
     resolved: bool = True,
+    resolved_values: dict[str, Any] | None = None,
 ) -> Path:
     """Write one run directory and return it. Arguments left None keep the composed config's value; the
     config goes through the training schema, and resolved.json through the code training uses
-    (``resolved=False`` leaves it out, like a run written before runs recorded it)."""
+    (``resolved=False`` leaves it out, like a run written before runs recorded it; ``resolved_values`` are
+    written instead, e.g. those of a real Agent)."""
     offline = algo in OFFLINE_ALGOS
     cfg = run_config(
         algo, task, seed, root, experiment=experiment, variant=variant, **{
@@ -119,7 +121,7 @@ def write_run(
     rundir.write_config(run, cfg)
     if resolved:
         learner_fields = {"dataset": dataset, "cql_alpha": cql_alpha} if offline else {}
-        rundir.write_resolved(run, resolved_for(cfg, learner_fields))
+        rundir.write_resolved(run, resolved_values or resolved_for(cfg, learner_fields))
     meta = {"git_sha": "abc1234", "git_dirty": False, "versions": {"torch": "2.13.0"}, "host": "testhost",
             "device": device, "cpu": "Test CPU", "python": "3.11", "resumes": []}
     (run / runformat.META).write_text(json.dumps(meta))
