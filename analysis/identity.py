@@ -1,4 +1,4 @@
-"""Names: method labels as the paper prints them, task display names, action dimensions."""
+"""Names: method labels as the paper prints them, task display names, true action dimensions."""
 
 from __future__ import annotations
 
@@ -108,9 +108,3 @@ def action_dim(task: str) -> int | None:
         pass
     domain = str(task).split("_", 1)[0]
     return _DMC_ACTION_DIMS.get(domain)
-
-
-def default_latent_dim(task: str) -> int | None:
-    """TACO's default latent action dimension ceil(1.25 |A|) (paper, Appendix D)."""
-    dim = action_dim(task)
-    return None if dim is None else math.ceil(1.25 * dim)

@@ -1,7 +1,8 @@
 """Walk a results root, validate every run directory (docs/run-format.md) and build tidy tables.
 
-A run directory is any folder holding ``config.yaml``. Identity columns come from the config, never
-from the path. A malformed or truncated CSV is reported as a :class:`Problem` (with its path) and
+A run directory is any folder holding ``config.yaml`` (format: repro/runformat.py). Identity columns come
+from the config and from the values the run recorded in ``resolved.json``, never from the path and never
+recomputed. A malformed or truncated CSV is reported as a :class:`Problem` (with its path) and
 skipped; loading never raises because of one bad run.
 """
 
@@ -22,22 +23,26 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from analysis.identity import algo_key, enabled_objectives, method_label, normalize_dataset
-
-EVAL_REQUIRED = ("frame", "step", "episode", "episode_reward")
-EVAL_COLUMNS = (
-    "frame",
-    "step",
-    "episode",
-    "episode_reward",
-    "episode_reward_std",
-    "episode_length",
-    "success",
-    "eval_episodes",
-    "total_time",
+from repro.runformat import (
+    CONFIG,
+    EVAL,
+    EVAL_COLUMNS,
+    EVAL_REQUIRED,
+    IDENTITY_KEYS,
+    META,
+    REPLAY,
+    RESOLVED,
+    RESOLVED_CONFIG_KEYS,
+    RESOLVED_FIELDS,
+    TRAIN,
+    TRAIN_REQUIRED,
+    ResolvedError,
+    read_resolved,
+    run_state,
 )
-TRAIN_REQUIRED = ("frame", "fps")
 
-# Identity columns of every row of the tidy tables (run_id is the run directory relative to the root).
+# Identity columns of every row of the tidy tables (run_id is the run directory relative to the root):
+# the config's identity keys and the run's resolved values (repro/runformat.py), plus labels and status.
 IDENTITY = (
     "run_id",
     "experiment",
@@ -47,8 +52,10 @@ IDENTITY = (
     "task",
     "suite",
     "seed",
+    "learner",
     "K",
     "batch_size",
+    "nstep",
     "latent_action_dim",
     "action_encoder",
     "objectives",
@@ -59,7 +66,8 @@ IDENTITY = (
     "cql_alpha",
     "status",
 )
-_SKIP_DIRS = {"replay", "__pycache__", ".git"}
+RESOLVED_FROM_FILE, RESOLVED_FROM_CONFIG = RESOLVED, CONFIG  # the runs table's ``resolved_from`` values
+_SKIP_DIRS = {REPLAY, "__pycache__", ".git"}
 
 
 @dataclass(frozen=True)
@@ -80,8 +88,9 @@ class Results:
 
     Attributes:
         root: the results root.
-        runs: one row per valid run: identity columns, status, number of eval rows, last eval frame,
-            median training FPS, provenance (git sha, device, host, cpu, versions).
+        runs: one row per valid run: identity columns, status, ``resolved_from`` (``resolved.json``, or
+            ``config.yaml`` for a run that predates it), number of eval rows, last eval frame, median
+            training FPS, provenance (git sha, device, host, cpu, versions).
         eval: one row per evaluation: identity columns + the eval.csv columns.
         problems: every file that was skipped or is suspicious.
         benches: parsed ``{root}/bench/*.json`` files, each with its ``path``.
@@ -111,40 +120,50 @@ def _get(cfg: dict[str, Any], dotted: str, default: Any = None) -> Any:
     return node
 
 
-def _first(cfg: dict[str, Any], *keys: str) -> Any:
-    for key in keys:
-        value = _get(cfg, key)
-        if value is not None:
-            return value
-    return None
-
-
 def identity_from_config(cfg: dict[str, Any]) -> dict[str, Any]:
-    """The identity columns of a run from its resolved config (tolerant to missing optional keys)."""
-    algo = _get(cfg, "agent.name")
-    objectives = enabled_objectives(_get(cfg, "agent.objectives") or {})
-    dataset = normalize_dataset(
-        _first(cfg, "dataset", "offline.dataset", "data.dataset", "task.dataset", "agent.dataset")
-    )
-    action_encoder = _get(cfg, "agent.action_encoder")
+    """The identity columns a run's resolved config gives (runformat.IDENTITY_KEYS), without resolved values."""
+    ident = {col: _get(cfg, key) for col, key in IDENTITY_KEYS.items()}
     return {
-        "experiment": str(_get(cfg, "experiment", "")),
-        "variant": str(_get(cfg, "variant", "base") or "base"),
-        "algo": algo_key(algo) if algo is not None else None,
-        "method": method_label(algo, objectives) if algo is not None else None,
-        "task": _get(cfg, "task.name"),
-        "suite": _get(cfg, "task.suite"),
-        "seed": _int_or_none(_get(cfg, "seed")),
-        "K": _int_or_none(_get(cfg, "agent.K")),
-        "batch_size": _int_or_none(_get(cfg, "agent.batch_size")),
-        "latent_action_dim": _int_or_none(_get(cfg, "agent.latent_action_dim")),
-        "action_encoder": None if action_encoder is None else bool(action_encoder),
+        "experiment": str(ident["experiment"] or ""),
+        "variant": str(ident["variant"] or "base"),
+        "algo": algo_key(ident["algo"]) if ident["algo"] is not None else None,
+        "task": ident["task"],
+        "suite": ident["suite"],
+        "seed": _int_or_none(ident["seed"]),
+        "distracting_dims": _int_or_none(ident["distracting_dims"]) or 0,
+        "train_frames": _int_or_none(ident["train_frames"]),
+    }
+
+
+def resolved_from_config(cfg: dict[str, Any]) -> dict[str, Any]:
+    """For a run without resolved.json: each resolved value as its config.yaml states it
+    (runformat.RESOLVED_CONFIG_KEYS), nothing recomputed; a null latent dim stays unknown (None)."""
+    values = {field: _get(cfg, key) for field, key in RESOLVED_CONFIG_KEYS.items()}
+    objectives = values["objectives"] if isinstance(values["objectives"], dict) else {}
+    values["objectives"] = {k: w for k, w in objectives.items() if k in enabled_objectives(objectives)}
+    if values["learner"] is None:  # configs written before agent.learner existed: the online learner
+        values["learner"] = "actor_critic"
+    if not values["action_encoder"]:
+        values["latent_action_dim"] = None
+    return values
+
+
+def resolved_columns(values: dict[str, Any], algo: Any) -> dict[str, Any]:
+    """The identity columns of a run's resolved values (runformat.RESOLVED_FIELDS)."""
+    objectives = enabled_objectives(values.get("objectives") or {})
+    encoder = values.get("action_encoder")
+    return {
+        "learner": values.get("learner"),
+        "K": _int_or_none(values.get("K")),
+        "batch_size": _int_or_none(values.get("batch_size")),
+        "nstep": _int_or_none(values.get("nstep")),
+        "latent_action_dim": _int_or_none(values.get("latent_action_dim")),
+        "action_encoder": None if encoder is None else bool(encoder),
         "objectives": "+".join(objectives),
-        "action_repeat": _int_or_none(_get(cfg, "env.action_repeat")),
-        "distracting_dims": _int_or_none(_get(cfg, "env.distracting_dims")) or 0,
-        "train_frames": _int_or_none(_get(cfg, "train.frames")),
-        "dataset": dataset,
-        "cql_alpha": _float_or_none(_first(cfg, "agent.cql_alpha", "agent.alpha_cql", "agent.cql.alpha")),
+        "method": method_label(algo, objectives) if algo is not None else None,
+        "action_repeat": _int_or_none(values.get("action_repeat")),
+        "dataset": normalize_dataset(values.get("dataset")),
+        "cql_alpha": _float_or_none(values.get("cql_alpha")),
     }
 
 
@@ -250,21 +269,36 @@ def find_run_dirs(root: Path) -> list[Path]:
         dirnames[:] = sorted(d for d in dirnames if d not in _SKIP_DIRS)
         if Path(dirpath) == root and "bench" in dirnames:
             dirnames.remove("bench")
-        if "config.yaml" in filenames:
+        if CONFIG in filenames:
             found.append(Path(dirpath))
             dirnames[:] = []  # a run directory has no nested runs
-        elif "eval.csv" in filenames:
+        elif EVAL in filenames:
             found.append(Path(dirpath))  # reported below: a run without its config
     return found
+
+
+def _resolved(run_dir: Path, cfg: dict[str, Any]) -> tuple[dict[str, Any], str, Problem | None]:
+    """(resolved values, where they came from, a warning if not from resolved.json)."""
+    path = run_dir / RESOLVED
+    try:
+        return read_resolved(run_dir), RESOLVED_FROM_FILE, None
+    except FileNotFoundError:
+        why = f"no {RESOLVED} (a run written before runs recorded their resolved values)"
+    except (ResolvedError, OSError, UnicodeDecodeError) as exc:
+        why = f"malformed {RESOLVED} ({exc})"
+    fields = ", ".join(RESOLVED_FIELDS)
+    return resolved_from_config(cfg), RESOLVED_FROM_CONFIG, Problem(
+        str(path), f"{why}; {fields} taken from {CONFIG} as written (a null latent_action_dim stays unknown)",
+        "warning")
 
 
 def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataFrame | None, list[Problem]]:
     """Load one run directory: (run row, eval rows, problems). Run row is None if the run is unusable."""
     problems: list[Problem] = []
     rel = str(run_dir.relative_to(root))
-    cfg_path = run_dir / "config.yaml"
+    cfg_path = run_dir / CONFIG
     if not cfg_path.exists():
-        return None, None, [Problem(str(run_dir / "eval.csv"), "run directory without config.yaml; skipped")]
+        return None, None, [Problem(str(run_dir / EVAL), f"run directory without {CONFIG}; skipped")]
     try:
         cfg = read_config(cfg_path)
     except (OmegaConfBaseException, yaml.YAMLError, OSError, ValueError, UnicodeDecodeError) as exc:
@@ -275,12 +309,16 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
     missing = [k for k in ("algo", "task", "seed") if ident[k] is None]
     if missing:
         return None, None, [Problem(str(cfg_path), f"config lacks {', '.join(missing)}; run skipped")]
-    done = (run_dir / "DONE").exists()
+    values, source, problem = _resolved(run_dir, cfg)
+    if problem is not None:
+        problems.append(problem)
+    ident.update(resolved_columns(values, ident["algo"]))
     ident["run_id"] = rel
-    ident["status"] = "done" if done else ("partial" if (run_dir / "checkpoint.pt").exists() else "incomplete")
+    ident["status"] = run_state(run_dir)
 
     row: dict[str, Any] = dict(ident)
-    meta_path = run_dir / "meta.json"
+    row["resolved_from"] = source
+    meta_path = run_dir / META
     meta: dict[str, Any] = {}
     if meta_path.exists():
         try:
@@ -292,7 +330,7 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
     row.update(_provenance(meta))
 
     eval_df: pd.DataFrame | None = None
-    eval_path = run_dir / "eval.csv"
+    eval_path = run_dir / EVAL
     if not eval_path.exists():
         problems.append(Problem(str(eval_path), "missing eval.csv; run has no scores", "warning"))
     else:
@@ -308,7 +346,7 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
     row["eval_rows"] = 0 if eval_df is None else len(eval_df)
     row["last_frame"] = math.nan if eval_df is None or eval_df.empty else float(eval_df["frame"].max())
 
-    train_path = run_dir / "train.csv"
+    train_path = run_dir / TRAIN
     row["fps"] = math.nan
     if train_path.exists():
         try:
@@ -351,7 +389,7 @@ def load_results(root: Path | str) -> Results:
     problems.extend(bench_problems)
     runs = pd.DataFrame(rows)
     if runs.empty:
-        runs = pd.DataFrame(columns=[*IDENTITY, "eval_rows", "last_frame", "fps"])
+        runs = pd.DataFrame(columns=[*IDENTITY, "resolved_from", "eval_rows", "last_frame", "fps"])
     else:
         dup = runs.duplicated(["experiment", "algo", "variant", "task", "seed"], keep=False)
         for run_id in runs.loc[dup, "run_id"]:

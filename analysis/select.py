@@ -17,7 +17,7 @@ from typing import Any
 
 import pandas as pd
 
-from analysis.identity import default_latent_dim
+from analysis.paper import DMC9
 
 ExperimentMap = Mapping[str, Sequence[str]]
 FULL_OBJECTIVES = ("curl", "reward", "taco")
@@ -78,8 +78,10 @@ def method_label(row: pd.Series) -> str:
 
 
 def online_main(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -> pd.DataFrame:
-    """Table 1 / F1 / F4 / F11: online DMC runs of the main comparison, labelled by method."""
-    return pick(scores, ["main"], method_label, experiment_map=experiment_map, suite="dmc", dataset=lambda d: pd.isna(d))
+    """Table 1 / F1 / F4 / F11: online runs of the main comparison on the paper's nine DMC tasks (reach_duplo's
+    suite is ``manipulation``), labelled by method."""
+    return pick(scores, ["main"], method_label, experiment_map=experiment_map, task=set(DMC9),
+                dataset=lambda d: pd.isna(d))
 
 
 def repr_objectives(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -> pd.DataFrame:
@@ -124,7 +126,7 @@ def horizon(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -
         ["horizon", "main"],
         label,
         experiment_map=experiment_map,
-        suite="dmc",
+        task=set(DMC9),
         action_repeat=lambda a: pd.isna(a) or int(a) == 2,
         dataset=lambda d: pd.isna(d),
     )
@@ -190,10 +192,8 @@ def objective_removal(scores: pd.DataFrame, experiment_map: ExperimentMap | None
 
 
 def dim_value(row: pd.Series) -> int | None:
-    """The latent action dimension of a run (its default ceil(1.25|A|) if the config leaves it null)."""
-    if not pd.isna(row["latent_action_dim"]):
-        return int(row["latent_action_dim"])
-    return default_latent_dim(row["task"])
+    """The latent action dimension a run used (its recorded resolved value; None when unknown)."""
+    return None if pd.isna(row["latent_action_dim"]) else int(row["latent_action_dim"])
 
 
 def action_dim(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -> pd.DataFrame:

@@ -68,6 +68,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     try:
         spec = env.spec
         agent = build_agent(rc, spec.obs_shape, spec.action_dim, device)
+        rundir.write_resolved(path, rundir.resolved_values(rc, agent))
         replay_device = resolve_device(rc.replay.device)
         buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
                               rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device)

@@ -7,6 +7,10 @@ import os
 from pathlib import Path
 from typing import Any, Sequence
 
+from repro.runformat import EVAL, EVAL_COLUMNS, TRAIN, TRAIN_COLUMNS, WALLCLOCK_COLUMNS, train_columns
+
+__all__ = ["CsvLog", "RunLogger", "format_row", "header_line", "EVAL_COLUMNS", "TRAIN_COLUMNS", "WALLCLOCK_COLUMNS"]
+
 
 def _fmt(value: Any) -> str:
     if value is None:
@@ -18,6 +22,20 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
+def header_line(columns: Sequence[str]) -> str:
+    """The header line (with its newline) of a CSV log with these columns."""
+    return ",".join(columns) + "\n"
+
+
+def format_row(columns: Sequence[str], row: dict[str, Any]) -> str:
+    """One CSV line (with its newline) of ``row`` under the header ``columns``: None and NaN empty, bools 0/1,
+    floats in full precision (repr)."""
+    unknown = set(row) - set(columns)
+    if unknown:
+        raise KeyError(f"unknown columns {sorted(unknown)}")
+    return ",".join(_fmt(row.get(c)) for c in columns) + "\n"
+
+
 class CsvLog:
     """One CSV file with a fixed header; each row is flushed and fsynced as soon as it is written."""
 
@@ -26,7 +44,7 @@ class CsvLog:
         ``None`` starts the file afresh."""
         self.path = Path(path)
         self.columns = list(columns)
-        header = ",".join(self.columns) + "\n"
+        header = header_line(self.columns)
         if offset is None or not self.path.exists():
             self.path.write_text(header)
         else:
@@ -38,10 +56,10 @@ class CsvLog:
         self._f = open(self.path, "ab")
 
     def write(self, row: dict[str, Any]) -> None:
-        unknown = set(row) - set(self.columns)
-        if unknown:
-            raise KeyError(f"{self.path.name}: unknown columns {sorted(unknown)}")
-        line = ",".join(_fmt(row.get(c)) for c in self.columns) + "\n"
+        try:
+            line = format_row(self.columns, row)
+        except KeyError as exc:
+            raise KeyError(f"{self.path.name}: {exc.args[0]}") from None
         self._f.write(line.encode())
         self._f.flush()
         os.fsync(self._f.fileno())
@@ -53,22 +71,15 @@ class CsvLog:
         self._f.close()
 
 
-EVAL_COLUMNS = ["frame", "step", "episode", "episode_reward", "episode_reward_std", "episode_length",
-                "success", "eval_episodes", "total_time"]
-TRAIN_COLUMNS = ["frame", "step", "episode", "episode_reward", "episode_length", "success", "buffer_size",
-                 "stddev", "fps", "total_time"]
-WALLCLOCK_COLUMNS = ("total_time", "fps")
-
-
 class RunLogger:
-    """The run's ``eval.csv`` and ``train.csv`` plus console output."""
+    """The run's ``eval.csv`` and ``train.csv`` (columns from repro.runformat) plus console output."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
                  offsets: dict[str, int] | None = None, echo=print):
         run_dir = Path(run_dir)
         offsets = offsets or {}
-        self.eval = CsvLog(run_dir / "eval.csv", EVAL_COLUMNS, offsets.get("eval"))
-        self.train = CsvLog(run_dir / "train.csv", TRAIN_COLUMNS + list(metric_names), offsets.get("train"))
+        self.eval = CsvLog(run_dir / EVAL, EVAL_COLUMNS, offsets.get("eval"))
+        self.train = CsvLog(run_dir / TRAIN, train_columns(metric_names), offsets.get("train"))
         self.echo = echo
 
     def offsets(self) -> dict[str, int]:

@@ -1,4 +1,5 @@
-"""The run directory contract (docs/run-format.md): path, identity check, metadata, DONE marker."""
+"""Writing a run directory (format: repro/runformat.py, docs/run-format.md): path, identity check, metadata,
+resolved values, DONE marker."""
 
 from __future__ import annotations
 
@@ -11,15 +12,18 @@ import sys
 import time
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import yaml
 from omegaconf import DictConfig, OmegaConf
 
 from repro.config import identity
 from repro.fsutil import atomic_write_text
+from repro.runformat import CHECKPOINT, CONFIG, DONE, META, RESOLVED, resolved_json, run_path, run_state
 from repro.schema import RunConfig
 
-CONFIG, META, DONE, CHECKPOINT = "config.yaml", "meta.json", "DONE", "checkpoint.pt"
+__all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "RESOLVED", "RunDirMismatch", "config_diff", "config_matches",
+           "resolved_values", "run_dir", "run_state", "write_config", "write_done", "write_meta", "write_resolved"]
 PACKAGES = ("torch", "numpy", "mujoco", "dm-control", "metaworld", "hydra-core", "omegaconf", "submitit",
             "pandas", "rliable", "taco-repro")
 
@@ -30,18 +34,7 @@ class RunDirMismatch(ValueError):
 
 def run_dir(cfg: DictConfig) -> Path:
     """``{results_root}/{experiment}/{agent}/{variant}/{task}/seed_{seed}`` from config values only."""
-    return (Path(cfg.runtime.results_root) / str(cfg.experiment) / str(cfg.agent.name) / str(cfg.variant)
-            / str(cfg.task.name) / f"seed_{cfg.seed}")
-
-
-def run_state(path: str | Path) -> str:
-    """``done`` (DONE exists), ``partial`` (a config or checkpoint but no DONE) or ``absent``."""
-    path = Path(path)
-    if (path / DONE).exists():
-        return "done"
-    if (path / CHECKPOINT).exists() or (path / CONFIG).exists():
-        return "partial"
-    return "absent"
+    return run_path(cfg.runtime.results_root, cfg.experiment, cfg.agent.name, cfg.variant, cfg.task.name, cfg.seed)
 
 
 def saved_identity(path: str | Path) -> dict | None:
@@ -91,6 +84,35 @@ def config_matches(path: str | Path, cfg: DictConfig) -> bool:
 
 def write_config(path: Path, cfg: DictConfig) -> None:
     atomic_write_text(path / CONFIG, OmegaConf.to_yaml(cfg, resolve=True))
+
+
+def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
+    """What ``learner`` (as built for ``rc``) actually uses, as resolved.json records it (runformat.RESOLVED_FIELDS).
+
+    Read from the learner, not recomputed: the latent action dim is its ``action_encoder.latent_dim`` (None
+    without an action encoder), the objectives are its active ``weights``. A learner adds or replaces fields
+    (an offline learner: ``dataset``, ``cql_alpha``, ...) through a ``resolved`` dict attribute.
+    """
+    encoder = getattr(learner, "action_encoder", None)
+    values: dict[str, Any] = {
+        "learner": rc.agent.learner,
+        "K": int(rc.agent.K),
+        "batch_size": int(rc.agent.batch_size),
+        "action_repeat": int(rc.env.action_repeat),
+        "nstep": int(rc.agent.nstep),
+        "action_encoder": encoder is not None,
+        "latent_action_dim": None if encoder is None else int(encoder.latent_dim),
+        "objectives": {str(k): float(w) for k, w in getattr(learner, "weights", {}).items()},
+        "dataset": None,
+        "cql_alpha": None,
+    }
+    values.update(getattr(learner, "resolved", None) or {})
+    return values
+
+
+def write_resolved(path: Path, values: dict[str, Any]) -> None:
+    """Write resolved.json (checked against the format, atomic); the same values on every (re)start."""
+    atomic_write_text(path / RESOLVED, resolved_json(values))
 
 
 def _git(*args: str) -> str | None:

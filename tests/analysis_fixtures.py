@@ -7,21 +7,74 @@
 
 from __future__ import annotations
 
+import copy
+import functools
 import json
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-import yaml
+from omegaconf import DictConfig, OmegaConf
 
-EVAL_HEADER = "frame,step,episode,episode_reward,episode_reward_std,episode_length,success,eval_episodes,total_time"
-TRAIN_HEADER = ("frame,step,episode,episode_reward,episode_length,success,buffer_size,stddev,fps,total_time,"
-                "critic_loss,critic_q1,critic_q2,critic_target_q,actor_loss,actor_logprob,actor_ent")
+from repro import rundir, runformat
+from repro.agent.agent import ACTOR_METRICS, CRITIC_METRICS
+from repro.agent.networks import default_latent_action_dim
+from repro.config import compose, group_options, typed, validate
+from repro.envs import get_task
+from repro.logger import format_row, header_line
+
+METRICS = (*CRITIC_METRICS, *ACTOR_METRICS)  # the online learner's base update metrics (train.csv)
 FRAMES = 100_000  # the synthetic frame budget
 EVAL_EVERY = 20_000
 DMC9 = ["quadruped_run", "hopper_hop", "walker_run", "quadruped_walk", "cheetah_run", "finger_turn_hard",
         "acrobot_swingup", "reacher_hard", "reach_duplo"]
 METAWORLD6 = ["hammer", "assembly", "disassemble", "stick-pull", "pick-place-wall", "hand-insert"]
+OFFLINE_ALGOS = ("td3bc", "cql", "iql", "bc", "dt")  # learners named by agent.learner (agent group drqv2)
+
+
+_DICT_KEYS = ("agent.objectives",)  # dict values, passed through the cache below as JSON text
+
+
+@functools.lru_cache(maxsize=None)
+def _composed(agent: str, task: str) -> DictConfig:
+    return compose([f"agent={agent}", f"task={task}"])
+
+
+@functools.lru_cache(maxsize=None)
+def _validated(algo: str, task: str, overrides: tuple[tuple[str, Any], ...]) -> DictConfig:
+    """The composed config of ``algo`` on ``task`` with dotted ``overrides`` applied in struct mode (a key the
+    schema lacks raises) and validated like any training config."""
+    agent = algo if algo in group_options("agent") else "drqv2"
+    cfg = copy.deepcopy(_composed(agent, task))
+    for key, value in (("agent.name", algo), *overrides):
+        OmegaConf.update(cfg, key, json.loads(value) if key in _DICT_KEYS else value, merge=False)
+    return validate(cfg)
+
+
+def run_config(algo: str, task: str, seed: int, results_root: Path, **overrides: Any) -> DictConfig:
+    """A training config built like ``repro train agent=... task=... key=value ...`` (dotted ``overrides``;
+    values None are left at the config's own value)."""
+    items = tuple(sorted((k, json.dumps(v) if k in _DICT_KEYS else v) for k, v in overrides.items()
+                         if v is not None))
+    cfg = copy.deepcopy(_validated(algo, task, items))
+    OmegaConf.update(cfg, "seed", seed, merge=False)
+    OmegaConf.update(cfg, "runtime.results_root", str(results_root), merge=False)
+    return cfg
+
+
+def resolved_for(cfg: DictConfig, resolved: dict[str, Any] | None = None) -> dict[str, Any]:
+    """resolved.json's values for ``cfg``, by the code training uses (rundir.resolved_values) on a learner
+    exposing what the Agent exposes: its action encoder's latent dim (the Agent's own default) and weights."""
+    rc = typed(cfg)
+    encoder = None
+    if rc.agent.action_encoder:
+        action_dim = get_task(rc.task.name).action_dim + rc.env.distracting_dims
+        latent = rc.agent.latent_action_dim or default_latent_action_dim(action_dim, rc.agent.latent_action_rounding)
+        encoder = SimpleNamespace(latent_dim=latent)
+    weights = {k: float(w) for k, w in rc.agent.objectives.items() if w}
+    learner = SimpleNamespace(action_encoder=encoder, weights=weights, resolved=resolved or {})
+    return rundir.resolved_values(rc, learner)
 
 
 def write_run(
@@ -33,13 +86,12 @@ def write_run(
     seed: int,
     final: float,
     variant: str = "base",
-    suite: str | None = None,
-    K: int = 3,
+    K: int | None = None,
     batch_size: int | None = None,
     latent_action_dim: int | None = None,
-    action_encoder: bool = True,
+    action_encoder: bool | None = None,
     objectives: dict[str, float] | None = None,
-    action_repeat: int = 2,
+    action_repeat: int | None = None,
     distracting_dims: int = 0,
     frames: int = FRAMES,
     eval_every: int = EVAL_EVERY,
@@ -50,50 +102,51 @@ def write_run(
     device: str = "cpu",
     success: bool = False,
     path: Path | None = None,
+    resolved: bool = True,
+    resolved_values: dict[str, Any] | None = None,
 ) -> Path:
-    """Write one run directory and return it."""
-    suite = suite or ("metaworld" if task in METAWORLD6 else "dmc")
-    if objectives is None:
-        objectives = {"taco": 1.0, "curl": 1.0, "reward": 1.0} if algo == "taco" else {}
-    if batch_size is None:
-        batch_size = 1024 if algo == "taco" else 256
-    run = path or root / experiment / algo / variant / task / f"seed_{seed}"
+    """Write one run directory and return it. Arguments left None keep the composed config's value; the
+    config goes through the training schema, and resolved.json through the code training uses
+    (``resolved=False`` leaves it out, like a run written before runs recorded it; ``resolved_values`` are
+    written instead, e.g. those of a real Agent)."""
+    offline = algo in OFFLINE_ALGOS
+    cfg = run_config(
+        algo, task, seed, root, experiment=experiment, variant=variant, **{
+            "agent.K": K, "agent.batch_size": batch_size, "agent.latent_action_dim": latent_action_dim,
+            "agent.action_encoder": action_encoder, "agent.objectives": objectives,
+            "env.action_repeat": action_repeat, "env.distracting_dims": distracting_dims, "train.frames": frames,
+            "agent.learner": algo if offline else None, "offline.dataset": dataset, "agent.cql.alpha": cql_alpha})
+    run = path or rundir.run_dir(cfg)
     run.mkdir(parents=True, exist_ok=True)
-    cfg: dict[str, Any] = {
-        "experiment": experiment,
-        "variant": variant,
-        "seed": seed,
-        "agent": {"name": algo, "K": K, "batch_size": batch_size, "latent_action_dim": latent_action_dim,
-                  "action_encoder": action_encoder, "objectives": objectives},
-        "task": {"name": task, "suite": suite},
-        "env": {"action_repeat": action_repeat, "distracting_dims": distracting_dims},
-        "train": {"frames": frames},
-        "runtime": {"results_root": str(root)},
-    }
-    if dataset is not None:
-        cfg["offline"] = {"dataset": dataset}
-    if cql_alpha is not None:
-        cfg["agent"]["cql_alpha"] = cql_alpha
-    (run / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    rundir.write_config(run, cfg)
+    if resolved:
+        learner_fields = {"dataset": dataset, "cql_alpha": cql_alpha} if offline else {}
+        rundir.write_resolved(run, resolved_values or resolved_for(cfg, learner_fields))
     meta = {"git_sha": "abc1234", "git_dirty": False, "versions": {"torch": "2.13.0"}, "host": "testhost",
             "device": device, "cpu": "Test CPU", "python": "3.11", "resumes": []}
-    (run / "meta.json").write_text(json.dumps(meta))
-    lines = [EVAL_HEADER]
+    (run / runformat.META).write_text(json.dumps(meta))
+    repeat = int(cfg.env.action_repeat)
+    lines = [header_line(runformat.EVAL_COLUMNS)]
     for i, frame in enumerate(range(0, frames + 1, eval_every)):
         value = final * frame / frames
-        if success:  # ``final`` is a success fraction; the return is arbitrary
-            lines.append(f"{frame},{frame // action_repeat},{i},{value * 1000:.6f},0.0,500,{value:.6f},10,{i}")
-        else:
-            lines.append(f"{frame},{frame // action_repeat},{i},{value:.6f},0.0,500,,10,{i}")
-    (run / "eval.csv").write_text("\n".join(lines) + "\n")
-    train = [TRAIN_HEADER]
+        lines.append(format_row(runformat.EVAL_COLUMNS, {
+            "frame": frame, "step": frame // repeat, "episode": i,
+            # Meta-world: ``final`` is a success fraction and the return is arbitrary
+            "episode_reward": value * 1000 if success else value, "episode_reward_std": 0.0,
+            "episode_length": 500, "success": value if success else None, "eval_episodes": 10,
+            "total_time": float(i)}))
+    (run / runformat.EVAL).write_text("".join(lines))
+    columns = runformat.train_columns(METRICS)
+    train = [header_line(columns)]
     for i in range(1, 4):
-        loss = "" if i == 1 else "0.5"
-        train.append(f"{i * 1000},{i * 500},{i},1.0,500,,{i * 500},0.2,{fps if i > 1 else fps * 10},{i},"
-                     f"{loss},{loss},{loss},{loss},{loss},{loss},{loss}")
-    (run / "train.csv").write_text("\n".join(train) + "\n")
+        loss = None if i == 1 else 0.5
+        train.append(format_row(columns, {
+            "frame": i * 1000, "step": i * 500, "episode": i, "episode_reward": 1.0, "episode_length": 500,
+            "success": None, "buffer_size": i * 500, "stddev": 0.2, "fps": fps if i > 1 else fps * 10,
+            "total_time": float(i), **{m: loss for m in METRICS}}))
+    (run / runformat.TRAIN).write_text("".join(train))
     if done:
-        (run / "DONE").write_text(json.dumps({"frame": frames}))
+        rundir.write_done(run, {"frame": frames})
     return run
 
 
@@ -106,7 +159,7 @@ def write_encoder_checkpoint(run: Path, true_dim: int = 6, distracting: int = 20
     w0[:, true_dim:] = 0.0
     state = {"step.0.weight": w0, "step.0.bias": torch.zeros(64), "step.2.weight": torch.randn(latent, 64, generator=g),
              "step.2.bias": torch.zeros(latent)}
-    torch.save({"agent": {"action_encoder": state}}, run / "checkpoint.pt")
+    torch.save({"agent": {"action_encoder": state}}, run / runformat.CHECKPOINT)
 
 
 # Per-seed offsets: seeds 0, 1, 2 score final - 10, final, final + 10 (mean final, std 10).
@@ -171,7 +224,8 @@ def full_coverage_root(root: Path, seeds: int = 2) -> Path:
                 if algo in ("td3bc", "cql"):
                     _seeds(root, seeds, experiment="offline", algo=algo, task=task, dataset=ds, variant=f"{ds}_taco",
                            objectives={"taco": 1.0}, final=(f + 0.05) * top, cql_alpha=0.5 if algo == "cql" else None)
-    tsne = write_run(root, experiment="tsne", algo="taco", task="cheetah_run", seed=0, distracting_dims=20, final=500)
+    tsne = write_run(root, experiment="tsne", algo="taco", task="cheetah_run", seed=0, distracting_dims=20, final=500,
+                     latent_action_dim=8)
     write_encoder_checkpoint(tsne)
     for algo, b, fps in (("taco", 1024, 10.0), ("taco", 512, 18.0), ("taco", 256, 26.0), ("drqv2", 256, 36.0)):
         write_run(root, experiment="speed", algo=algo, task="quadruped_run", seed=0, batch_size=b, fps=fps,

@@ -12,6 +12,7 @@ from typing import Sequence
 from repro.launch import lock
 from repro.launch.slurm_query import FAILED, QUEUED, job_states
 from repro.launch.state import read_record, read_state
+from repro.runformat import EVAL, STATE_DONE, STATE_PARTIAL, TRAIN, run_state
 
 STATUSES = ("done", "running", "queued", "failed", "pending")
 
@@ -55,16 +56,14 @@ def _num(value: str | None) -> float | None:
 
 def progress(run_dir: Path) -> tuple[int | None, float | None]:
     """(last frame seen in train.csv or eval.csv, last evaluation return)."""
-    ev = last_row(run_dir / "eval.csv")
-    tr = last_row(run_dir / "train.csv")
+    ev = last_row(run_dir / EVAL)
+    tr = last_row(run_dir / TRAIN)
     frames = [f for f in (_num(ev and ev.get("frame")), _num(tr and tr.get("frame"))) if f is not None]
     return (int(max(frames)) if frames else None, _num(ev and ev.get("episode_reward")))
 
 
 def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
                slurm_states: dict[str, str] | None) -> RunStatus:
-    from repro.rundir import run_state
-
     frame, ret = progress(run_dir)
     state = run_state(run_dir)
     record = read_record(sdir, key)
@@ -77,14 +76,14 @@ def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
     def make(status: str, detail: str) -> RunStatus:
         return RunStatus(key, run_dir, status, frame, ret, job, detail)
 
-    if state == "done":
+    if state == STATE_DONE:
         return make("done", "")
     if owner is not None and not lock.is_stale(owner, slurm_states):
         if owner.job_id:
             sstate = (slurm_states or {}).get(owner.job_id, "UNKNOWN")
             status = "queued" if sstate in QUEUED else "running"
             shown = "" if sstate in ("PENDING", "RUNNING") else f"SLURM {sstate}"
-            return make(status, ", ".join(x for x in (shown, "partial" if state == "partial" else "") if x))
+            return make(status, ", ".join(x for x in (shown, "partial" if state == STATE_PARTIAL else "") if x))
         return make("running", f"pid {owner.child_pid or owner.pid} on {owner.host}")
     if record is not None:
         sstate = (slurm_states or {}).get(record.job_id or "", "")
@@ -93,7 +92,7 @@ def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
             failed = make("failed", why)
             failed.log = record.stderr or record.log
             return failed
-    return make("pending", "partial: resumes from checkpoint" if state == "partial" else "not started")
+    return make("pending", "partial: resumes from checkpoint" if state == STATE_PARTIAL else "not started")
 
 
 def sweep_runs(sdir: Path) -> dict[str, Path]:

@@ -1,0 +1,169 @@
+"""The run directory format (docs/run-format.md), defined once.
+
+File names, CSV columns per file, run states, the config keys that identify a run and the resolved
+values a run records about itself. Training (logger, rundir, api), sweeps (launch/status), analysis
+(analysis/load) and the test fixtures all read these names from here. This module only names things
+and reads small files; it imports nothing heavier than the standard library.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+# ---------------------------------------------------------------- file names
+CONFIG = "config.yaml"  # the resolved config, identity of the run (atomic, at start)
+META = "meta.json"  # provenance: git sha, versions, host, device, command, resumes (atomic)
+RESOLVED = "resolved.json"  # values the learner actually used (atomic, at start): RESOLVED_FIELDS
+EVAL = "eval.csv"  # one row per evaluation: EVAL_COLUMNS
+TRAIN = "train.csv"  # one row per training episode: TRAIN_COLUMNS + the learner's metric names
+CHECKPOINT = "checkpoint.pt"  # state for resume (atomic replace)
+DONE = "DONE"  # written last: the run reached its budget
+FRAMES = "frames.npz"  # the final evaluation's first episode (trajectory figures)
+REPLAY = "replay"  # folder of replay episodes, so that a resume does not rewrite the buffer
+FILES = (CONFIG, META, RESOLVED, EVAL, TRAIN, CHECKPOINT, DONE, FRAMES, REPLAY)
+
+# ---------------------------------------------------------------- CSV columns
+EVAL_COLUMNS = ("frame", "step", "episode", "episode_reward", "episode_reward_std", "episode_length", "success",
+                "eval_episodes", "total_time")
+TRAIN_COLUMNS = ("frame", "step", "episode", "episode_reward", "episode_length", "success", "buffer_size",
+                 "stddev", "fps", "total_time")  # followed by the learner's metric names
+WALLCLOCK_COLUMNS = ("total_time", "fps")  # every other column is deterministic on CPU
+EVAL_REQUIRED = ("frame", "step", "episode", "episode_reward")  # a readable eval.csv has at least these
+TRAIN_REQUIRED = ("frame", "fps")  # a readable train.csv has at least these
+
+
+def train_columns(metric_names: Sequence[str]) -> list[str]:
+    """The header of train.csv for a learner with these metric names."""
+    return [*TRAIN_COLUMNS, *metric_names]
+
+
+# ---------------------------------------------------------------- run states
+STATE_DONE, STATE_PARTIAL, STATE_ABSENT = "done", "partial", "absent"
+RUN_STATES = (STATE_DONE, STATE_PARTIAL, STATE_ABSENT)
+
+
+def run_state(path: str | Path) -> str:
+    """``done`` (DONE exists), ``partial`` (a config or checkpoint but no DONE: resumable) or ``absent``."""
+    path = Path(path)
+    if (path / DONE).exists():
+        return STATE_DONE
+    if (path / CHECKPOINT).exists() or (path / CONFIG).exists():
+        return STATE_PARTIAL
+    return STATE_ABSENT
+
+
+# ---------------------------------------------------------------- identity
+# The run directory is {runtime.results_root}/{experiment}/{agent.name}/{variant}/{task.name}/seed_{seed}.
+PATH_KEYS = ("experiment", "agent.name", "variant", "task.name", "seed")
+
+
+def run_path(results_root: str | Path, experiment: str, algo: str, variant: str, task: str, seed: int) -> Path:
+    """The run directory of these identity values (no timestamps: the same command finds the same folder)."""
+    return Path(results_root) / str(experiment) / str(algo) / str(variant) / str(task) / f"seed_{seed}"
+
+
+# Identity columns of analysis tables read from config.yaml: column -> dotted config key.
+IDENTITY_KEYS: dict[str, str] = {
+    "experiment": "experiment",
+    "variant": "variant",
+    "algo": "agent.name",
+    "task": "task.name",
+    "suite": "task.suite",
+    "seed": "seed",
+    "distracting_dims": "env.distracting_dims",
+    "train_frames": "train.frames",
+}
+
+# ---------------------------------------------------------------- resolved values (resolved.json)
+RESOLVED_FORMAT = 1
+# Values a run records about what it actually used; analysis reads them and never recomputes them.
+#   learner            agent.learner that trained the run
+#   K, batch_size, nstep, action_repeat   the values in effect
+#   action_encoder     whether the learner has an action encoder
+#   latent_action_dim  size of one latent action of that encoder (None without one)
+#   objectives         active auxiliary objectives -> weight (zero weights left out)
+#   dataset            offline dataset the learner trained from (None for online learners)
+#   cql_alpha          CQL's alpha actually used (None unless the learner uses one)
+RESOLVED_FIELDS = ("learner", "K", "batch_size", "action_repeat", "nstep", "action_encoder", "latent_action_dim",
+                   "objectives", "dataset", "cql_alpha")
+# Where a run written before resolved.json existed keeps each value in its config.yaml. Analysis falls back
+# to these (and marks the run) instead of recomputing anything from a formula.
+RESOLVED_CONFIG_KEYS: dict[str, str] = {
+    "learner": "agent.learner",
+    "K": "agent.K",
+    "batch_size": "agent.batch_size",
+    "action_repeat": "env.action_repeat",
+    "nstep": "agent.nstep",
+    "action_encoder": "agent.action_encoder",
+    "latent_action_dim": "agent.latent_action_dim",
+    "objectives": "agent.objectives",
+    "dataset": "offline.dataset",
+    "cql_alpha": "agent.cql.alpha",
+}
+_INT_FIELDS = ("K", "batch_size", "action_repeat", "nstep")
+
+
+class ResolvedError(ValueError):
+    """A resolved.json (or the values meant for one) does not follow the format."""
+
+
+def check_resolved(values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` as a plain dict after checking every RESOLVED_FIELDS entry; extra keys are kept as they are."""
+    missing = [k for k in RESOLVED_FIELDS if k not in values]
+    if missing:
+        raise ResolvedError(f"missing field(s) {', '.join(missing)}")
+    out = dict(values)
+    for key in _INT_FIELDS:
+        if not _is_int(out[key]) or out[key] < 1:
+            raise ResolvedError(f"{key} must be a positive integer (got {out[key]!r})")
+    if out["learner"] is None or not isinstance(out["learner"], str) or not out["learner"]:
+        raise ResolvedError(f"learner must be a name (got {out['learner']!r})")
+    if not isinstance(out["action_encoder"], bool):
+        raise ResolvedError(f"action_encoder must be true or false (got {out['action_encoder']!r})")
+    dim = out["latent_action_dim"]
+    if out["action_encoder"] != (dim is not None) or (dim is not None and (not _is_int(dim) or dim < 1)):
+        raise ResolvedError(f"latent_action_dim must be a positive integer with an action encoder and null "
+                            f"without one (action_encoder {out['action_encoder']}, got {dim!r})")
+    objectives = out["objectives"]
+    if not isinstance(objectives, Mapping) or not all(
+            isinstance(k, str) and _is_number(w) and w != 0 for k, w in objectives.items()):
+        raise ResolvedError(f"objectives must map names to non-zero weights (got {objectives!r})")
+    out["objectives"] = {str(k): float(w) for k, w in objectives.items()}
+    if out["dataset"] is not None and not isinstance(out["dataset"], str):
+        raise ResolvedError(f"dataset must be a name or null (got {out['dataset']!r})")
+    if out["cql_alpha"] is not None and not _is_number(out["cql_alpha"]):
+        raise ResolvedError(f"cql_alpha must be a number or null (got {out['cql_alpha']!r})")
+    return out
+
+
+def resolved_json(values: Mapping[str, Any]) -> str:
+    """The text of resolved.json for ``values`` (checked), with the format number."""
+    return json.dumps({"format": RESOLVED_FORMAT, **check_resolved(values)}, indent=2, sort_keys=False) + "\n"
+
+
+def read_resolved(path: str | Path) -> dict[str, Any]:
+    """The resolved values of the run directory ``path``; FileNotFoundError if it has none, ResolvedError if
+    the file is malformed."""
+    file = Path(path) / RESOLVED
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ResolvedError(f"not JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise ResolvedError("not a JSON object")
+    if data.get("format") != RESOLVED_FORMAT:
+        raise ResolvedError(f"format {data.get('format')!r}, expected {RESOLVED_FORMAT}")
+    data.pop("format")
+    return check_resolved(data)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
