@@ -181,7 +181,7 @@ def register(app: typer.Typer) -> None:
             else:
                 known = set(specs.sweep_names()) | set(launched)
                 if name not in known:
-                    raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, known))
+                    raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, sorted(known)))
                 _console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
                 return
             for n in names:
