@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from repro.cli import app
+from repro_app.cli import app
 from repro.envs import TASKS
 
 runner = CliRunner()

@@ -34,8 +34,7 @@ def train_command(overrides: tuple[str, ...] | list[str]) -> list[str]:
     script = Path(sys.executable).with_name("repro")
     if script.exists():
         return [str(script), "train", *overrides]
-    return [sys.executable, "-c", "import sys; from repro.cli import main; sys.argv[0] = 'repro'; main()",
-            "train", *overrides]
+    return [sys.executable, "-m", "repro", "train", *overrides]
 
 
 def move_aside(planned: PlannedRun) -> Path:
