@@ -30,10 +30,7 @@ class Claim:
 
 
 def train_command(overrides: tuple[str, ...] | list[str]) -> list[str]:
-    """``repro train OVERRIDES`` with the interpreter running this process."""
-    script = Path(sys.executable).with_name("repro")
-    if script.exists():
-        return [str(script), "train", *overrides]
+    """``repro train OVERRIDES`` with the interpreter (and import path) running this process."""
     return [sys.executable, "-m", "repro", "train", *overrides]
 
 
