@@ -167,7 +167,8 @@ def register(app: typer.Typer) -> None:
     def status_cmd(
         name: Optional[str] = typer.Argument(None, help="Sweep name; all launched sweeps when omitted."),
         results_root: Optional[Path] = typer.Option(
-            None, *RESULTS_FLAGS, help="Results root the sweeps ran under (default: the config's runtime.results_root)."),
+            None, *RESULTS_FLAGS,
+            help="Results root the sweeps ran under (default: the config's runtime.results_root)."),
     ) -> None:
         """Per sweep: done / running / queued / failed / pending per run, last frame and eval return."""
         from repro.launch.state import state_dir
