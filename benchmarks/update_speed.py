@@ -6,7 +6,7 @@ printed seconds with the upstream figures in ../shared/docs/upstream.md (TACO B1
 """
 
 from repro.bench import register  # noqa: F401  (the implementation lives in the package)
-from repro.cli import app
+from repro_app.cli import app
 
 if __name__ == "__main__":
     import sys

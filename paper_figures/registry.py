@@ -1,10 +1,13 @@
-"""The registry of paper artifacts (tables T1-T6, figures F1, F3-F13), keyed by id."""
+"""The registry of paper artifacts (tables T1-T6, figures F1, F3-F13), keyed by id.
+
+Each artifact module registers itself with :func:`register`; :mod:`paper_figures.catalog` imports them
+all and looks artifacts up, so this module imports none of them.
+"""
 
 from __future__ import annotations
 
-import importlib
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,45 +47,12 @@ class Artifact:
 
 REGISTRY: dict[str, Artifact] = {}
 
-# The modules that register artifacts (one per artifact; F7a and F7b are two).
-ARTIFACT_MODULES = (
-    "t1_online",
-    "t2_repr_objectives",
-    "t3_offline",
-    "t4_speed",
-    "t5_speed_taco",
-    "t6_cql_alpha",
-    "f1_average",
-    "f3_action_repr",
-    "f4_curves_dmc",
-    "f5_curves_metaworld",
-    "f6_tsne",
-    "f7a_batch_size",
-    "f7b_objectives",
-    "f8_horizon",
-    "f9_action_repeat",
-    "f10_action_dim",
-    "f11_seeds",
-    "f12_manipulator",
-    "f13_frames",
-)
-
-
-def load_artifacts() -> dict[str, Artifact]:
-    """Import every artifact module (idempotent) so that :data:`REGISTRY` is complete."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    for name in ARTIFACT_MODULES:
-        importlib.import_module(f"paper_figures.{name}")
-    return REGISTRY
-
 
 class UnknownArtifactError(KeyError):
     """An artifact id that is not registered."""
 
     def __str__(self) -> str:
-        return f"unknown artifact {self.args[0]!r} (known: {', '.join(ordered_ids())})"
+        return f"unknown artifact {self.args[0]!r} (known: {', '.join(sorted_ids())})"
 
 
 def register(artifact_id: str, title: str, kind: str, paper_label: str):
@@ -104,23 +74,6 @@ def _sort_key(artifact_id: str) -> tuple:
     return ({"T": 0, "F": 1}.get(m.group(1), 2), int(m.group(2)), m.group(3))
 
 
-def ordered_ids() -> list[str]:
-    load_artifacts()
+def sorted_ids() -> list[str]:
+    """The registered ids, tables first, in paper order (``paper_figures.catalog`` registers them all)."""
     return sorted(REGISTRY, key=_sort_key)
-
-
-def resolve(ids: Iterable[str]) -> list[Artifact]:
-    """Artifacts for ids (case-insensitive); ``F7`` means ``F7a`` and ``F7b``. Unknown ids raise."""
-    load_artifacts()
-    by_lower = {k.lower(): k for k in REGISTRY}
-    out: list[str] = []
-    for raw in ids:
-        key = raw.strip().lower()
-        if key in by_lower:
-            matches = [by_lower[key]]
-        else:
-            matches = [k for k in ordered_ids() if re.fullmatch(re.escape(key) + r"[a-z]", k.lower())]
-        if not matches:
-            raise UnknownArtifactError(raw)
-        out += [m for m in matches if m not in out]
-    return [REGISTRY[k] for k in out]

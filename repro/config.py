@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import difflib
 import re
+from collections.abc import Iterable
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -30,9 +31,27 @@ def group_options(group: str) -> list[str]:
     return sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
 
 
-def _close(name: str, options: list[str]) -> str:
+def config_groups() -> dict[str, list[str]]:
+    """Every config group of the packaged config -> its option names."""
+    return {d.name: group_options(d.name) for d in sorted(CONF_DIR.iterdir()) if d.is_dir()}
+
+
+def close_matches(name: str, options: Iterable[str]) -> str:
+    """`` Did you mean: a, b?`` or `` Known: ...`` (options in the order given) for an error line; empty when
+    there are no options."""
+    options = list(dict.fromkeys(options))
     matches = difflib.get_close_matches(name, options, n=3, cutoff=0.5)
-    return f" Did you mean: {', '.join(matches)}?" if matches else f" Known: {', '.join(options)}."
+    if matches:
+        return f" Did you mean: {', '.join(matches)}?"
+    return f" Known: {', '.join(options)}." if options else ""
+
+
+def check_option(group: str, value: str, where: str = "") -> None:
+    """Raise ConfigError when ``value`` is not an option of config ``group``; ``where`` is added after the value
+    (e.g. `` in --set task=x``)."""
+    options = group_options(group)
+    if value not in options:
+        raise ConfigError(f"unknown {group} '{value}'{where}." + close_matches(value, options))
 
 
 def _check_group_overrides(overrides: list[str]) -> None:
@@ -42,9 +61,7 @@ def _check_group_overrides(overrides: list[str]) -> None:
             raise ConfigError(f"override '{ov}' is not key=value.")
         key = key.lstrip("+~")
         if key in ("agent", "task", "profile"):
-            options = group_options(key)
-            if value not in options:
-                raise ConfigError(f"unknown {key} '{value}'." + _close(value, options))
+            check_option(key, value)
 
 
 def _check_keys(overrides: list[str], cfg: DictConfig) -> None:
@@ -56,7 +73,7 @@ def _check_keys(overrides: list[str], cfg: DictConfig) -> None:
             parent, _, leaf = key.rpartition(".")
             node = OmegaConf.select(cfg, parent) if parent else cfg
             siblings = list(node.keys()) if isinstance(node, DictConfig) else []
-            raise ConfigError(f"unknown config key '{key}'." + _close(leaf, [str(s) for s in siblings]))
+            raise ConfigError(f"unknown config key '{key}'." + close_matches(leaf, [str(s) for s in siblings]))
 
 
 def compose(overrides: list[str] | tuple[str, ...] = ()) -> DictConfig:
@@ -128,7 +145,7 @@ def validate(raw: DictConfig) -> DictConfig:
 
     for name in cfg.agent.objectives:
         if name not in OBJECTIVES:
-            raise ConfigError(f"unknown objective '{name}'." + _close(str(name), sorted(OBJECTIVES)))
+            raise ConfigError(f"unknown objective '{name}'." + close_matches(str(name), sorted(OBJECTIVES)))
     return cfg
 
 

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from analysis import select
 from analysis.audit import mismatches, run_audit
 from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims
-from analysis.cli import register
+from repro_app.analysis_cli import register
 from analysis.context import Context
 from analysis.load import load_results
 from analysis.scores import best_online_returns, final_scores, learning_curves, normalize_offline

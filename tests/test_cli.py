@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from repro.cli import app
+from repro_app.cli import app
 from repro.envs import TASKS
 
 runner = CliRunner()
@@ -71,3 +71,29 @@ def test_metaworld_tiny_run_logs_success(tmp_path):
     assert ev["success"].between(0, 1).all() and ev["success"].notna().all()
     tr = pd.read_csv(run / "train.csv")
     assert tr["success"].notna().all()
+
+
+def test_sweep_results_flag_is_the_results_root(tmp_path, monkeypatch):
+    """`repro sweep --results ROOT` (like `repro status`): the plan and the runs live under ROOT."""
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(app, ["sweep", "tiny", "--dry-run", "--results", "my runs"], terminal_width=240)
+    assert result.exit_code == 0, result.output
+    assert f"Results root: {tmp_path / 'my runs'}" in result.output.replace("\n", "")
+    assert "absent" in result.output and not (tmp_path / "my runs").exists()
+
+    both = runner.invoke(app, ["sweep", "tiny", "--dry-run", "-r", "a", "--set", "runtime.results_root=b"])
+    assert both.exit_code == 2 and "not both" in both.output
+
+
+def test_sweep_short_results_flag_launches_under_root(tmp_path):
+    from test_sweeps import write_sweep  # the launcher tests' one-run tiny sweep file
+
+    sweep = write_sweep(tmp_path, "res", ["reacher_hard"], {"base": []}, 1)
+    root = tmp_path / "elsewhere"
+    result = runner.invoke(app, ["sweep", str(sweep), "-r", str(root), "--max-parallel", "1"])
+    assert result.exit_code == 0, result.output
+    run_dir = root / "res/taco/base/reacher_hard/seed_1"
+    assert (run_dir / "DONE").exists() and (run_dir / "eval.csv").exists()
+    assert (root / ".sweeps/res/state.json").exists()
+    status = runner.invoke(app, ["status", "res", "-r", str(root)], terminal_width=240)
+    assert status.exit_code == 0 and "1 done" in status.output, status.output

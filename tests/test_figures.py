@@ -15,10 +15,10 @@ from typer.testing import CliRunner
 
 import paper_figures
 from analysis.claims import REFUTED, SUPPORTED
-from analysis.cli import register
+from repro_app.analysis_cli import register
 from analysis.context import Context
 from analysis.load import load_results
-from analysis.report import build_report
+from repro_app.report import build_report
 from analysis.tsne import build_step_mlp, find_action_encoder_state, run_tsne
 
 REPS = 200

@@ -16,6 +16,8 @@ from rich.table import Table
 from repro.launch import spec as specs
 from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 
+# The same flags as `repro status`, `figures` and `report`.
+RESULTS_FLAGS = ("--results-root", "--results", "-r")
 STATE_STYLE = {"done": "green", "partial": "yellow", "absent": "dim", "mismatch": "red", "running": "cyan",
                "queued": "blue", "failed": "red", "pending": "dim"}
 
@@ -110,6 +112,9 @@ def register(app: typer.Typer) -> None:
         seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Use seeds 1..N."),
         frames: Optional[int] = typer.Option(None, "--frames", min=1, help="Frame budget of every run."),
         sets: Optional[List[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
+        results_root: Optional[Path] = typer.Option(
+            None, *RESULTS_FLAGS, help="Results root to write the runs under (the same as --set "
+                                       "runtime.results_root=ROOT; default: the config's runtime.results_root)."),
         dry_run: bool = typer.Option(False, "--dry-run", help="Print the grid (run dir, overrides, state); launch nothing."),
         launcher: Launcher = typer.Option(Launcher.local, "--launcher", help="Where to run."),
         max_parallel: Optional[int] = typer.Option(None, "--max-parallel", min=1,
@@ -126,7 +131,7 @@ def register(app: typer.Typer) -> None:
         try:
             spec = specs.load(name)
             task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
-            sel = Selection(tasks=task_list, seeds=seeds, frames=frames, sets=tuple(sets or ()))
+            sel = Selection(tasks=task_list, seeds=seeds, frames=frames, sets=_with_results_root(sets, results_root))
             runs = specs.expand(spec, sel)
             planned = specs.plan(runs)
             root = specs.results_root_of(planned)
@@ -162,7 +167,8 @@ def register(app: typer.Typer) -> None:
     def status_cmd(
         name: Optional[str] = typer.Argument(None, help="Sweep name; all launched sweeps when omitted."),
         results_root: Optional[Path] = typer.Option(
-            None, "--results-root", "--results", "-r", help="Results root the sweeps ran under (default: the config's runtime.results_root)."),
+            None, *RESULTS_FLAGS,
+            help="Results root the sweeps ran under (default: the config's runtime.results_root)."),
     ) -> None:
         """Per sweep: done / running / queued / failed / pending per run, last frame and eval return."""
         from repro.launch.state import state_dir
@@ -181,13 +187,23 @@ def register(app: typer.Typer) -> None:
             else:
                 known = set(specs.sweep_names()) | set(launched)
                 if name not in known:
-                    raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, known))
+                    raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, sorted(known)))
                 _console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
                 return
             for n in names:
                 _print_status(n, root, state_dir(root, n))
         except SweepError as exc:
             raise _fail(str(exc)) from None
+
+
+def _with_results_root(sets: Optional[List[str]], results_root: Optional[Path]) -> tuple[str, ...]:
+    """The --set overrides, plus ``runtime.results_root`` when --results is given (not both)."""
+    out = tuple(sets or ())
+    if results_root is None:
+        return out
+    if any(specs.override_key(s) == "runtime.results_root" for s in out):
+        raise SweepError("give the results root once: --results ROOT or --set runtime.results_root=ROOT, not both.")
+    return (*out, f"runtime.results_root={specs.hydra_quote(str(results_root.expanduser()))}")
 
 
 def _default_results_root() -> Path:

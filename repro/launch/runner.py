@@ -30,12 +30,8 @@ class Claim:
 
 
 def train_command(overrides: tuple[str, ...] | list[str]) -> list[str]:
-    """``repro train OVERRIDES`` with the interpreter running this process."""
-    script = Path(sys.executable).with_name("repro")
-    if script.exists():
-        return [str(script), "train", *overrides]
-    return [sys.executable, "-c", "import sys; from repro.cli import main; sys.argv[0] = 'repro'; main()",
-            "train", *overrides]
+    """``repro train OVERRIDES`` with the interpreter (and import path) running this process."""
+    return [sys.executable, "-m", "repro", "train", *overrides]
 
 
 def move_aside(planned: PlannedRun) -> Path:

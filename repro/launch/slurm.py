@@ -89,7 +89,7 @@ def load_cluster_config(path: Path | None) -> ClusterConfig:
     known = [f.name for f in fields(ClusterConfig)]
     for key in data:
         if key not in known:
-            raise SweepError(f"cluster config {path}: unknown field '{key}'." + close_matches(str(key), known))
+            raise SweepError(f"cluster config {path}: unknown field '{key}'." + close_matches(str(key), sorted(known)))
     try:
         return ClusterConfig(**data)
     except TypeError as exc:

@@ -94,7 +94,8 @@ def register(app: typer.Typer) -> None:
         render_envs: bool = RENDER_OPT,
     ) -> None:
         """Render the paper's tables (CSV, Markdown, LaTeX) and figures (PNG, PDF) from the runs."""
-        from paper_figures.registry import REGISTRY, UnknownArtifactError, ordered_ids, resolve
+        from paper_figures.catalog import ordered_ids, resolve
+        from paper_figures.registry import REGISTRY, UnknownArtifactError
         from paper_figures.render import render_artifacts
 
         if list_:
@@ -169,7 +170,7 @@ def register(app: typer.Typer) -> None:
         render_envs: bool = RENDER_OPT,
     ) -> None:
         """Render everything and write REPORT.md and REPORT.html (tables, figures, claims, audit, provenance)."""
-        from analysis.report import build_report
+        from repro_app.report import build_report
 
         ctx = make_context(results, out, frames, reps, seed, min_seeds, experiment_map, tsne_n, render_envs)
         summarize_load(ctx)

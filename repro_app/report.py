@@ -17,6 +17,8 @@ from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims, write_
 from analysis.context import Context
 from analysis.io import atomic_write_text
 from analysis.tables import to_markdown
+from paper_figures.catalog import ordered_ids, resolve
+from paper_figures.render import render_artifacts
 
 PACKAGES = ("numpy", "pandas", "scipy", "rliable", "arch", "scikit-learn", "matplotlib", "seaborn", "torch", "taco-repro")
 
@@ -120,9 +122,6 @@ def markdown_to_html(md: str, title: str = "TACO reproduction report") -> str:
 
 def build_report(ctx: Context, progress: Callable[[str], None] | None = None) -> tuple[Path, Path]:
     """Render every artifact, the claims and the audit into ``ctx.out_dir`` and write REPORT.md/.html."""
-    from paper_figures.registry import ordered_ids, resolve
-    from paper_figures.render import render_artifacts
-
     artifacts = render_artifacts(ctx, resolve(ordered_ids()), progress)
     verdicts = evaluate_claims(ctx)
     write_claims(ctx, verdicts)

@@ -1,4 +1,5 @@
-"""The `repro` command line: train one run, list tasks, benchmark; sweeps and analysis register theirs."""
+"""The `repro` command line: train one run and list tasks here; sweeps, benchmark, analysis and the main job
+add their commands through their ``register(app)``."""
 
 from __future__ import annotations
 
@@ -8,7 +9,10 @@ from typing import Optional
 import typer
 from omegaconf import OmegaConf
 
+from repro import bench
+from repro.launch import cli as launch_cli
 from repro.offline.cli import dataset_app
+from repro_app import analysis_cli, reproduce
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -99,18 +103,8 @@ def _console():
     return Console(width=max(120, shutil.get_terminal_size((120, 24)).columns))
 
 
-def _register_plugins() -> None:
-    for module in ("repro.launch.cli", "analysis.cli", "repro.bench", "repro.reproduce"):
-        try:
-            mod = __import__(module, fromlist=["register"])
-        except ModuleNotFoundError as exc:
-            if exc.name and module.startswith(exc.name):
-                continue
-            raise
-        mod.register(app)
-
-
-_register_plugins()
+for _commands in (launch_cli, analysis_cli, bench, reproduce):
+    _commands.register(app)
 app.add_typer(dataset_app, name="dataset")
 
 

@@ -27,7 +27,7 @@ def register(app: typer.Typer) -> None:
                                                    help="Let F13 render random-action frames for tasks without runs.")):
         """Train the tiny sweep locally, then build every table, figure, claim and the report from it."""
         t0 = time.time()
-        cmd = [sys.executable, "-m", "repro", "sweep", sweep, "--set", f"runtime.results_root={results_root}"]
+        cmd = [sys.executable, "-m", "repro", "sweep", sweep, "--results", str(results_root)]
         if max_parallel:
             cmd += ["--max-parallel", str(max_parallel)]
         typer.echo(f"[1/2] training: {' '.join(cmd[2:])}")
@@ -40,7 +40,7 @@ def register(app: typer.Typer) -> None:
 
         from analysis.context import Context
         from analysis.load import load_results
-        from analysis.report import build_report
+        from repro_app.report import build_report
 
         typer.echo(f"\n[2/2] report from {results_root} (budget: the runs' own frame budget)")
         results = load_results(results_root)

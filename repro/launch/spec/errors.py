@@ -1,0 +1,7 @@
+"""The one exception of sweep handling."""
+
+from __future__ import annotations
+
+
+class SweepError(ValueError):
+    """A user-facing problem with a sweep, explained in one line (the CLI exits 2)."""

@@ -1,0 +1,94 @@
+"""A sweep's grid: the command line's narrowing (Selection) and one Run per (agent, variant, task, seed)."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+from repro.launch.spec.errors import SweepError
+from repro.launch.spec.groups import check_sets, check_tasks, unavailable_reason
+from repro.launch.spec.overrides import merge_overrides, override_key, override_value
+from repro.launch.spec.sweepfile import SweepSpec
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Command-line choices that narrow or change a sweep's grid."""
+
+    tasks: tuple[str, ...] | None = None
+    seeds: int | None = None
+    frames: int | None = None
+    sets: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Run:
+    """One cell of a sweep's grid, before its config is composed."""
+
+    agent: str
+    variant: str
+    task: str
+    seed: int
+    overrides: tuple[str, ...]
+
+    @property
+    def cell(self) -> tuple[str, str, str]:
+        return (self.agent, self.variant, self.task)
+
+
+def excluded(spec: SweepSpec, sel: Selection | None = None) -> list[tuple[str, str, str, str]]:
+    """(agent, variant, task, reason) of every cell the sweep leaves out."""
+    tasks = tuple(sel.tasks) if sel and sel.tasks else spec.tasks
+    cells = []
+    for vname, vovers in spec.variants.items():
+        named = {override_key(o): override_value(o) for o in vovers}
+        variant = named.get("variant", vname)
+        for agent in ((named["agent"],) if "agent" in named else spec.agents):
+            for task in tasks:
+                for ex in spec.exclude:
+                    if ex.matches(agent, variant, task):
+                        cells.append((agent, variant, task, ex.reason))
+                        break
+    return cells
+
+
+def expand(spec: SweepSpec, sel: Selection = Selection()) -> list[Run]:
+    """The sweep's grid: one Run per (agent, variant, task, seed), in a stable order.
+
+    Override order (a later one wins for the same key): identity (experiment, agent, task, seed,
+    variant), the sweep's budget and eval schedule, ``common``, the variant's overrides, ``--set``,
+    ``--frames``. ``agent=`` or ``variant=`` inside a variant replace the defaults. When ``--set``
+    or ``common`` selects a ``profile``, the sweep's budget is left to the profile (``--frames`` still
+    applies).
+    """
+    reason = unavailable_reason(spec)
+    if reason:
+        raise SweepError(reason)
+    tasks = tuple(sel.tasks) if sel.tasks else spec.tasks
+    check_tasks(tasks)
+    check_sets(sel.sets)
+    seeds = tuple(range(1, sel.seeds + 1)) if sel.seeds else spec.seeds
+    uses_profile = any(override_key(o) == "profile" for o in itertools.chain(spec.common, sel.sets))
+    budget = () if uses_profile else spec.budget_overrides()
+    extra = (f"train.frames={sel.frames}",) if sel.frames else ()
+    runs: list[Run] = []
+    seen: dict[tuple[str, str, str, int], str] = {}
+    for vname, vovers in spec.variants.items():
+        named = {override_key(o): override_value(o) for o in vovers}
+        agents = (named["agent"],) if "agent" in named else spec.agents
+        variant = named.get("variant", vname)
+        for agent in agents:
+            for task in tasks:
+                if any(ex.matches(agent, variant, task) for ex in spec.exclude):
+                    continue
+                for seed in seeds:
+                    identity = (f"experiment={spec.experiment}", f"agent={agent}", f"task={task}",
+                                f"seed={seed}", f"variant={variant}")
+                    overrides = merge_overrides(identity, budget, spec.common, vovers, sel.sets, extra)
+                    where = (agent, variant, task, seed)
+                    if where in seen:
+                        raise SweepError(f"{spec.path}: variants '{seen[where]}' and '{vname}' give the same "
+                                         f"run directory ({agent}/{variant}).")
+                    seen[where] = vname
+                    runs.append(Run(agent, variant, task, seed, overrides))
+    return runs

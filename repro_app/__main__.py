@@ -1,0 +1,5 @@
+"""``python -m repro_app``: the same as ``repro``."""
+
+from repro_app.cli import main
+
+main()
