@@ -593,7 +593,7 @@ def test_info_prints_counts_and_per_episode_returns_and_writes_a_histogram(tmp_p
 
 
 def test_dataset_is_a_subcommand_of_repro():
-    from repro.cli import app
+    from repro_app.cli import app
 
     result = runner.invoke(app, ["dataset", "check", "/nonexistent/ds"])
     assert result.exit_code == 2
