@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import getpass
+import hashlib
 import json
 import platform
+import re
 import socket
 import subprocess
 import sys
@@ -29,9 +31,23 @@ class RunDirMismatch(ValueError):
 
 
 def run_dir(cfg: DictConfig) -> Path:
-    """``{results_root}/{experiment}/{agent}/{variant}/{task}/seed_{seed}`` from config values only."""
-    return (Path(cfg.runtime.results_root) / str(cfg.experiment) / str(cfg.agent.name) / str(cfg.variant)
-            / str(cfg.task.name) / f"seed_{cfg.seed}")
+    """``{results_root}/{experiment}/{agent}/{variant}/{task}/seed_{seed}`` from config values only;
+    an offline run (``offline.dataset`` set) has ``{task}/{dataset}/seed_{seed}`` (see dataset_tag)."""
+    task_dir = (Path(cfg.runtime.results_root) / str(cfg.experiment) / str(cfg.agent.name) / str(cfg.variant)
+                / str(cfg.task.name))
+    dataset = OmegaConf.select(cfg, "offline.dataset", default=None)
+    if dataset is not None:
+        task_dir = task_dir / dataset_tag(str(dataset))
+    return task_dir / f"seed_{cfg.seed}"
+
+
+def dataset_tag(value: str) -> str:
+    """Run directory component of ``offline.dataset``: a kind (``medium``) as is; a folder: its name and the
+    first 8 hex digits of the sha256 of the value as written (``84px-1a2b3c4d``), so two folders never share one."""
+    if "/" not in value:
+        return value
+    name = re.sub(r"[^A-Za-z0-9_.\-]", "_", Path(value.rstrip("/")).name) or "dataset"
+    return f"{name}-{hashlib.sha256(value.encode()).hexdigest()[:8]}"
 
 
 def run_state(path: str | Path) -> str:
