@@ -11,11 +11,14 @@ import torch
 from omegaconf import DictConfig
 
 from repro import rundir
-from repro.agent.agent import Agent
 from repro.checkpoint import load_checkpoint, save_checkpoint
 from repro.config import compose, typed
 from repro.episodes import EpisodeStore
+from repro.learners import Learner, build_learner, is_offline
 from repro.logger import RunLogger
+from repro.offline.reference import score_reference
+from repro.offline.replay import DatasetError, OfflineData, load_offline_data, resolve_dataset
+from repro.offline_trainer import OfflineLogger, OfflineTrainer
 from repro.replay import ReplayBuffer
 from repro.schema import RunConfig
 from repro.trainer import Trainer
@@ -36,9 +39,10 @@ def build_env(rc: RunConfig, seed: int):
                     max_episode_frames=e.max_episode_frames, camera=e.camera)
 
 
-def build_agent(rc: RunConfig, obs_shape: tuple[int, int, int], action_dim: int, device: str) -> Agent:
+def build_agent(rc: RunConfig, obs_shape: tuple[int, int, int], action_dim: int, device: str) -> Learner:
+    """The learner named by ``agent.learner`` (the online Agent by default), seeded by the run's seed."""
     torch.manual_seed(rc.seed)
-    return Agent(rc.agent, obs_shape, action_dim, device=device, explore_steps=rc.train.explore_steps)
+    return build_learner(rc.agent, obs_shape, action_dim, device, explore_steps=rc.train.explore_steps)
 
 
 def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress: bool | None = None) -> Path:
@@ -53,6 +57,8 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     if rundir.run_state(path) == "done":
         echo(f"already done: {path}")
         return path
+    # An offline run reads and checks its whole dataset before anything is written.
+    data = _load_dataset(rc) if is_offline(rc.agent.learner) else None
     path.mkdir(parents=True, exist_ok=True)
     ckpt_file = path / rundir.CHECKPOINT
     resuming = ckpt_file.exists()
@@ -62,7 +68,16 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     if rc.runtime.threads:
         torch.set_num_threads(int(rc.runtime.threads))
     rundir.write_meta(path, device, resumed=resuming)
+    if data is not None:
+        _train_offline(rc, path, data, device, resuming, echo, progress)
+    else:
+        _train_online(rc, path, device, resuming, echo, progress)
+    return path
 
+
+def _train_online(rc: RunConfig, path: Path, device: str, resuming: bool, echo: Callable[[str], None],
+                  progress: bool | None) -> None:
+    ckpt_file = path / rundir.CHECKPOINT
     env = build_env(rc, rc.seed)
     eval_env = build_env(rc, rc.seed + 10_000)
     try:
@@ -97,7 +112,55 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     finally:
         env.close()
         eval_env.close()
-    return path
+
+
+def _load_dataset(rc: RunConfig) -> OfflineData:
+    """Resolve ``offline.dataset`` and load it into a replay sized to it (DatasetError: one line)."""
+    if rc.offline.dataset is None:
+        raise DatasetError(f"agent.learner={rc.agent.learner} trains from a dataset: set offline.dataset="
+                           "medium|medium-replay|full-replay (under the results root) or a dataset folder.")
+    directory = resolve_dataset(rc.offline.dataset, rc.runtime.results_root, rc.task.name)
+    return load_offline_data(directory, task=rc.task.name, action_dim=run_action_dim(rc),
+                             frame_shape=(3, rc.env.image_size, rc.env.image_size), frame_stack=rc.env.frame_stack,
+                             nstep=rc.agent.nstep, K=rc.agent.K, discount=rc.agent.discount, seed=rc.seed,
+                             device=resolve_device(rc.replay.device))
+
+
+def run_action_dim(rc: RunConfig) -> int:
+    """|A| of the run's environment without building it (the task's plus any distracting dimensions)."""
+    from repro.envs import get_task
+
+    return get_task(rc.task.name).action_dim + rc.env.distracting_dims
+
+
+def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, resuming: bool,
+                   echo: Callable[[str], None], progress: bool | None) -> None:
+    ckpt_file = path / rundir.CHECKPOINT
+    eval_env = build_env(rc, rc.seed + 10_000)
+    try:
+        spec = eval_env.spec
+        learner = build_agent(rc, spec.obs_shape, spec.action_dim, device)
+        state = load_checkpoint(ckpt_file) if resuming else None
+        logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo)
+        bar = _progress(rc, progress, total=rc.offline.updates, unit="updates/s")
+        trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner, data.buffer, logger,
+                                 lambda s: save_checkpoint(ckpt_file, s),
+                                 reference=score_reference(rc.task.name, data.manifest.source),
+                                 dataset_digest=data.digest, progress=bar.update if bar else None)
+        if state is not None:
+            trainer.restore(state)
+            echo(f"resumed {path} at update {trainer.update}")
+        try:
+            updates = trainer.run()
+        finally:
+            if bar:
+                bar.close()
+            logger.close()
+        rundir.write_done(path, {"update": updates, "dataset": str(data.directory), "dataset_sha256": data.digest,
+                                 "total_time": round(trainer.total_time(), 3),
+                                 "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+    finally:
+        eval_env.close()
 
 
 def _save_frames(path: Path, frames) -> None:
@@ -122,14 +185,14 @@ def train(overrides: list[str], echo: Callable[[str], None] = print, progress: b
 
 
 class _Progress:
-    """A rich progress bar: frames, frames/s, last eval return, ETA."""
+    """A rich progress bar: frames (offline: updates), their rate, last eval return, ETA."""
 
-    def __init__(self, total_frames: int, start_frame: int, label: str):
+    def __init__(self, total_frames: int, start_frame: int, label: str, unit: str = "fps"):
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                    TimeRemainingColumn)
 
         self._p = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                           TextColumn("{task.fields[fps]} fps"), TextColumn("eval {task.fields[ret]}"),
+                           TextColumn(f"{{task.fields[fps]}} {unit}"), TextColumn("eval {task.fields[ret]}"),
                            TimeElapsedColumn(), TimeRemainingColumn(), transient=False)
         self._p.start()
         self._task = self._p.add_task(label, total=total_frames, completed=start_frame, fps="-", ret="-")
@@ -148,9 +211,10 @@ class _Progress:
         self._p.stop()
 
 
-def _progress(rc: RunConfig, forced: bool | None) -> _Progress | None:
+def _progress(rc: RunConfig, forced: bool | None, total: int | None = None, unit: str = "fps") -> _Progress | None:
     setting = rc.runtime.progress if forced is None else forced
     enabled = sys.stderr.isatty() if setting == "auto" else bool(setting)
     if not enabled:
         return None
-    return _Progress(rc.train.frames, 0, f"{rc.agent.name} {rc.task.name} s{rc.seed}")
+    return _Progress(rc.train.frames if total is None else total, 0, f"{rc.agent.name} {rc.task.name} s{rc.seed}",
+                     unit=unit)

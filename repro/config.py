@@ -146,7 +146,32 @@ def validate(raw: DictConfig) -> DictConfig:
     for name in cfg.agent.objectives:
         if name not in OBJECTIVES:
             raise ConfigError(f"unknown objective '{name}'." + close_matches(str(name), sorted(OBJECTIVES)))
+    _check_learner(cfg)
     return cfg
+
+
+def _check_learner(cfg: DictConfig) -> None:
+    """``agent.learner`` is registered; ``offline.*`` is consistent with it."""
+    from repro.learners import LEARNERS, is_offline
+
+    learner = str(cfg.agent.learner)
+    if learner not in LEARNERS:
+        raise ConfigError(f"unknown agent.learner '{learner}'." + close_matches(learner, sorted(LEARNERS)))
+    dataset = cfg.offline.dataset
+    if not is_offline(learner):
+        if dataset is not None:
+            raise ConfigError(f"offline.dataset is read by offline learners only (agent.learner={learner} "
+                              "trains online); pick an offline agent, e.g. agent=bc.")
+        return
+    if dataset is not None and "/" not in str(dataset) and not NAME_RE.match(str(dataset)):
+        raise ConfigError(f"offline.dataset='{dataset}': a dataset kind may only contain letters, digits, '_', '.' "
+                          "and '-' (a folder needs a '/', e.g. ./my_dataset).")
+    for key in ("offline.updates", "offline.eval_every_updates", "offline.checkpoint_every_updates",
+                "offline.log_every_updates"):
+        if OmegaConf.select(cfg, key) < 1:
+            raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
+    if cfg.offline.eval_episodes < 0:
+        raise ConfigError(f"offline.eval_episodes must be >= 0 (got {cfg.offline.eval_episodes}).")
 
 
 def typed(cfg: DictConfig) -> RunConfig:

@@ -33,8 +33,11 @@ class RunDirMismatch(ValueError):
 
 
 def run_dir(cfg: DictConfig) -> Path:
-    """``{results_root}/{experiment}/{agent}/{variant}/{task}/seed_{seed}`` from config values only."""
-    return run_path(cfg.runtime.results_root, cfg.experiment, cfg.agent.name, cfg.variant, cfg.task.name, cfg.seed)
+    """``{results_root}/{experiment}/{agent}/{variant}/{task}/seed_{seed}`` from config values only;
+    an offline run (``offline.dataset`` set) has ``{task}/{dataset}/seed_{seed}`` (see runformat.dataset_tag)."""
+    dataset = OmegaConf.select(cfg, "offline.dataset", default=None)
+    return run_path(cfg.runtime.results_root, cfg.experiment, cfg.agent.name, cfg.variant, cfg.task.name, cfg.seed,
+                    dataset=None if dataset is None else str(dataset))
 
 
 def saved_identity(path: str | Path) -> dict | None:

@@ -8,6 +8,9 @@ and reads small files; it imports nothing heavier than the standard library.
 
 from __future__ import annotations
 
+import hashlib
+import re
+
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -61,9 +64,23 @@ def run_state(path: str | Path) -> str:
 PATH_KEYS = ("experiment", "agent.name", "variant", "task.name", "seed")
 
 
-def run_path(results_root: str | Path, experiment: str, algo: str, variant: str, task: str, seed: int) -> Path:
-    """The run directory of these identity values (no timestamps: the same command finds the same folder)."""
-    return Path(results_root) / str(experiment) / str(algo) / str(variant) / str(task) / f"seed_{seed}"
+def run_path(results_root: str | Path, experiment: str, algo: str, variant: str, task: str, seed: int,
+             dataset: str | None = None) -> Path:
+    """The run directory of these identity values (no timestamps: the same command finds the same folder).
+    Offline runs (a ``dataset``) have one more component, ``{task}/{dataset_tag}/seed_{seed}``."""
+    task_dir = Path(results_root) / str(experiment) / str(algo) / str(variant) / str(task)
+    if dataset is not None:
+        task_dir = task_dir / dataset_tag(dataset)
+    return task_dir / f"seed_{seed}"
+
+
+def dataset_tag(value: str) -> str:
+    """Run directory component of ``offline.dataset``: a kind (``medium``) as is; a folder: its name and the
+    first 8 hex digits of the sha256 of the value as written (``84px-1a2b3c4d``), so two folders never share one."""
+    if "/" not in value:
+        return value
+    name = re.sub(r"[^A-Za-z0-9_.\-]", "_", Path(value.rstrip("/")).name) or "dataset"
+    return f"{name}-{hashlib.sha256(value.encode()).hexdigest()[:8]}"
 
 
 # Identity columns of analysis tables read from config.yaml: column -> dotted config key.

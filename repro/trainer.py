@@ -1,4 +1,8 @@
-"""The online training loop (as upstream DrQ-v2): it receives env, agent, buffer and logger."""
+"""The online training loop (as upstream DrQ-v2): it receives env, learner, buffer and logger.
+
+Shared pieces (episode seeds, evaluation rollouts, RNG state) live in repro/trainer_base.py; the offline
+loop is repro/offline_trainer.py.
+"""
 
 from __future__ import annotations
 
@@ -7,19 +11,16 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-import torch
 
-from repro.agent.agent import Agent
 from repro.envs.base import Env
 from repro.episodes import EpisodeStore
+from repro.learners.base import OnlineLearner
 from repro.logger import RunLogger
 from repro.replay import ReplayBuffer
 from repro.schema import TrainConfig
+from repro.trainer_base import episode_seed, rng_state, run_eval_episodes, set_rng_state
 
-
-def episode_seed(seed: int, kind: int, index: int, sub: int = 0) -> int:
-    """Deterministic per-episode environment seed (kind 0: training, 1: evaluation)."""
-    return int(np.random.SeedSequence([seed, kind, index, sub]).generate_state(1)[0])
+__all__ = ["Counters", "Trainer", "episode_seed"]
 
 
 @dataclass
@@ -30,7 +31,7 @@ class Counters:
 
 
 class Trainer:
-    def __init__(self, cfg: TrainConfig, seed: int, action_repeat: int, env: Env, eval_env: Env, agent: Agent,
+    def __init__(self, cfg: TrainConfig, seed: int, action_repeat: int, env: Env, eval_env: Env, agent: OnlineLearner,
                  buffer: ReplayBuffer, logger: RunLogger, episodes: EpisodeStore,
                  save_checkpoint: Callable[[dict], None], progress=None,
                  save_frames: Callable[[np.ndarray], None] | None = None):
@@ -63,17 +64,14 @@ class Trainer:
                              "total_time": self.total_time()},
                 "agent": agent_state["modules"],
                 "optimizers": agent_state["optimizers"],
-                "rng": {"torch": torch.get_rng_state(),
-                        "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else []},
+                "rng": rng_state(),
                 "buffer": self.buffer.state(), "csv": self.logger.offsets(), "last_eval": self.last_eval}
 
     def restore(self, state: dict) -> None:
         c = state["counters"]
         self.counters = Counters(int(c["step"]), int(c["episode"]), float(c["total_time"]))
         self.agent.load_state_dict({"modules": state["agent"], "optimizers": state["optimizers"]})
-        torch.set_rng_state(state["rng"]["torch"])
-        if state["rng"]["cuda"] and torch.cuda.is_available():
-            torch.cuda.set_rng_state_all(state["rng"]["cuda"])
+        set_rng_state(state["rng"])
         self.buffer.restore(state["buffer"], self.episodes.load)
         self.last_eval = state.get("last_eval")
         self._t0 = time.time()
@@ -88,27 +86,10 @@ class Trainer:
 
     def _evaluate(self, record: bool = False) -> None:
         """Evaluate with the policy mean; ``record`` saves the first episode's frames (frames.npz, for F13)."""
-        returns, lengths, successes = [], [], []
-        frames: list[np.ndarray] = []
-        eval_index = self.counters.step
-        self.agent.train(False)
-        for ep in range(self.cfg.eval_episodes):
-            ts = self.eval_env.reset(seed=episode_seed(self.seed, 1, eval_index, ep))
-            total, length, success = 0.0, 0, 0.0
-            if record and ep == 0:
-                frames.append(ts.observation[-3:].transpose(1, 2, 0))
-            while not ts.last:
-                action = self.agent.act(ts.observation, self.counters.step, eval_mode=True)
-                ts = self.eval_env.step(action)
-                total += ts.reward
-                length += 1
-                success = max(success, float(ts.info.get("success", 0.0)))
-                if record and ep == 0:
-                    frames.append(ts.observation[-3:].transpose(1, 2, 0))
-            returns.append(total)
-            lengths.append(length * self.action_repeat)  # in frames, as upstream
-            successes.append(success)
-        self.agent.train(True)
+        result = run_eval_episodes(self.eval_env, self.agent, self.cfg.eval_episodes, self.seed,
+                                   self.counters.step, self.counters.step, record=record)
+        returns, successes, frames = result.returns, result.successes, result.frames
+        lengths = [n * self.action_repeat for n in result.lengths]  # in frames, as upstream
         if frames and self.save_frames is not None:
             self.save_frames(np.stack(frames))
         mean = float(np.mean(returns)) if returns else float("nan")

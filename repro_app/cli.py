@@ -41,11 +41,12 @@ def train(ctx: typer.Context,
         _dry_run(cfg)
         return
     from repro.api import train_config
+    from repro.offline.replay import DatasetError
     from repro.rundir import RunDirMismatch
 
     try:
         path = train_config(cfg, echo=typer.echo, progress=progress)
-    except RunDirMismatch as exc:
+    except (RunDirMismatch, DatasetError) as exc:
         fail(str(exc))
     typer.echo(f"run directory: {path}")
 

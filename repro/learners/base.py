@@ -1,0 +1,64 @@
+"""The learner protocol: what a trainer (online or offline) needs from an algorithm.
+
+A learner owns its networks and optimizers. ``update`` takes one batch of tensors as returned by
+``ReplayBuffer.sample(batch_size, **learner.sample_options)`` and returns float metrics whose keys are
+``metric_names()`` (the train.csv columns); it never touches files. ``state_dict`` is plain tensors and
+containers (``{"modules": {...}, "optimizers": {...}}``) so checkpoints load with ``weights_only=True``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+import torch
+
+from repro.schema import AgentConfig
+
+
+@runtime_checkable
+class Learner(Protocol):
+    cfg: AgentConfig
+    sample_options: dict[str, Any]  # keyword arguments of ReplayBuffer.sample (e.g. future_seq)
+
+    def act(self, obs: np.ndarray, step: int, eval_mode: bool) -> np.ndarray:
+        """Action for one stacked observation (C, H, W) uint8; ``eval_mode``: the policy mean."""
+        ...
+
+    def update(self, batch: dict[str, torch.Tensor], step: int) -> dict[str, float]:
+        """One gradient update on ``batch``; ``step`` is the agent step (online) or update count (offline)."""
+        ...
+
+    def state_dict(self) -> dict:
+        ...
+
+    def load_state_dict(self, state: dict) -> None:
+        ...
+
+    def parameter_counts(self) -> list[tuple[str, int]]:
+        """Trainable parameters per module, each parameter counted once."""
+        ...
+
+    def metric_names(self) -> list[str]:
+        ...
+
+    def train(self, training: bool = True) -> None:
+        ...
+
+
+@runtime_checkable
+class OnlineLearner(Learner, Protocol):
+    """What the online loop needs on top: the exploration std at a step (a train.csv column)."""
+
+    def stddev(self, step: int) -> float:
+        ...
+
+
+def count_parameters(modules: dict[str, torch.nn.Module]) -> list[tuple[str, int]]:
+    """Trainable parameters per named module, a parameter shared by two modules counted at the first."""
+    rows, seen = [], set()
+    for name, mod in modules.items():
+        params = [p for p in mod.parameters() if p.requires_grad and id(p) not in seen]
+        seen.update(id(p) for p in params)
+        rows.append((name, sum(p.numel() for p in params)))
+    return rows

@@ -1,0 +1,89 @@
+"""Behaviour cloning on the DrQ-v2 pixel backbone: encoder + deterministic actor head, MSE to the dataset action.
+
+The encoder sees randomly shifted observations and is trained by the BC loss (no critic). The policy is the
+DrQ-v2 Actor's tanh mean; its std argument plays no role.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from repro.agent.aug import RandomShift
+from repro.agent.networks import Actor, Encoder
+from repro.learners.base import count_parameters
+from repro.schema import AgentConfig
+
+METRICS = ("bc_loss",)
+
+
+def bc_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean over batch and action dimensions of (predicted - target)^2."""
+    if predicted.shape != target.shape:
+        raise ValueError(f"bc_loss: predicted {tuple(predicted.shape)} vs target {tuple(target.shape)}")
+    return (predicted - target).pow(2).mean()
+
+
+class BCLearner:
+    """Offline learner ``bc``."""
+
+    def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
+                 device: torch.device | str = "cpu", explore_steps: int = 0):
+        self.cfg = cfg
+        self.device = torch.device(device)
+        self.action_dim = action_dim
+        self.aug = RandomShift(pad=4)
+        self.encoder = Encoder(obs_shape).to(self.device)
+        self.actor = Actor(self.encoder.repr_dim, action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
+        self.encoder_opt = torch.optim.Adam(self.encoder.parameters(), lr=cfg.lr)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr)
+        self.sample_options: dict = {}
+        self.train(True)
+
+    def modules(self) -> dict[str, torch.nn.Module]:
+        return {"encoder": self.encoder, "actor": self.actor}
+
+    def optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        return {"encoder": self.encoder_opt, "actor": self.actor_opt}
+
+    def parameter_counts(self) -> list[tuple[str, int]]:
+        return count_parameters(self.modules())
+
+    def metric_names(self) -> list[str]:
+        return list(METRICS)
+
+    def state_dict(self) -> dict:
+        return {"modules": {k: m.state_dict() for k, m in self.modules().items()},
+                "optimizers": {k: o.state_dict() for k, o in self.optimizers().items()}}
+
+    def load_state_dict(self, state: dict) -> None:
+        for k, m in self.modules().items():
+            m.load_state_dict(state["modules"][k])
+        for k, o in self.optimizers().items():
+            o.load_state_dict(state["optimizers"][k])
+
+    def train(self, training: bool = True) -> None:
+        self.training = training
+        for mod in self.modules().values():
+            mod.train(training)
+
+    def policy(self, obs: torch.Tensor) -> torch.Tensor:
+        """Deterministic action in [-1, 1] for float observations (B, C, H, W)."""
+        return self.actor(self.encoder(obs), 1.0).mean
+
+    def stddev(self, step: int) -> float:
+        return 0.0
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, step: int, eval_mode: bool) -> np.ndarray:
+        obs_t = torch.as_tensor(obs, device=self.device).float().unsqueeze(0)
+        return self.policy(obs_t).cpu().numpy()[0].astype(np.float32)
+
+    def update(self, batch: dict[str, torch.Tensor], step: int) -> dict[str, float]:
+        loss = bc_loss(self.policy(self.aug(batch["obs"].float())), batch["action"])
+        self.encoder_opt.zero_grad(set_to_none=True)
+        self.actor_opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.actor_opt.step()
+        self.encoder_opt.step()
+        return {"bc_loss": loss.item()}

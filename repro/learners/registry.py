@@ -1,0 +1,30 @@
+"""Learners by ``agent.learner``: the online actor-critic agent and the offline learners."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import torch
+
+from repro.agent.agent import Agent
+from repro.learners.base import Learner
+from repro.learners.bc import BCLearner
+from repro.schema import AgentConfig
+
+LearnerFactory = Callable[..., Learner]  # (cfg, obs_shape, action_dim, device=, explore_steps=) -> Learner
+
+LEARNERS: dict[str, LearnerFactory] = {
+    "actor_critic": Agent,  # DrQ-v2 / TACO and the representation ablations (online)
+    "bc": BCLearner,  # behaviour cloning (offline)
+}
+ONLINE_LEARNERS = frozenset({"actor_critic"})  # every other learner trains from offline.dataset
+
+
+def is_offline(name: str) -> bool:
+    return name not in ONLINE_LEARNERS
+
+
+def build_learner(cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
+                  device: torch.device | str, explore_steps: int = 0) -> Learner:
+    """The learner named by ``cfg.learner`` (KeyError for an unknown name; config validation names it first)."""
+    return LEARNERS[cfg.learner](cfg, obs_shape, action_dim, device=device, explore_steps=explore_steps)

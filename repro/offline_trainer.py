@@ -1,0 +1,152 @@
+"""The offline training loop: gradient updates on a fixed dataset, evaluation in the environment.
+
+At update u (u updates done): evaluate when u % eval_every_updates == 0 or u == updates (update 0 included),
+then stop if u == updates, else sample a batch and update. After an update, a train.csv row every
+log_every_updates and a checkpoint every checkpoint_every_updates. A resume from a checkpoint at u truncates
+the CSVs to the offsets stored in it and recomputes everything after, so the files equal an uninterrupted
+run's in every non-wall-clock column.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from repro.envs.base import Env
+from repro.learners.base import Learner
+from repro.logger import CsvLog
+from repro.offline.columns import OFFLINE_EVAL_COLUMNS, OFFLINE_TRAIN_COLUMNS
+from repro.offline.reference import normalized_score
+from repro.offline.replay import DatasetError
+from repro.replay import ReplayBuffer
+from repro.schema import OfflineConfig
+from repro.trainer_base import WallClock, rng_state, run_eval_episodes, set_rng_state
+
+
+class OfflineLogger:
+    """eval.csv and train.csv of an offline run (columns: repro/offline/columns.py)."""
+
+    def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
+                 offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print):
+        offsets = offsets or {}
+        self.eval = CsvLog(Path(run_dir) / "eval.csv", OFFLINE_EVAL_COLUMNS, offsets.get("eval"))
+        self.train = CsvLog(Path(run_dir) / "train.csv", OFFLINE_TRAIN_COLUMNS + list(metric_names),
+                            offsets.get("train"))
+        self.echo = echo
+
+    def offsets(self) -> dict[str, int]:
+        return {"eval": self.eval.offset(), "train": self.train.offset()}
+
+    def log_eval(self, row: dict[str, Any]) -> None:
+        self.eval.write(row)
+        score = row.get("normalized_score")
+        extra = f"  score {score:.1f} ({row['score_reference']})" if score is not None else ""
+        self.echo(f"eval  update {row['update']:>8}  return {row['episode_reward']:8.2f}"
+                  f" ± {row['episode_reward_std']:.2f}{extra}")
+
+    def log_train(self, row: dict[str, Any]) -> None:
+        self.train.write(row)
+
+    def close(self) -> None:
+        self.eval.close()
+        self.train.close()
+
+
+class OfflineTrainer:
+    def __init__(self, cfg: OfflineConfig, seed: int, action_repeat: int, eval_env: Env, learner: Learner,
+                 buffer: ReplayBuffer, logger: OfflineLogger, save_checkpoint: Callable[[dict], None],
+                 reference: tuple[float | None, str], dataset_digest: str,
+                 progress: Callable[[int, float | None], None] | None = None):
+        self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
+        self.eval_env, self.learner, self.buffer, self.logger = eval_env, learner, buffer, logger
+        self._save, self.progress = save_checkpoint, progress
+        self.reference_return, self.reference_kind = reference
+        self.dataset_digest = dataset_digest
+        self.has_success = eval_env.spec.has_success
+        self.batch_size = learner.cfg.batch_size
+        self.update = 0
+        self.clock = WallClock()
+        self.last_eval: float | None = None
+        self._sums: dict[str, float] = {}  # metrics summed since the last train.csv row
+        self._n = 0
+        self._window_seconds = 0.0  # update time (evaluation excluded) since the last train.csv row
+
+    def total_time(self) -> float:
+        return self.clock.total()
+
+    # ----------------------------------------------------------------- checkpoints
+    def checkpoint_state(self) -> dict:
+        state = self.learner.state_dict()
+        return {"offline": {"update": self.update, "total_time": self.total_time(), "dataset": self.dataset_digest,
+                            "sums": dict(self._sums), "n": self._n, "window_seconds": self._window_seconds},
+                "agent": state["modules"], "optimizers": state["optimizers"], "rng": rng_state(),
+                "replay_rng": self.buffer.rng.bit_generator.state, "csv": self.logger.offsets(),
+                "last_eval": self.last_eval}
+
+    def restore(self, state: dict) -> None:
+        off = state["offline"]
+        if off["dataset"] != self.dataset_digest:
+            raise DatasetError("the dataset changed since this run started (its manifest.json differs from the "
+                               "one the checkpoint was trained on); use another variant or move the run away")
+        self.update = int(off["update"])
+        self._sums, self._n = dict(off["sums"]), int(off["n"])
+        self._window_seconds = float(off["window_seconds"])
+        self.learner.load_state_dict({"modules": state["agent"], "optimizers": state["optimizers"]})
+        set_rng_state(state["rng"])
+        self.buffer.rng.bit_generator.state = state["replay_rng"]
+        self.last_eval = state.get("last_eval")
+        self.clock.resume(float(off["total_time"]))
+
+    # ----------------------------------------------------------------- evaluation and logging
+    def evaluate(self) -> None:
+        result = run_eval_episodes(self.eval_env, self.learner, self.cfg.eval_episodes, self.seed, self.update,
+                                   self.update)
+        returns = result.returns
+        mean = float(np.mean(returns)) if returns else math.nan
+        self.last_eval = mean
+        self.logger.log_eval({
+            "update": self.update, "episode_reward": mean,
+            "episode_reward_std": float(np.std(returns)) if returns else math.nan,
+            "episode_length": float(np.mean(result.lengths)) * self.action_repeat if returns else math.nan,
+            "success": float(np.mean(result.successes)) if (self.has_success and returns) else None,
+            "eval_episodes": len(returns), "normalized_score": normalized_score(mean, self.reference_return),
+            "reference_return": self.reference_return, "score_reference": self.reference_kind,
+            "total_time": round(self.total_time(), 3)})
+
+    def _log_train(self) -> None:
+        row: dict[str, Any] = {"update": self.update,
+                               "updates_per_s": round(self._n / max(self._window_seconds, 1e-9), 3),
+                               "total_time": round(self.total_time(), 3)}
+        row.update({k: self._sums[k] / self._n for k in self.learner.metric_names() if k in self._sums})
+        self.logger.log_train(row)
+        self._sums, self._n, self._window_seconds = {}, 0, 0.0
+
+    # ----------------------------------------------------------------- loop
+    def run(self) -> int:
+        cfg = self.cfg
+        while True:
+            if self.update % cfg.eval_every_updates == 0 or self.update >= cfg.updates:
+                if cfg.eval_episodes > 0:
+                    self.evaluate()
+            if self.progress is not None:
+                self.progress(self.update, self.last_eval)
+            if self.update >= cfg.updates:
+                break
+            started = time.time()
+            batch = self.buffer.sample(self.batch_size, **self.learner.sample_options)
+            metrics = self.learner.update(batch, self.update)
+            self.update += 1
+            for k, v in metrics.items():
+                self._sums[k] = self._sums.get(k, 0.0) + v
+            self._n += 1
+            self._window_seconds += time.time() - started
+            if self.update % cfg.log_every_updates == 0 or self.update >= cfg.updates:
+                self._log_train()
+            if self.update % cfg.checkpoint_every_updates == 0 or self.update >= cfg.updates:
+                self._save(self.checkpoint_state())
+        return self.update
