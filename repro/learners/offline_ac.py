@@ -1,0 +1,208 @@
+"""TD3+BC, CQL and IQL on the DrQ-v2 pixel backbone, each with or without TACO's auxiliary step.
+
+The networks, the action encoder and the auxiliary objectives are the online agent's (repro/agent/agent.py):
+with ``agent.objectives`` {taco, curl, reward} and ``agent.action_encoder: true`` the critic sees latent
+actions u(a) and one TACO step follows the critic and actor updates, exactly as online. The BC term of
+TD3+BC and CQL's uniform actions stay in raw action space. Each algorithm's loss is a pure function in
+``repro/offline/losses/``; this file only wires networks to losses and steps the optimizers.
+
+Update order: TD3+BC and CQL as DrQ-v2 (critic with the encoder, actor on sg(h), target, auxiliary);
+IQL as the reference code (value, actor, critic with the encoder, target, auxiliary).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from repro.agent.agent import Agent, soft_update
+from repro.agent.networks import mlp, orthogonal_init, trunk
+from repro.offline.losses import cql as cql_loss
+from repro.offline.losses import iql as iql_loss
+from repro.offline.losses import td3bc as td3bc_loss
+from repro.schema import AgentConfig
+
+CRITIC = ("critic_loss", "critic_q1", "critic_q2", "critic_target_q")
+CQL_METRICS = tuple(f"cql_{part}_q{i}" for i in (1, 2)
+                    for part in ("reg", "lse", "q_data", "q_uniform", "q_policy", "q_next_policy"))
+ALGORITHMS = ("td3bc", "cql", "iql")
+
+
+class ValueNet(nn.Module):
+    """IQL's state value V(h): the DrQ-v2 trunk and a ReLU MLP."""
+
+    def __init__(self, repr_dim: int, feature_dim: int, hidden_dim: int):
+        super().__init__()
+        self.trunk = trunk(repr_dim, feature_dim)
+        self.v = mlp(feature_dim, hidden_dim, 1)
+        self.apply(orthogonal_init)
+
+    def forward(self, h: torch.Tensor) -> torch.Tensor:
+        return self.v(self.trunk(h))
+
+
+class OfflineActorCritic(Agent):
+    """Learners ``td3bc``, ``cql`` and ``iql`` (the ``_taco`` agent files switch on the auxiliary step)."""
+
+    algorithm = "td3bc"
+
+    def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
+                 device: torch.device | str = "cpu", explore_steps: int = 0):
+        super().__init__(cfg, obs_shape, action_dim, device=device, explore_steps=0)
+        self.value: ValueNet | None = None
+        if self.algorithm == "iql":
+            self.value = ValueNet(self.encoder.repr_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
+            self.value_opt = torch.optim.Adam(self.value.parameters(), lr=cfg.lr)
+            self.value.train(True)
+
+    # ----------------------------------------------------------------- protocol
+    def modules(self) -> dict[str, nn.Module]:
+        mods = super().modules()
+        if self.value is not None:
+            mods["value"] = self.value
+        return mods
+
+    def optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        opts = super().optimizers()
+        if self.value is not None:
+            opts["value"] = self.value_opt
+        return opts
+
+    def metric_names(self) -> list[str]:
+        names = list(CRITIC)
+        if self.algorithm == "td3bc":
+            names += ["actor_loss", "actor_lambda", "actor_bc", "actor_q"]
+        elif self.algorithm == "cql":
+            names += list(CQL_METRICS) + ["actor_loss", "actor_logprob", "actor_ent"]
+        else:
+            names += ["value_loss", "value_v", "actor_loss", "actor_adv", "actor_weight", "actor_logprob"]
+        for objective in self.objectives.values():
+            names += objective.metric_keys()
+        if self.objectives:
+            names.append("aux_loss")
+        return names
+
+    def resolved(self) -> dict[str, object]:
+        """Values this learner used that analysis reads (recorded in the run directory)."""
+        out: dict[str, object] = {"algorithm": self.algorithm}
+        if self.algorithm == "cql":
+            out["cql_alpha"] = self.cfg.cql.alpha
+        return out
+
+    # ----------------------------------------------------------------- updates
+    def update(self, batch: dict[str, torch.Tensor], step: int) -> dict[str, float]:
+        metrics: dict[str, float] = {}
+        obs = self.aug(batch["obs"].float())
+        next_obs = self.aug(batch["next_obs"].float())
+        h = self._encode(obs)
+        with torch.no_grad():
+            next_h = self._encode(next_obs)
+        action, reward, discount = batch["action"], batch["reward"], batch["discount"]
+        if self.algorithm == "iql":
+            metrics.update(self._iql_value_actor(h.detach(), action, step))
+            metrics.update(self._iql_critic(h, action, reward, discount, next_h))
+        else:
+            metrics.update(self._critic(h, action, reward, discount, next_h, step))
+            if self.algorithm == "td3bc":
+                metrics.update(self._td3bc_actor(h.detach(), action, step))
+            else:
+                metrics.update(self._update_actor(h.detach(), step))
+        soft_update(self.critic, self.critic_target, self.cfg.critic_target_tau)
+        if self.aux_opt is not None:
+            metrics.update(self._update_aux(batch))
+        return metrics
+
+    def _step(self, loss: torch.Tensor, *opts: torch.optim.Optimizer) -> None:
+        for opt in opts:
+            opt.zero_grad(set_to_none=True)
+        loss.backward()
+        for opt in opts:
+            opt.step()
+
+    def _critic(self, h, action, reward, discount, next_h, step) -> dict[str, float]:
+        """DrQ-v2's critic loss; CQL adds its regulariser for each head."""
+        with torch.no_grad():
+            dist = self.actor(next_h, self.stddev(step))
+            next_action = self.encode_action(dist.sample(clip=self.cfg.stddev_clip))
+            tq1, tq2 = self.critic_target(next_h, next_action)
+            target_q = reward + discount * torch.min(tq1, tq2)
+        q1, q2 = self.critic(h, self.encode_action(action))
+        loss = nn.functional.mse_loss(q1, target_q) + nn.functional.mse_loss(q2, target_q)
+        metrics = {"critic_loss": loss.item(), "critic_q1": q1.mean().item(), "critic_q2": q2.mean().item(),
+                   "critic_target_q": target_q.mean().item()}
+        if self.algorithm == "cql":
+            regs, cql_metrics = self._cql_regularisers(h, next_h, (q1, q2), step)
+            loss = loss + regs[0] + regs[1]
+            metrics.update(cql_metrics)
+            metrics["critic_loss"] = loss.item()
+        self._step(loss, self.encoder_opt, self.critic_opt)
+        return metrics
+
+    def _cql_regularisers(self, h, next_h, q_data, step):
+        c = self.cfg.cql
+        n, batch = c.n_samples, h.shape[0]
+        std = self.stddev(step)
+        with torch.no_grad():  # policy samples carry no gradient (CQL issue 5)
+            dist = self.actor(h.detach(), std)
+            next_dist = self.actor(next_h, std)
+            policy = dist.sample(sample_shape=torch.Size([n])).transpose(0, 1)  # (B, N, A)
+            next_policy = next_dist.sample(sample_shape=torch.Size([n])).transpose(0, 1)
+            log_p = dist.log_prob(policy.transpose(0, 1)).sum(-1).transpose(0, 1)
+            log_np = next_dist.log_prob(next_policy.transpose(0, 1)).sum(-1).transpose(0, 1)
+        uniform = cql_loss.uniform_actions(batch, n, self.action_dim, like=h)
+
+        def critic(h_rows: torch.Tensor, actions: torch.Tensor):
+            return self.critic(h_rows, self.encode_action(actions))
+
+        assert c.alpha is not None, "agent.cql.alpha is resolved when the config is composed"
+        return cql_loss.critic_regularisers(critic, h, q_data, uniform, policy, next_policy, float(c.alpha),
+                                            c.temperature, importance_sampling=c.importance_sampling,
+                                            log_prob_policy=log_p, log_prob_next_policy=log_np)
+
+    def _td3bc_actor(self, h, data_action, step) -> dict[str, float]:
+        dist = self.actor(h, self.stddev(step))
+        policy_action = dist.sample(clip=self.cfg.stddev_clip)
+        q1, q2 = self.critic(h, self.encode_action(policy_action))
+        c = self.cfg.td3bc
+        loss, metrics = td3bc_loss.actor_loss(q1, q2, policy_action, data_action, alpha=c.alpha,
+                                              lambda_from=c.lambda_from)
+        self._step(loss, self.actor_opt)
+        return metrics
+
+    def _iql_value_actor(self, h, action, step) -> dict[str, float]:
+        assert self.value is not None
+        c = self.cfg.iql
+        with torch.no_grad():
+            tq1, tq2 = self.critic_target(h, self.encode_action(action))
+        v = self.value(h)
+        v_loss, metrics = iql_loss.value_loss(tq1, tq2, v, expectile=c.expectile)
+        self._step(v_loss, self.value_opt)
+        dist = self.actor(h, self.stddev(step))
+        log_prob = dist.log_prob(action).sum(-1, keepdim=True)
+        a_loss, a_metrics = iql_loss.actor_loss(log_prob, tq1, tq2, v.detach(), beta=c.beta,
+                                                max_weight=c.max_weight)
+        self._step(a_loss, self.actor_opt)
+        metrics.update(a_metrics)
+        return metrics
+
+    def _iql_critic(self, h, action, reward, discount, next_h) -> dict[str, float]:
+        assert self.value is not None
+        with torch.no_grad():
+            next_v = self.value(next_h)
+        target = iql_loss.critic_target(reward, discount, next_v)
+        q1, q2 = self.critic(h, self.encode_action(action))
+        loss, metrics = iql_loss.critic_loss(q1, q2, target)
+        self._step(loss, self.encoder_opt, self.critic_opt)
+        return metrics
+
+
+class TD3BC(OfflineActorCritic):
+    algorithm = "td3bc"
+
+
+class CQL(OfflineActorCritic):
+    algorithm = "cql"
+
+
+class IQL(OfflineActorCritic):
+    algorithm = "iql"
