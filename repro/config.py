@@ -172,6 +172,22 @@ def _check_learner(cfg: DictConfig) -> None:
             raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
     if cfg.offline.eval_episodes < 0:
         raise ConfigError(f"offline.eval_episodes must be >= 0 (got {cfg.offline.eval_episodes}).")
+    if learner == "cql" and cfg.agent.cql.alpha is None and dataset is not None:
+        cfg.agent.cql.alpha = _table6_alpha(str(cfg.task.name), str(dataset))
+
+
+def _table6_alpha(task: str, dataset: str) -> float:
+    """CQL's alpha from the paper's Table 6 for a dataset kind; a folder or an unlisted pair needs agent.cql.alpha."""
+    from repro.offline.losses.cql import cql_alpha
+
+    if "/" in dataset:
+        raise ConfigError(f"agent.cql.alpha: Table 6 gives alpha per task and dataset kind, not for the folder "
+                          f"'{dataset}'; set agent.cql.alpha (one of 0.5, 1, 2, 4, 8 in the paper).")
+    try:
+        return float(cql_alpha(task, dataset))
+    except ValueError:
+        raise ConfigError(f"agent.cql.alpha: Table 6 has no value for task {task} and dataset {dataset}; "
+                          "set agent.cql.alpha.") from None
 
 
 def typed(cfg: DictConfig) -> RunConfig:

@@ -20,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 from repro.config import identity
 from repro.fsutil import atomic_write_text
 from repro.runformat import CHECKPOINT, CONFIG, DONE, META, RESOLVED, resolved_json, run_path, run_state
+from repro.learners.registry import is_offline
 from repro.schema import RunConfig
 
 __all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "RESOLVED", "RunDirMismatch", "config_diff", "config_matches",
@@ -106,7 +107,7 @@ def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
         "action_encoder": encoder is not None,
         "latent_action_dim": None if encoder is None else int(encoder.latent_dim),
         "objectives": {str(k): float(w) for k, w in getattr(learner, "weights", {}).items()},
-        "dataset": None,
+        "dataset": rc.offline.dataset if is_offline(rc.agent.learner) else None,
         "cql_alpha": None,
     }
     values.update(getattr(learner, "resolved", None) or {})

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
+from repro.offline.configs import DTConfig, IQLConfig, TD3BCConfig
+
 
 @dataclass
 class StdSchedule:
@@ -26,6 +28,7 @@ class CQLConfig:
     n_samples: int = 10
     temperature: float = 1.0
     importance_sampling: bool = False
+    include_data_in_logsumexp: bool = False
 
 
 @dataclass
@@ -52,6 +55,9 @@ class AgentConfig:
     compile: bool = False
     amp: bool = False
     cql: CQLConfig = field(default_factory=CQLConfig)
+    td3bc: TD3BCConfig = field(default_factory=TD3BCConfig)
+    iql: IQLConfig = field(default_factory=IQLConfig)
+    dt: DTConfig = field(default_factory=DTConfig)
 
 
 @dataclass

@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from offline_fixtures import action_of, reward_of, write_dataset  # noqa: E402
 
 from repro import api, rundir  # noqa: E402
-from repro.cli import app  # noqa: E402
+from repro_app.cli import app  # noqa: E402
 from repro.config import compose, typed  # noqa: E402
 from repro.learners import LEARNERS, Learner, build_learner  # noqa: E402
 from repro.learners.bc import bc_loss  # noqa: E402

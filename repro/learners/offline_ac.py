@@ -45,11 +45,11 @@ class OfflineActorCritic(Agent):
     """Learners ``td3bc``, ``cql`` and ``iql`` (the ``_taco`` agent files switch on the auxiliary step)."""
 
     algorithm = "td3bc"
+    value: ValueNet | None = None  # IQL's V(h); set before Agent.__init__ lists the modules
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
         super().__init__(cfg, obs_shape, action_dim, device=device, explore_steps=0)
-        self.value: ValueNet | None = None
         if self.algorithm == "iql":
             self.value = ValueNet(self.encoder.repr_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
             self.value_opt = torch.optim.Adam(self.value.parameters(), lr=cfg.lr)
@@ -82,6 +82,7 @@ class OfflineActorCritic(Agent):
             names.append("aux_loss")
         return names
 
+    @property
     def resolved(self) -> dict[str, object]:
         """Values this learner used that analysis reads (recorded in the run directory)."""
         out: dict[str, object] = {"algorithm": self.algorithm}
@@ -157,7 +158,8 @@ class OfflineActorCritic(Agent):
         assert c.alpha is not None, "agent.cql.alpha is resolved when the config is composed"
         return cql_loss.critic_regularisers(critic, h, q_data, uniform, policy, next_policy, float(c.alpha),
                                             c.temperature, importance_sampling=c.importance_sampling,
-                                            log_prob_policy=log_p, log_prob_next_policy=log_np)
+                                            log_prob_policy=log_p, log_prob_next_policy=log_np,
+                                            include_data_in_logsumexp=c.include_data_in_logsumexp)
 
     def _td3bc_actor(self, h, data_action, step) -> dict[str, float]:
         dist = self.actor(h, self.stddev(step))

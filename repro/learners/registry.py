@@ -9,6 +9,7 @@ import torch
 from repro.agent.agent import Agent
 from repro.learners.base import Learner
 from repro.learners.bc import BCLearner
+from repro.learners.offline_ac import CQL, IQL, TD3BC
 from repro.schema import AgentConfig
 
 LearnerFactory = Callable[..., Learner]  # (cfg, obs_shape, action_dim, device=, explore_steps=) -> Learner
@@ -16,6 +17,9 @@ LearnerFactory = Callable[..., Learner]  # (cfg, obs_shape, action_dim, device=,
 LEARNERS: dict[str, LearnerFactory] = {
     "actor_critic": Agent,  # DrQ-v2 / TACO and the representation ablations (online)
     "bc": BCLearner,  # behaviour cloning (offline)
+    "td3bc": TD3BC,  # TD3+BC on the DrQ-v2 backbone (offline; agent=td3bc | td3bc_taco)
+    "cql": CQL,  # CQL on the DrQ-v2 backbone (offline; agent=cql | cql_taco)
+    "iql": IQL,  # IQL on the DrQ-v2 backbone (offline)
 }
 ONLINE_LEARNERS = frozenset({"actor_critic"})  # every other learner trains from offline.dataset
 
