@@ -82,7 +82,7 @@ def test_taco_loss_matches_formula():
     h = ctx.shared().state_proj(aux.future())
     expected, acc = infonce64(g, ctx.shared().W, h)
     assert loss.item() == pytest.approx(expected, rel=1e-4)
-    assert metrics["taco_loss"] == pytest.approx(loss.item()) and metrics["taco_acc"] == acc
+    assert metrics["taco_loss"] == pytest.approx(loss.item()) and metrics["taco_acc"] == pytest.approx(acc)
 
 
 def test_reward_loss_targets():
@@ -119,7 +119,7 @@ def test_curl_positive_is_other_augmentation_without_gradient():
     heads = ctx.shared()
     expected, acc = infonce64(heads.state_proj(aux.anchor()), heads.W, heads.state_proj(aux.positive()))
     assert loss.item() == pytest.approx(expected, rel=1e-5)
-    assert m["curl_loss"] == pytest.approx(loss.item()) and m["curl_acc"] == acc
+    assert m["curl_loss"] == pytest.approx(loss.item()) and m["curl_acc"] == pytest.approx(acc)
 
 
 def test_random_shift_is_integer_crop_of_padded_image():
