@@ -152,6 +152,10 @@ def test_distracting_action_dims_are_ignored() -> None:
         results.append((ts.observation, ts.reward))
     assert np.array_equal(results[0][0], results[1][0])
     assert results[0][1] == results[1][1]
+    env.reset(2)  # the real dimension still acts: other actions in it give another state
+    for a in _actions(2, 1, seed=1):
+        ts = env.step(np.concatenate([a, np.full(3, -1.0, np.float32)]))
+    assert not np.array_equal(ts.observation, results[0][0])
     with pytest.raises(ValueError):
         env.step(np.zeros(1, np.float32))  # the wrapped dimension alone is the wrong shape
     env.close()
@@ -190,6 +194,9 @@ def test_metaworld_obs_and_determinism(mw_env) -> None:
     assert np.array_equal(frames[0], frames[2])
     assert ts.info["success"] == 0.0
     assert mw_env.frames_rotated  # corner2 is defined upside down; frames are turned upright
+    raw = mw_env.raw_env.render()  # the same state as rendered by Meta-world itself
+    assert not np.array_equal(raw, raw[::-1, ::-1])  # not symmetric, so the check below can fail
+    assert np.array_equal(frames[2], raw[::-1, ::-1].transpose(2, 0, 1))  # the observation is it turned by 180
     first, task0 = ts.observation, mw_env.task_index
     mw_env.step(np.ones(4, np.float32))
     assert np.array_equal(mw_env.reset(0).observation, first)

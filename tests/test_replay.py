@@ -52,12 +52,13 @@ def test_samples_stay_inside_episodes(nstep, K):
         assert batch["reward"][i].item() == pytest.approx(expected, rel=1e-6)
         assert batch["discount"][i].item() == pytest.approx(0.9 ** nstep, rel=1e-6)
         assert batch["reward_ksum"][i].item() == pytest.approx(sum(rewards[:K]), rel=1e-6)
-    # an episode too short for the horizon is never sampled; every valid start is reachable
+    # the sampled starts are exactly the valid ones (t + max(nstep, K) <= length): none outside, none missed
     starts = {decode(batch["obs"][i].numpy())[-1] for i in range(512)}
     lengths = {0: 7, 1: 3, 2: 12, 3: 6}
-    assert all(t + h <= lengths[e] for e, t in starts)
-    if h > 3:
-        assert not any(e == 1 for e, _ in starts)
+    valid = {(e, t) for e, n in lengths.items() for t in range(n - h + 1)}
+    assert starts == valid
+    assert buf.num_valid() == len(valid)
+    assert (h > 3) == all(e != 1 for e, _ in starts)  # the 3-step episode only fits a horizon of 3
 
 
 def test_discount_stops_at_terminal():
@@ -67,25 +68,37 @@ def test_discount_stops_at_terminal():
         buf.add(np.zeros(A, np.float32), reward=1.0, discount=0.0 if t == 3 else 1.0, next_frame=frame(0, t + 1))
     buf.end_episode()
     batch = buf.sample(256)
+    # by hand, r + g d_t r' + g^2 d_t d_t+1 r'' and g^3 d_t d_t+1 d_t+2 with g = 0.5 and d_3 = 0 (terminal)
+    expected = {0: (1 + 0.5 + 0.25, 0.125), 1: (1 + 0.5 + 0.25, 0.0), 2: (1 + 0.5, 0.0)}
+    seen = set()
     for i in range(256):
         t = decode(batch["obs"][i].numpy())[-1][1]
-        if t == 2:  # rewards at t=2,3 count, the discount is cut after the terminal at t=3
-            assert batch["reward"][i].item() == pytest.approx(1 + 0.5)
-            assert batch["discount"][i].item() == 0.0
+        seen.add(t)
+        assert batch["reward"][i].item() == pytest.approx(expected[t][0]), t
+        assert batch["discount"][i].item() == expected[t][1], t
+    assert seen == set(expected)
 
 
 def test_ring_wraparound_keeps_samples_valid_and_drops_overwritten_episodes():
     buf = ReplayBuffer(20, (3, 4, 4), A, frame_stack=3, nstep=3, K=3, discount=0.99, seed=1)
     fill(buf, [8, 8, 8, 8])  # 36 frames into 20 slots
     assert len(buf) == 20
-    assert [r.ep_id for r in buf.episodes] == [1, 2, 3] or [r.ep_id for r in buf.episodes] == [2, 3]
+    # the last 20 frames written survive: episode 1's last two frames, all of episodes 2 and 3
+    written = [(e, p) for e in range(4) for p in range(9)]
+    alive = set(written[-20:])
+    assert [r.ep_id for r in buf.episodes] == [1, 2, 3]  # episode 0 is gone, episode 1 is partly there
+    valid = {(e, t) for e, t in alive if all((e, t + k) in alive for k in range(4)) and (e, max(t - 2, 0)) in alive}
+    assert valid == {(e, t) for e in (2, 3) for t in range(6)}
     batch = buf.sample(300)
+    starts = set()
     for i in range(300):
         obs = decode(batch["obs"][i].numpy())
         ep, t = obs[-1]
+        starts.add((ep, t))
         assert all(e == ep for e, _ in obs)
         assert [p for _, p in obs] == [max(t - 2, 0), max(t - 1, 0), t]
         assert decode(batch["future_obs"][i].numpy())[-1] == (ep, t + 3)
+    assert starts == valid
 
 
 def test_memory_is_within_ten_percent_of_raw_frames():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import torch
@@ -54,6 +55,22 @@ def has_no_grad(module: nn.Module) -> bool:
 
 def snapshot(module: nn.Module) -> list[torch.Tensor]:
     return [p.detach().clone() for p in module.parameters()]
+
+
+def plain_aux(agent: Agent, batch: dict[str, torch.Tensor]) -> AuxBatch:
+    """Like aux_for but without augmentation, so every view can be recomputed outside the objective."""
+    return AuxBatch(batch, agent.encoder, lambda x: x, agent.encode_action_sequence, agent.cfg.reward_target,
+                    agent.encode_action_steps)
+
+
+def f64(t: torch.Tensor) -> np.ndarray:
+    return t.detach().numpy().astype(np.float64)
+
+
+def neg_cos64(pred: np.ndarray, target: np.ndarray) -> float:
+    """-mean over all leading axes of cos(pred, target) along the last axis, by hand."""
+    dots = (pred * target).sum(-1)
+    return float(-(dots / (np.linalg.norm(pred, axis=-1) * np.linalg.norm(target, axis=-1))).mean())
 
 
 # ----------------------------------------------------------------------------- known answers
@@ -174,8 +191,15 @@ def test_spr_gradient_flow_and_momentum_target():
     agent = agent_for(["agent=spr", f"agent.objective_params.spr.momentum={m}"])
     spr = agent.objectives["spr"]
     assert isinstance(spr, SPRObjective) and spr.target is not None
-    loss, metrics = spr(aux_for(agent, make_batch()))
-    assert -1.0 <= loss.item() <= 1.0 and metrics["spr_loss"] == pytest.approx(loss.item())
+    batch = make_batch()
+    loss, metrics = spr(plain_aux(agent, batch))
+    assert metrics["spr_loss"] == pytest.approx(loss.item())
+    # at construction the momentum target is a copy of (f, H, g): its latent of o_{t+k} is the online one's
+    with torch.no_grad():
+        online = torch.stack([spr.projection(agent.shared.state_proj(agent.encoder(batch["future_obs_seq"][:, k]
+                                                                                  .float()))) for k in range(3)], 1)
+    expected = neg_cos64(f64(spr.predict(plain_aux(agent, batch))), f64(online))
+    assert loss.item() == pytest.approx(expected, rel=1e-5)
     agent.aux_opt.zero_grad(set_to_none=True)
     loss.backward()
     for mod in (agent.encoder, agent.action_encoder, agent.shared.state_proj, spr.transition, spr.projection,
@@ -237,8 +261,14 @@ def test_spr_one_shot_variant_and_replay_without_future_seq():
     assert spr.transition[0].in_features == agent.cfg.feature_dim + 3 * agent.action_encoder.latent_dim
     batch = make_batch()
     del batch["future_obs_seq"]
-    loss, _ = spr(aux_for(agent, batch))
-    assert -1.0 <= loss.item() <= 1.0
+    loss, _ = spr(plain_aux(agent, batch))
+    # one prediction of o_{t+K} from (z_t, u_t..u_{t+K-1}) against the stopped-gradient online latent of o_{t+K}
+    with torch.no_grad():
+        z = agent.shared.state_proj(agent.encoder(batch["obs"].float()))
+        u = agent.encode_action_sequence(batch["action_seq"])
+        pred = spr.prediction(spr.projection(spr.transition(torch.cat([z, u], -1))))
+        target = spr.projection(agent.shared.state_proj(agent.encoder(batch["future_obs"].float())))
+    assert loss.item() == pytest.approx(neg_cos64(f64(pred), f64(target)), rel=1e-5)
     with pytest.raises(ValueError, match="future_obs_seq"):
         agent_for(["agent=spr"]).objectives["spr"](aux_for(agent_for(["agent=spr"]), batch))
 
@@ -259,8 +289,21 @@ def test_atc_gradient_flow_no_actions_and_momentum_target():
     atc = agent.objectives["atc"]
     m = atc.target.momentum
     assert m == pytest.approx(0.99)
-    loss, metrics = atc(aux_for(agent, make_batch()))
-    assert 0.0 <= metrics["atc_acc"] <= 1.0 and loss.item() > 0
+    batch = make_batch()
+    loss, metrics = atc(plain_aux(agent, batch))
+    # by hand in float64: anchor c = H(f(o_t)), p = c + W2 relu(W1 c + b1) + b2, positive c~ = H_m(f_m(o_{t+K}))
+    # (= the online H(f(o_{t+K})) before any update), InfoNCE of p W c~^T against the diagonal
+    with torch.no_grad():
+        c = f64(agent.shared.state_proj(agent.encoder(batch["obs"].float())))
+        target = f64(agent.shared.state_proj(agent.encoder(batch["future_obs"].float())))
+    l1, l2 = atc.predictor[0], atc.predictor[2]
+    p = c + np.maximum(c @ f64(l1.weight).T + f64(l1.bias), 0) @ f64(l2.weight).T + f64(l2.bias)
+    logits = p @ f64(atc.W) @ target.T
+    top = logits.max(1, keepdims=True)
+    log_soft = logits - top - np.log(np.exp(logits - top).sum(1, keepdims=True))
+    assert loss.item() == pytest.approx(float(-np.diag(log_soft).mean()), rel=1e-5)
+    assert metrics["atc_loss"] == pytest.approx(loss.item())
+    assert metrics["atc_acc"] == pytest.approx(float((logits.argmax(1) == np.arange(len(logits))).mean()))
     agent.aux_opt.zero_grad(set_to_none=True)
     loss.backward()
     assert grad_norm(agent.encoder) > 0 and grad_norm(agent.shared.state_proj) > 0

@@ -228,7 +228,21 @@ def test_stale_and_live_locks(tmp_path):
     assert not lock.is_stale(job, {"12_3": "PENDING"}) and not lock.is_stale(job, {"12_3": "COMPLETING"})
     assert lock.is_stale(job, {"12_3": "CANCELLED"}) and lock.is_stale(job, {})
     assert not lock.is_stale(job, None), "SLURM unreachable: assume live"
-    assert lock.update  # token-checked rewrite is exercised by the launchers
+
+
+def test_update_rewrites_only_our_own_lock(tmp_path):
+    path = tmp_path / "run.lock"
+    mine = lock.LockInfo.mine("local")
+    assert not lock.update(path, mine.token, job_id="1"), "no lock: nothing to update"
+    assert lock.try_create(path, mine)
+    assert lock.update(path, mine.token, child_pid=4321, job_id="77_1")
+    got = lock.read(path)
+    assert got is not None and (got.child_pid, got.job_id) == (4321, "77_1")
+    assert (got.token, got.pid, got.host) == (mine.token, mine.pid, mine.host)  # the rest is kept
+    before = path.read_bytes()
+    assert not lock.update(path, "not-the-token", job_id="99"), "another owner's lock is left alone"
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["run.lock"]  # no temporary file left behind
 
 
 # ------------------------------------------------------------------------------------------ status

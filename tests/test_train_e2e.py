@@ -2,10 +2,13 @@
 
 import json
 import os
+import platform
 import signal
+import socket
 import subprocess
 import sys
 import time
+from importlib import metadata
 from pathlib import Path
 
 import pandas as pd
@@ -13,7 +16,7 @@ import pytest
 import torch
 import yaml
 
-from repro import api
+from repro import api, rundir
 from repro.logger import WALLCLOCK_COLUMNS
 
 pytestmark = pytest.mark.slow
@@ -41,7 +44,14 @@ def test_run_directory_contract(reference: Path):
     meta = json.loads((reference / "meta.json").read_text())
     for key in ("git_sha", "git_dirty", "versions", "host", "device", "command"):
         assert key in meta
-    assert meta["versions"]["torch"] == torch.__version__.split("+")[0] or meta["versions"]["torch"]
+    assert meta["versions"]["torch"] == metadata.version("torch") == torch.__version__
+    assert meta["versions"]["python"] == platform.python_version()
+    assert meta["host"] == socket.gethostname() and meta["resumes"] == []
+    assert meta["device"] == rundir.device_name(api.resolve_device("auto"))
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(api.__file__).parent, capture_output=True,
+                          text=True, check=False)
+    if head.returncode == 0:  # a git checkout: the run names the commit it was trained from
+        assert meta["git_sha"] == head.stdout.strip() and isinstance(meta["git_dirty"], bool)
     ev = pd.read_csv(reference / "eval.csv")
     assert list(ev["frame"]) == [0, 200, 400]
     assert list(ev["step"]) == [0, 100, 200]
@@ -88,6 +98,7 @@ def test_sigkill_and_resume_matches_uninterrupted_run(reference: Path, tmp_path:
     # 1st kill: right after the first evaluation row, before any checkpoint exists
     _kill_when(_train_cmd(tmp_path), lambda: _rows(run / "eval.csv") >= 1)
     assert not (run / "DONE").exists()
+    early_checkpoint = (run / "checkpoint.pt").exists()  # the kill is meant to come first; if not, one more resume
     # 2nd kill: after a checkpoint, in the middle of a later episode
     _kill_when(_train_cmd(tmp_path), lambda: _rows(run / "train.csv") >= 2 and (run / "checkpoint.pt").exists()
                and _rows(run / "eval.csv") >= 2)
@@ -98,7 +109,7 @@ def test_sigkill_and_resume_matches_uninterrupted_run(reference: Path, tmp_path:
     for name in ("eval.csv", "train.csv"):
         pd.testing.assert_frame_equal(deterministic(run / name), deterministic(reference / name))
     meta = json.loads((run / "meta.json").read_text())
-    assert len(meta["resumes"]) >= 1
+    assert len(meta["resumes"]) == 1 + early_checkpoint  # a start without a checkpoint is no resume
 
 
 def test_rerun_of_done_run_is_skipped_and_other_config_refused(reference: Path):
