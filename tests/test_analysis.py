@@ -442,3 +442,20 @@ def test_cli_list_and_audit(tmp_path):
     audit = runner.invoke(_app(), ["audit", "--out", str(tmp_path)])
     assert audit.exit_code == 0 and "MISMATCH" in audit.output and (tmp_path / "audit.md").exists()
     assert pd.read_csv(tmp_path / "audit.csv")["match"].eq(False).sum() >= 7
+
+
+def test_cli_claims_indicative_flag(tmp_path):
+    _main_grid(tmp_path / "runs", {t: 600.0 for t in DMC9}, seeds=2, frames=400)
+    args = ["claims", "--results", str(tmp_path / "runs"), "--out", str(tmp_path / "out"), "--reps", "50"]
+    plain = CliRunner().invoke(_app(), args)
+    assert plain.exit_code == 0, plain.output
+    line = next(ln for ln in plain.output.splitlines() if ln.startswith("online_beats_drqv2_all"))
+    assert NO_DATA in line and "runs reach 400 frames; the claim is about 1M frames" in line and "indicative" not in line
+    flagged = CliRunner().invoke(_app(), [*args, "--indicative"])
+    assert flagged.exit_code == 0, flagged.output
+    line = next(ln for ln in flagged.output.splitlines() if ln.startswith("online_beats_drqv2_all"))
+    assert "indicative: TACO ahead on every task (400 frames, 2 seeds)" in line
+    assert not any(ln.split()[1:2] in (["supported"], ["refuted"]) for ln in flagged.output.splitlines())
+    table = pd.read_csv(tmp_path / "out" / "claims.csv", keep_default_na=False).set_index("id")
+    assert table.loc["online_beats_drqv2_all", "verdict"] == NO_DATA
+    assert table.loc["online_beats_drqv2_all", "indicative"].startswith("indicative: TACO ahead")
