@@ -466,7 +466,7 @@ def _short_of_budget(ctx: Context, spec: ClaimBudget) -> str | None:
         if r.done == 0:
             return f"none of the {r.runs} offline runs has finished its configured offline.updates"
         return None
-    if r.highest < spec.budget:
+    if spec.budget is not None and r.highest < spec.budget:
         return f"{r.describe()}; the claim is about {spec.text()}"
     return None
 
@@ -482,7 +482,7 @@ def _indicative(ctx: Context, spec: ClaimBudget, fn: Callable[[Context], tuple[s
     """A reading at the frames every run of the claim reaches (the lowest last frame, capped at the
     claim's budget), one seed per cell allowed: (label, evidence), or ("", reason) if there is none."""
     runs = claim_runs(ctx.scores, spec, ctx.experiment_map, offline=spec.kind == "offline_updates")
-    if spec.kind == "frames":
+    if spec.kind == "frames" and spec.budget is not None:
         r = reach(runs)
         if r.runs == 0 or not r.lowest > 0:
             return "", "no indicative reading: " + ("no runs" if r.runs == 0 else "a run has no evaluation past frame 0")
