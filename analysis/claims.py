@@ -442,7 +442,7 @@ def _manipulator(ctx: Context) -> tuple[str, str]:
 # ---------------------------------------------------------------- entry points
 def _claim_context(ctx: Context, spec: ClaimBudget, budget: int | None, below: bool) -> Context:
     """``ctx`` for one claim: the claim's budget and seed minimum (or, ``below``, an indicative reading)."""
-    key = ("claim-context", spec.kind, budget, spec.min_seeds, below)
+    key = ("claim-context", spec.kind, budget, spec.min_seeds, ctx.min_seeds, below)
     if key not in ctx.cache:
         label = "its configured offline.updates" if spec.kind == "offline_updates" and not below else None
         if spec.kind == "offline_updates" and below:
