@@ -1,25 +1,32 @@
 """A verdict for every claim of ``claims.csv`` from the user's runs: supported / refuted / not enough data.
 
-Rules (also in docs/analysis.md): verdicts compare point estimates (means over the seeds that reached
-the frame budget) with the tolerances written in each rule; 95% CIs are reported beside them. A cell
-with fewer than ``ctx.min_seeds`` seeds counts as missing. A claim about every task ("on each of the
-nine tasks") is refuted by one counterexample among the cells that exist, even if others are missing.
+Rules (also in docs/analysis.md): each claim is judged at its own budget with its own minimum number of
+seeds (``analysis/claim_budgets.csv``: 1M frames for most, 1.5M, 2M, 30M, or an offline run's own
+configured ``offline.updates``), never at the budget the runs happen to reach. Verdicts compare point
+estimates (means over the seeds that reached the claim's budget) with the tolerances written in each
+rule; 95% CIs are reported beside them. A cell with fewer seeds than the claim's minimum counts as
+missing. A claim about every task ("on each of the nine tasks") is refuted by one counterexample among
+the cells that exist, even if others are missing. When the runs fall short, the verdict is "not enough
+data" with the reason; on request (``Context.indicative``) an indicative reading at the frames the runs
+reach is added, labelled as such and never counted as supported or refuted.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 
 from analysis import select
+from analysis.claim_budget import ClaimBudget, claim_runs, frames_text, load_budgets, reach, seed_counts
 from analysis.context import Context
 from analysis.paper import DMC9, METAWORLD6, OFFLINE_TASKS
 from analysis.robustness import seed_spread, solved_counts
-from analysis.scores import best_online_returns, normalize_offline
+from analysis.scores import best_online_returns, final_scores, normalize_offline
 from analysis.speed import speed_measurements
 from analysis.stats import grand_mean_ci, ratio_of_means, score_matrix
 from analysis.tables import write_table
@@ -30,13 +37,22 @@ SUPPORTED, REFUTED, NO_DATA = "supported", "refuted", "not enough data"
 
 @dataclass
 class Verdict:
-    """The outcome of one claim: verdict, the numbers behind it, and the rule applied."""
+    """The outcome of one claim: verdict, the numbers behind it, the rule applied, the claim's budget and
+    seed minimum, and (on request, only when ``verdict`` is "not enough data") an indicative reading."""
 
     id: str
     claim: str
     verdict: str
     evidence: str
     rule: str
+    budget: str = ""
+    min_seeds: int = 0
+    indicative: str = ""
+
+    @property
+    def shown(self) -> str:
+        """What a table shows in its Verdict column: the indicative label when there is one."""
+        return self.indicative or self.verdict
 
 
 class NotEnoughData(Exception):
@@ -101,7 +117,8 @@ def universal(ctx: Context, table: dict, pairs: Sequence[tuple[tuple, tuple, str
     if fails:
         return REFUTED, f"fails on {', '.join(fails)}. {evidence}"
     if missing:
-        raise NotEnoughData(f"missing cells: {', '.join(missing)}" + (f". So far: {evidence}" if evidence else ""))
+        raise NotEnoughData(f"need >= {ctx.min_seeds} seeds that reached {ctx.budget_text()} for: {', '.join(missing)}"
+                            + (f". So far: {evidence}" if evidence else ""))
     return SUPPORTED, evidence
 
 
@@ -158,22 +175,23 @@ def _mean_curves(ctx: Context, curves: pd.DataFrame, task: str) -> dict[str, pd.
     return out
 
 
-@check("reacher_speed", "on reacher_hard, with target = 95% of TACO's best mean-curve value: TACO reaches it by 1.0M frames and DrQ-v2 needs >= 1.5x as many frames (or never does)")
+@check("reacher_speed", "on reacher_hard, with curves cut at the budget (1.5M) and target = 95% of TACO's best mean-curve value: TACO reaches it within 2/3 of the budget (1.0M frames) and DrQ-v2 needs >= 1.5x as many frames (or never does)")
 def _reacher_speed(ctx: Context) -> tuple[str, str]:
     curves = labelled(select.online_main(ctx.curves, ctx.experiment_map))
     mc = _mean_curves(ctx, curves, "reacher_hard")
-    if "TACO" not in mc or "DrQ-v2" not in mc or min(mc["TACO"].index.max(), mc["DrQ-v2"].index.max()) < 1e6:
-        raise NotEnoughData("need TACO and DrQ-v2 learning curves on reacher_hard up to >= 1M frames")
+    if "TACO" not in mc or "DrQ-v2" not in mc or min(mc["TACO"].index.max(), mc["DrQ-v2"].index.max()) < ctx.budget:
+        raise NotEnoughData(f"need TACO and DrQ-v2 learning curves on reacher_hard up to >= {ctx.budget_text()}")
+    mc = {m: c[c.index <= ctx.budget] for m, c in mc.items()}
     target = 0.95 * mc["TACO"].max()
     t_taco = float(mc["TACO"][mc["TACO"] >= target].index.min())
     hit = mc["DrQ-v2"][mc["DrQ-v2"] >= target]
     t_drq = float(hit.index.min()) if len(hit) else None
-    ok = t_taco <= 1e6 and (t_drq is None or t_drq >= 1.5 * t_taco)
+    ok = t_taco <= ctx.budget * 2 / 3 and (t_drq is None or t_drq >= 1.5 * t_taco)
     drq_text = f"{t_drq / 1e6:.2f}M" if t_drq is not None else f"not within {mc['DrQ-v2'].index.max() / 1e6:.2f}M"
     return (SUPPORTED if ok else REFUTED), f"target {target:.0f}: TACO at {t_taco / 1e6:.2f}M, DrQ-v2 {drq_text} (paper: 0.75M vs 1.5M)"
 
 
-@check("longer_training", "TACO mean > DrQ-v2 mean at the last common frame (>= 2M) on quadruped_run, hopper_hop, walker_run, cheetah_run")
+@check("longer_training", "TACO mean > DrQ-v2 mean at the last common frame (>= the budget, 2M) on quadruped_run, hopper_hop, walker_run, cheetah_run")
 def _longer(ctx: Context) -> tuple[str, str]:
     curves = labelled(select.online_main(ctx.curves, ctx.experiment_map))
     lines, fails, missing = [], [], []
@@ -183,7 +201,7 @@ def _longer(ctx: Context) -> tuple[str, str]:
             missing.append(t)
             continue
         common = mc["TACO"].index.intersection(mc["DrQ-v2"].index)
-        if len(common) == 0 or common.max() < 2e6:
+        if len(common) == 0 or common.max() < ctx.budget:
             missing.append(t)
             continue
         f = common.max()
@@ -193,7 +211,7 @@ def _longer(ctx: Context) -> tuple[str, str]:
     if fails:
         return REFUTED, f"fails on {', '.join(fails)}: " + "; ".join(lines)
     if missing:
-        raise NotEnoughData(f"need curves to >= 2M frames on {', '.join(missing)}")
+        raise NotEnoughData(f"need curves to >= {ctx.budget_text()} on {', '.join(missing)}")
     return SUPPORTED, "; ".join(lines)
 
 
@@ -243,6 +261,10 @@ def _tsne(ctx: Context) -> tuple[str, str]:
     res, info = tsne_for_context(ctx)
     if res.silhouette_latent_2d is None:
         raise NotEnoughData(info["reason"] or "no latent embedding")
+    last = ctx.scores.loc[ctx.scores["run_id"] == info["run_id"], "last_frame"]
+    if not ctx.below_budget and (last.empty or not float(last.fillna(0).max()) >= ctx.budget):
+        got = frames_text(float(last.fillna(0).max())) if not last.empty else "no evaluation"
+        raise NotEnoughData(f"the t-SNE run {info['run_id']} reaches {got}; the claim is about {ctx.budget_text()}")
     ok = res.silhouette_latent_2d >= CLUSTER_THRESHOLD and res.silhouette_raw_2d < CLUSTER_THRESHOLD
     return (SUPPORTED if ok else REFUTED), (
         f"silhouette raw {res.silhouette_raw_2d:.3f}, latent {res.silhouette_latent_2d:.3f} (t-SNE 2-D; original "
@@ -286,8 +308,20 @@ def _vs_repr(ctx: Context) -> tuple[str, str]:
     return universal(ctx, table, pairs)
 
 
+def offline_scores(ctx: Context) -> pd.DataFrame:
+    """Per-run scores for offline claims, at each run's own budget (its configured ``offline.updates``):
+    the last evaluation, ``reached`` when the run finished (status done). In an indicative reading every
+    run with an evaluation counts, finished or not."""
+    df = final_scores(ctx.results, budget=sys.maxsize)
+    if df.empty:
+        return df
+    offline = df["dataset"].notna()
+    reached = df["score"].notna() if ctx.below_budget else df["status"] == "done"
+    return df.assign(reached=(reached & offline).to_numpy(dtype=bool))
+
+
 def _offline_table(ctx: Context, value: str = "score") -> tuple[dict, pd.DataFrame]:
-    df = labelled(select.offline(ctx.scores, ctx.experiment_map))
+    df = labelled(select.offline(offline_scores(ctx), ctx.experiment_map))
     if not df.empty:
         df = normalize_offline(df, best_online_returns(ctx.results))
     return means(df, ["task", "dataset", "method"], value), df
@@ -351,12 +385,12 @@ def _action_dim(ctx: Context) -> tuple[str, str]:
     return (SUPPORTED if ok else REFUTED), ", ".join(f"d={d} {get(ctx, table, d):.0f}" for d in have)
 
 
-@check("speed", "on one hardware, FPS(DrQ-v2 B256) / FPS(TACO B1024) within ±25% of 3.6, and TACO's FPS decreases with batch size where measured")
+@check("speed", "on one hardware, FPS(DrQ-v2 B256) / FPS(TACO B1024) within ±25% of 3.6, and TACO's FPS decreases with batch size where measured (from `repro bench` files and runs of experiment 'speed'; other runs' FPS only in an indicative reading)")
 def _speed(ctx: Context) -> tuple[str, str]:
-    meas = speed_measurements(ctx.results)
+    meas = speed_measurements(ctx.results, fallback=ctx.below_budget)
     meas = meas[meas["speedup"] == "plain"]
     if meas.empty:
-        raise NotEnoughData("no FPS measurements (runs' train.csv or bench/*.json)")
+        raise NotEnoughData("no FPS measurements (bench/*.json or runs of experiment 'speed')")
     for hw, rows in meas.groupby("hardware"):
         fps = rows.groupby(["method", "batch_size"])["fps"].mean()
         if ("TACO", 1024) in fps.index and ("DrQ-v2", 256) in fps.index:
@@ -375,7 +409,7 @@ def _seeds(ctx: Context) -> tuple[str, str]:
     df = select.online_main(ctx.scores, ctx.experiment_map)
     df = df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df
     spread = seed_spread(df)
-    need = max(3, ctx.min_seeds)
+    need = ctx.min_seeds
     got = spread[spread["n"] >= need]
     tasks = [t for t in DMC9 if set(got[got["task"] == t]["label"]) >= {"TACO", "DrQ-v2"}]
     if len(tasks) < 9:
@@ -387,10 +421,10 @@ def _seeds(ctx: Context) -> tuple[str, str]:
     return (SUPPORTED if ok else REFUTED), f"TACO's std lower on {less}/9 tasks; DrQ-v2 broken seeds: {broken}; TACO broken seeds: {int(got[got['label'] == 'TACO']['broken'].sum())}"
 
 
-@check("manipulator", "within 30M frames TACO solves (an eval return >= 500) at least a third of its seeds (paper 3/6) and DrQ-v2 none")
+@check("manipulator", "within the budget (30M frames) TACO solves (an eval return >= 500) at least a third of its seeds (paper 3/6) and DrQ-v2 none")
 def _manipulator(ctx: Context) -> tuple[str, str]:
     curves = select.manipulator(ctx.curves, ctx.experiment_map)
-    solved = solved_counts(curves, 30e6)
+    solved = solved_counts(curves, ctx.budget)
     s = solved.set_index("label") if not solved.empty else solved
     if "DrQ-v2" in s.index and s.loc["DrQ-v2", "solved"] > 0:
         return REFUTED, f"DrQ-v2 solves {int(s.loc['DrQ-v2', 'solved'])} seeds"
@@ -400,36 +434,120 @@ def _manipulator(ctx: Context) -> tuple[str, str]:
     ev = f"TACO {int(s.loc['TACO', 'solved'])}/{int(s.loc['TACO', 'runs'])}, DrQ-v2 0/{int(s.loc['DrQ-v2', 'runs'])} solved"
     if taco_frac >= 1 / 3:
         return SUPPORTED, ev
-    if min(s["last_frame"]) >= 30e6:
+    if min(s["last_frame"]) >= ctx.budget:
         return REFUTED, ev
-    raise NotEnoughData(ev + f"; runs reach only {min(s['last_frame']) / 1e6:.1f}M of 30M frames")
+    raise NotEnoughData(ev + f"; runs reach only {frames_text(min(s['last_frame']))} of {ctx.budget_text()}")
 
 
 # ---------------------------------------------------------------- entry points
+def _claim_context(ctx: Context, spec: ClaimBudget, budget: int | None, below: bool) -> Context:
+    """``ctx`` for one claim: the claim's budget and seed minimum (or, ``below``, an indicative reading)."""
+    key = ("claim-context", spec.kind, budget, spec.min_seeds, ctx.min_seeds, below)
+    if key not in ctx.cache:
+        label = "its configured offline.updates" if spec.kind == "offline_updates" and not below else None
+        if spec.kind == "offline_updates" and below:
+            label = "the latest evaluation"
+        ctx.cache[key] = replace(ctx, budget=budget if budget is not None else ctx.budget, below_budget=below,
+                                 min_seeds=1 if below else max(spec.min_seeds, ctx.min_seeds),
+                                 budget_label=label, cache=ctx.cache)
+    return ctx.cache[key]
+
+
+def _short_of_budget(ctx: Context, spec: ClaimBudget) -> str | None:
+    """Why the claim's runs cannot carry a verdict at its budget, or None if they may."""
+    if spec.kind == "none":
+        return None
+    runs = claim_runs(ctx.scores, spec, ctx.experiment_map, offline=spec.kind == "offline_updates")
+    r = reach(runs)
+    names = ", ".join(select.expand_experiments(spec.experiments, ctx.experiment_map))
+    if r.runs == 0:
+        return f"no runs in experiment(s) {names}; the claim is about {spec.text()}"
+    if spec.kind == "offline_updates":
+        if r.done == 0:
+            return f"none of the {r.runs} offline runs has finished its configured offline.updates"
+        return None
+    if spec.budget is not None and r.highest < spec.budget:
+        return f"{r.describe()}; the claim is about {spec.text()}"
+    return None
+
+
+def _judge(ctx: Context, fn: Callable[[Context], tuple[str, str]]) -> tuple[str, str]:
+    try:
+        return fn(ctx)
+    except NotEnoughData as exc:
+        return NO_DATA, str(exc)
+
+
+def _indicative(ctx: Context, spec: ClaimBudget, fn: Callable[[Context], tuple[str, str]]) -> tuple[str, str]:
+    """A reading at the frames every run of the claim reaches (the lowest last frame, capped at the
+    claim's budget), one seed per cell allowed: (label, evidence), or ("", reason) if there is none."""
+    runs = claim_runs(ctx.scores, spec, ctx.experiment_map, offline=spec.kind == "offline_updates")
+    if spec.kind == "frames" and spec.budget is not None:
+        r = reach(runs)
+        if r.runs == 0 or not r.lowest > 0:
+            return "", "no indicative reading: " + ("no runs" if r.runs == 0 else "a run has no evaluation past frame 0")
+        budget = int(min(r.lowest, spec.budget))
+        where = frames_text(budget)
+    else:
+        budget, where = None, "latest evaluations" if spec.kind == "offline_updates" else "measurements"
+    verdict, evidence = _judge(_claim_context(ctx, spec, budget, below=True), fn)
+    if verdict == NO_DATA:
+        return "", f"no indicative reading at {where}: {evidence}"
+    words = spec.holds if verdict == SUPPORTED else spec.fails
+    label = f"indicative: {words} ({where}, {seed_counts(runs)})"
+    return label, f"indicative reading at {where}, below the claim's budget or seed count: {evidence}"
+
+
 def evaluate_claims(ctx: Context) -> list[Verdict]:
-    """One verdict per row of claims.csv, in its order."""
+    """One verdict per row of claims.csv, in its order, each at the claim's own budget."""
+    budgets = load_budgets()
     out = []
     for row in ctx.paper.claims.itertuples(index=False):
         fn, rule = CHECKS.get(row.id, (None, "no check implemented"))
-        if fn is None:
-            out.append(Verdict(row.id, row.claim, NO_DATA, "no check implemented for this claim", rule))
+        spec = budgets.get(row.id)
+        if fn is None or spec is None:
+            why = "no check implemented for this claim" if fn is None else "no budget for this claim in claim_budgets.csv"
+            out.append(Verdict(row.id, row.claim, NO_DATA, why, rule))
             continue
-        try:
-            verdict, evidence = fn(ctx)
-        except NotEnoughData as exc:
-            verdict, evidence = NO_DATA, str(exc)
-        out.append(Verdict(row.id, row.claim, verdict, f"at {ctx.budget_text()}: {evidence}", rule))
+        seeds = max(spec.min_seeds, ctx.min_seeds)
+        short = _short_of_budget(ctx, spec)
+        if short is not None:
+            verdict, evidence = NO_DATA, short
+        else:
+            verdict, evidence = _judge(_claim_context(ctx, spec, spec.budget, below=False), fn)
+        evidence = f"at {spec.text()}: {evidence}"
+        label = ""
+        if verdict == NO_DATA and ctx.indicative:
+            label, extra = _indicative(ctx, spec, fn)
+            evidence = f"{evidence}. {extra}"
+        out.append(Verdict(row.id, row.claim, verdict, evidence, rule, spec.text(), seeds, label))
     return out
+
+
+def verdict_counts(verdicts: Sequence[Verdict]) -> str:
+    """'2 supported, 1 refuted, 17 not enough data (5 with an indicative reading)'."""
+    counts = {k: sum(v.verdict == k for v in verdicts) for k in (SUPPORTED, REFUTED, NO_DATA)}
+    text = ", ".join(f"{counts[k]} {k}" for k in (SUPPORTED, REFUTED, NO_DATA))
+    n_ind = sum(bool(v.indicative) for v in verdicts)
+    return text + (f" ({n_ind} with an indicative reading, not a verdict)" if n_ind else "")
+
+
+def claims_frame(verdicts: Sequence[Verdict]) -> pd.DataFrame:
+    """The display table of the claims: Claim, Verdict (or indicative label), Budget, Seeds, Numbers, Rule."""
+    return pd.DataFrame({"Claim": [v.id for v in verdicts], "Verdict": [v.shown for v in verdicts],
+                         "Budget": [v.budget for v in verdicts],
+                         "Seeds": [f">= {v.min_seeds}" if v.min_seeds else "" for v in verdicts],
+                         "Numbers": [v.evidence for v in verdicts], "Rule": [v.rule for v in verdicts]})
 
 
 def write_claims(ctx: Context, verdicts: Sequence[Verdict]):
     """Write ``claims.csv/.md/.tex`` to ``ctx.out_dir``."""
     raw = pd.DataFrame([v.__dict__ for v in verdicts])
-    disp = pd.DataFrame({"Claim": [v.id for v in verdicts], "Verdict": [v.verdict for v in verdicts],
-                         "Numbers": [v.evidence for v in verdicts], "Rule": [v.rule for v in verdicts]})
-    counts = raw["verdict"].value_counts().to_dict() if not raw.empty else {}
-    caption = ("Verdict on each claim of the paper from the reproduced runs (" +
-               ", ".join(f"{counts.get(k, 0)} {k}" for k in (SUPPORTED, REFUTED, NO_DATA)) + ").")
-    notes = [f"A cell needs >= {ctx.min_seeds} seeds that reached {ctx.budget_text()}; verdicts compare means "
+    caption = f"Verdict on each claim of the paper from the reproduced runs ({verdict_counts(verdicts)})."
+    notes = ["Each claim is judged at its own budget (Budget) with at least the seeds per cell in Seeds "
+             "(analysis/claim_budgets.csv), only from runs that reached that budget; verdicts compare means "
              "with the tolerances in the Rule column; CIs are 95% stratified-bootstrap (rliable)."]
-    return write_table(ctx.out_dir, "claims", raw, caption, disp, notes)
+    if any(v.indicative for v in verdicts):
+        notes.append("An 'indicative' entry is a reading below the claim's budget or seed count, asked for "
+                     "with --indicative: it is not a verdict and counts as not enough data.")
+    return write_table(ctx.out_dir, "claims", raw, caption, claims_frame(verdicts), notes)

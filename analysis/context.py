@@ -31,7 +31,14 @@ class Context:
         tsne_n: noisy copies per centroid in F6 (the paper's 1000).
         tsne_iter: t-SNE iterations (scikit-learn's default 1000).
         render_envs: whether F13 may build environments to render frames.
-        min_seeds: seeds per cell a claim needs before it gets a verdict.
+        min_seeds: seeds per cell a claim needs before it gets a verdict (each claim also has its own
+            minimum in analysis/claim_budgets.csv; the larger applies).
+        indicative: also give a labelled indicative reading of each claim whose runs fall short of its
+            budget or seed count (never a supported/refuted verdict).
+        below_budget: set by analysis.claims on the context of an indicative reading: cells use the
+            runs' latest scores instead of needing to have reached the claim's budget.
+        budget_label: what a run must reach, in words, where ``budget`` is not a frame count (offline
+            claims: "its configured offline.updates").
         cache: results shared between artifacts and claims (e.g. the t-SNE of F6).
     """
 
@@ -47,6 +54,9 @@ class Context:
     tsne_iter: int = 1000
     render_envs: bool = True
     min_seeds: int = 2
+    indicative: bool = False
+    below_budget: bool = False
+    budget_label: str | None = None
     cache: dict = field(default_factory=dict)
 
     @cached_property
@@ -54,15 +64,20 @@ class Context:
         """Per-run score at the budget (see analysis.scores.final_scores)."""
         return final_scores(self.results, self.budget)
 
-    @cached_property
+    @property
     def curves(self) -> pd.DataFrame:
-        """Every run's learning curve on a common frame grid."""
-        return learning_curves(self.results)
+        """Every run's learning curve on a common frame grid (budget-independent: kept in ``cache``, which
+        the per-claim contexts of analysis.claims share)."""
+        if "curves" not in self.cache:
+            self.cache["curves"] = learning_curves(self.results)
+        return self.cache["curves"]
 
     @property
     def no_runs(self) -> bool:
         return self.results.empty
 
     def budget_text(self) -> str:
+        if self.budget_label is not None:
+            return self.budget_label
         b = self.budget
         return f"{b / 1e6:g}M frames" if b >= 1_000_000 else f"{b:,} frames"

@@ -24,6 +24,11 @@ FULL_OBJECTIVES = ("curl", "reward", "taco")
 _OBJECTIVE_LABELS = {"taco": "TACO", "curl": "CURL", "reward": "reward"}
 
 
+def expand_experiments(experiments: Sequence[str], experiment_map: ExperimentMap | None) -> list[str]:
+    """The actual experiment names read for canonical ``experiments`` under ``experiment_map``, in order."""
+    return _expand(experiments, experiment_map)
+
+
 def _expand(experiments: Sequence[str], experiment_map: ExperimentMap | None) -> list[str]:
     out: list[str] = []
     for name in experiments:

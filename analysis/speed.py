@@ -23,11 +23,12 @@ def hardware_label(device: Any, cpu: Any = None, host: Any = None) -> str:
     return dev or "unknown hardware"
 
 
-def speed_measurements(results: Results, experiments: tuple[str, ...] = ("speed",)) -> pd.DataFrame:
+def speed_measurements(results: Results, experiments: tuple[str, ...] = ("speed",),
+                       fallback: bool = True) -> pd.DataFrame:
     """One row per measurement: method, batch_size, fps, hardware, source, speedup.
 
-    Runs of the ``speed`` experiment are used if there are any, otherwise every run with an FPS (each
-    run's FPS is the median over training episodes once updates started). Benchmark rows are added as
+    Runs of the ``speed`` experiment are used if there are any, otherwise (if ``fallback``) every run
+    with an FPS (each run's FPS is the median over training episodes once updates started). Benchmark rows are added as
     they are; ``speedup`` is the benchmark's code path ("plain", or e.g. "amp", "compile", shown in the
     source) and "plain" for runs.
     """
@@ -36,7 +37,7 @@ def speed_measurements(results: Results, experiments: tuple[str, ...] = ("speed"
     if not runs.empty and "fps" in runs.columns:
         runs = runs[runs["fps"].notna()]
         chosen = runs[runs["experiment"].isin(experiments)]
-        if chosen.empty:
+        if chosen.empty and fallback:
             chosen = runs
         for r in chosen.itertuples(index=False):
             rows.append(

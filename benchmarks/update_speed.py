@@ -1,8 +1,8 @@
 """Benchmark (not a test): seconds per TACO / DrQ-v2 update at batch 256 and 1024, and replay memory.
 
-Usage: `python benchmarks/update_speed.py [--device cuda]` (same as `repro bench`). Compare the
-printed seconds with the upstream figures in ../shared/docs/upstream.md (TACO B1024 ~30 s, DrQ-v2 B1024
-~11.5 s, TACO B256 ~6.7 s on the 2-core CPU).
+Usage: `python benchmarks/update_speed.py [--device cuda] [--warmup N] [--repeats N]` (same as
+`repro bench`). It prints only ratios between measurements of this one run; to compare with the
+upstream TACO code, time both side by side on your machine as docs/performance.md describes.
 """
 
 from repro.bench import register  # noqa: F401  (the implementation lives in the package)

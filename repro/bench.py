@@ -1,7 +1,10 @@
 """`repro bench`: time one agent update per algorithm and batch size, and the replay memory overhead.
 
-Results are reported as ratios measured in one run (no timed unit tests) and saved as JSON under
-``{results_root}/bench/`` for the speed tables (T4, T5).
+Only ratios between measurements made in this one run are printed (speed-up path vs plain, one batch
+size vs another, one algorithm vs another at the same batch): a ratio against a figure measured on
+another machine or in another process says nothing. To compare with the upstream code, time both side
+by side on one machine (docs/performance.md). Results are saved as JSON under ``{results_root}/bench/``
+for the speed tables (T4, T5).
 """
 
 from __future__ import annotations
@@ -19,10 +22,6 @@ import typer
 
 from repro.fsutil import atomic_write_text
 
-# Seconds per update measured for the upstream code on a 2-core CPU (../shared/docs/upstream.md).
-UPSTREAM_CPU_SECONDS = {("taco", 1024): 30.0, ("drqv2", 1024): 11.5, ("taco", 256): 6.7}
-
-
 def _batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(0)
     u8 = lambda: torch.randint(0, 256, (B, 9, 84, 84), dtype=torch.uint8, generator=g).to(device)  # noqa: E731
@@ -34,8 +33,9 @@ def _batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tensor]:
 
 
 def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
-                device: str = "cpu", speedup: str = "plain") -> dict:
-    """Median wall-clock seconds of one full agent update (after one warm-up update)."""
+                device: str = "cpu", speedup: str = "plain", warmup: int = 1) -> dict:
+    """Median wall-clock seconds of one full agent update, over ``repeats`` timed updates after ``warmup``
+    untimed ones (same batch every time)."""
     from repro.agent.agent import Agent
     from repro.config import compose, typed
     from repro.envs import get_task
@@ -46,7 +46,8 @@ def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: 
     torch.manual_seed(0)
     agent = Agent(rc.agent, (9, 84, 84), A, device=device)
     batch = _batch(batch_size, rc.agent.K, A, device)
-    agent.update(batch, step=10**6)
+    for _ in range(warmup):
+        agent.update(batch, step=10**6)
     times = []
     for _ in range(repeats):
         if device.startswith("cuda"):
@@ -60,7 +61,7 @@ def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: 
     # one update every 2 agent steps at action repeat 2 = 4 frames per update (update-bound estimate)
     fps = rc.train.update_every_steps * rc.env.action_repeat / seconds
     return {"algo": algo, "batch_size": batch_size, "speedup": speedup, "update_seconds": round(seconds, 4),
-            "fps_estimate": round(fps, 3), "repeats": repeats}
+            "fps_estimate": round(fps, 3), "repeats": repeats, "warmup": warmup}
 
 
 def replay_memory_ratio(capacity: int = 100_000, action_dim: int = 12) -> dict:
@@ -80,33 +81,54 @@ def hardware(device: str) -> str:
     return f"{_cpu_model()} ({torch.get_num_threads()} threads)"
 
 
+def same_run_ratios(plain_seconds: dict[tuple[str, int], float]) -> dict[str, float]:
+    """Ratios of update times measured in one run, keyed ``{algo}_b{batch}_over_{algo}_b{batch}``: each
+    algorithm's batch sizes against its smallest one, TACO against DrQ-v2 at each shared batch size, and
+    TACO B1024 over DrQ-v2 B256 (the paper's own batch sizes)."""
+    ratios: dict[str, float] = {}
+
+    def put(a: tuple[str, int], b: tuple[str, int]) -> None:
+        ratios[f"{a[0]}_b{a[1]}_over_{b[0]}_b{b[1]}"] = round(plain_seconds[a] / plain_seconds[b], 3)
+
+    algos = sorted({a for a, _ in plain_seconds}, reverse=True)  # taco before drqv2: ratios above 1
+    sizes = {a: sorted(b for x, b in plain_seconds if x == a) for a in algos}
+    for a in algos:
+        for b in sizes[a][1:]:
+            put((a, b), (a, sizes[a][0]))
+    for i, a in enumerate(algos):
+        for other in algos[i + 1:]:
+            for b in sorted(set(sizes[a]) & set(sizes[other])):
+                put((a, b), (other, b))
+    if ("taco", 1024) in plain_seconds and ("drqv2", 256) in plain_seconds:
+        put(("taco", 1024), ("drqv2", 256))
+    return ratios
+
+
+def _ratio_text(name: str, value: float) -> str:
+    num, den = (part.replace("_b", " B") for part in name.split("_over_"))
+    return f"{num} / {den} update time: {value:.2f}x (measured in this run)"
+
+
 def run_bench(configs: list[tuple[str, int]], repeats: int, device: str, out_dir: Path,
-              echo=print, speedups: tuple[str, ...] = ()) -> dict:
+              echo=print, speedups: tuple[str, ...] = (), warmup: int = 1) -> dict:
+    """Time every (algo, batch) plain and with each speed-up, print the same-run ratios, write the JSON."""
     results = []
     plain_seconds: dict[tuple[str, int], float] = {}
     for algo, bs, speedup in [(a, b, "plain") for a, b in configs] + [(a, b, s) for s in speedups
                                                                       for a, b in configs]:
-        row = time_update(algo, bs, repeats=repeats, device=device, speedup=speedup)
+        row = time_update(algo, bs, repeats=repeats, device=device, speedup=speedup, warmup=warmup)
         if speedup == "plain":
             plain_seconds[(algo, bs)] = row["update_seconds"]
+            echo(f"{algo:>6} batch {bs:>5}: {row['update_seconds']:.3f} s/update, ~{row['fps_estimate']:.1f} fps "
+                 f"(update-bound; {warmup} warm-up + {repeats} timed updates, median)")
         else:
             row["speedup_vs_plain"] = round(plain_seconds[(algo, bs)] / row["update_seconds"], 3)
-            results.append(row)
             echo(f"{algo:>6} batch {bs:>5} {speedup}: {row['update_seconds']:.3f} s/update, "
-                 f"{row['speedup_vs_plain']:.2f}x the plain path")
-            continue
-        upstream = UPSTREAM_CPU_SECONDS.get((algo, bs))
-        if upstream is not None and device == "cpu":
-            row["upstream_cpu_seconds"] = upstream
-            row["speedup_vs_upstream"] = round(upstream / row["update_seconds"], 3)
+                 f"{row['speedup_vs_plain']:.2f}x the plain path (measured in this run)")
         results.append(row)
-        echo(f"{algo:>6} batch {bs:>5}: {row['update_seconds']:.3f} s/update, ~{row['fps_estimate']:.1f} fps"
-             + (f", {row['speedup_vs_upstream']:.2f}x upstream's CPU time" if "speedup_vs_upstream" in row else ""))
-    by = plain_seconds
-    ratios = {}
-    if ("taco", 1024) in by and ("drqv2", 256) in by:
-        ratios["taco1024_over_drqv2_256"] = round(by[("taco", 1024)] / by[("drqv2", 256)], 3)
-        echo(f"TACO B1024 / DrQ-v2 B256 update time: {ratios['taco1024_over_drqv2_256']:.2f}x (paper: 130/35 = 3.7x in fps)")
+    ratios = same_run_ratios(plain_seconds)
+    for name, value in ratios.items():
+        echo(_ratio_text(name, value))
     memory = replay_memory_ratio()
     echo(f"replay memory / raw frame bytes: {memory['ratio']:.4f} (target <= 1.10)")
     report = {"hardware": hardware(device), "device": device, "host": socket.gethostname(),
@@ -123,12 +145,13 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def bench(batch: Optional[list[int]] = typer.Option(None, "--batch", help="Batch sizes (default 256 1024)."),
               algo: Optional[list[str]] = typer.Option(None, "--algo", help="taco and/or drqv2 (default both)."),
-              repeats: int = typer.Option(2, help="Timed updates per setting (median reported)."),
+              repeats: int = typer.Option(2, min=1, help="Timed updates per setting (median reported)."),
+              warmup: int = typer.Option(1, min=0, help="Untimed warm-up updates before the timed ones."),
               device: str = typer.Option("cpu", help="cpu or cuda."),
               amp: bool = typer.Option(False, "--amp", help="Also time agent.amp=true (ratio to plain)."),
               compile_: bool = typer.Option(False, "--compile", help="Also time agent.compile=true (ratio to plain)."),
               results_root: Path = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).")):
-        """Time one update of TACO and DrQ-v2 at batch 256 and 1024; report ratios and replay memory."""
+        """Time one update of TACO and DrQ-v2 at batch 256 and 1024; print same-run ratios and replay memory."""
         if device.startswith("cuda") and not torch.cuda.is_available():
             typer.echo("error: --device cuda but no CUDA device is available", err=True)
             raise typer.Exit(2)
@@ -138,4 +161,7 @@ def register(app: typer.Typer) -> None:
                 raise typer.Exit(2)
         configs = [(a, b) for a in (algo or ["taco", "drqv2"]) for b in (batch or [256, 1024])]
         speedups = tuple(name for name, on in (("amp", amp), ("compile", compile_)) if on)
-        run_bench(configs, repeats, device, results_root / "bench", echo=typer.echo, speedups=speedups)
+        if any(b < 1 for b in batch or []):
+            typer.echo("error: --batch must be >= 1", err=True)
+            raise typer.Exit(2)
+        run_bench(configs, repeats, device, results_root / "bench", echo=typer.echo, speedups=speedups, warmup=warmup)

@@ -18,7 +18,11 @@ OUT_OPT = typer.Option(Path("results/report"), "--out", "-o", help="Folder for t
 FRAMES_OPT = typer.Option(1_000_000, "--frames", help="Frame budget of 'score at N frames' (the paper: 1M).")
 REPS_OPT = typer.Option(DEFAULT_REPS, "--reps", help="Bootstrap repetitions (rliable's default 50,000).")
 SEED_OPT = typer.Option(DEFAULT_SEED, "--seed", help="Random state of the bootstrap and t-SNE.")
-MIN_SEEDS_OPT = typer.Option(2, "--min-seeds", help="Seeds a cell needs before a claim gets a verdict.")
+MIN_SEEDS_OPT = typer.Option(2, "--min-seeds", help="Seeds a cell needs before a claim gets a verdict (raises, never "
+                             "lowers, each claim's own minimum in analysis/claim_budgets.csv).")
+INDICATIVE_OPT = typer.Option(False, "--indicative", help="For claims whose runs fall short of the claim's budget or "
+                              "seed count, add a labelled indicative reading at the frames the runs reach (never "
+                              "a supported/refuted verdict).")
 MAP_OPT = typer.Option(
     None, "--experiment-map", "-x",
     help="Read a canonical experiment from other experiment names, e.g. -x main=tiny (repeatable).",
@@ -129,15 +133,17 @@ def register(app: typer.Typer) -> None:
         min_seeds: int = MIN_SEEDS_OPT,
         experiment_map: Optional[list[str]] = MAP_OPT,
         tsne_n: int = TSNE_OPT,
+        indicative: bool = INDICATIVE_OPT,
     ) -> None:
         """A verdict (supported / refuted / not enough data) on each claim of the paper, with its numbers."""
         from analysis.claims import evaluate_claims, write_claims
 
         ctx = make_context(results, out, frames, reps, seed, min_seeds, experiment_map, tsne_n)
+        ctx.indicative = indicative
         summarize_load(ctx)
         verdicts = evaluate_claims(ctx)
         for v in verdicts:
-            typer.echo(f"{v.id:<26} {v.verdict:<16} {v.evidence}")
+            typer.echo(f"{v.id:<26} {v.shown:<16} {v.evidence}")
         table = write_claims(ctx, verdicts)
         typer.echo(f"Wrote {', '.join(str(p) for p in table.files)}")
 
@@ -168,11 +174,13 @@ def register(app: typer.Typer) -> None:
         experiment_map: Optional[list[str]] = MAP_OPT,
         tsne_n: int = TSNE_OPT,
         render_envs: bool = RENDER_OPT,
+        indicative: bool = INDICATIVE_OPT,
     ) -> None:
         """Render everything and write REPORT.md and REPORT.html (tables, figures, claims, audit, provenance)."""
         from repro_app.report import build_report
 
         ctx = make_context(results, out, frames, reps, seed, min_seeds, experiment_map, tsne_n, render_envs)
+        ctx.indicative = indicative
         summarize_load(ctx)
         md, html = build_report(ctx, progress=lambda aid: typer.echo(f"  rendering {aid}"))
         typer.echo(f"Wrote {md} and {html}")

@@ -13,7 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.audit import mismatches, run_audit, write_audit
-from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims, write_claims
+from analysis.claims import claims_frame, evaluate_claims, verdict_counts, write_claims
 from analysis.context import Context
 from analysis.io import atomic_write_text
 from analysis.tables import to_markdown
@@ -75,13 +75,17 @@ def build_markdown(ctx: Context, artifacts, verdicts, findings) -> str:
     else:
         lines.append(f"\n{len(res.runs)} runs loaded ({int((res.runs['status'] == 'done').sum())} done); "
                      f"{len(res.problems)} problem files (listed under Provenance).")
-    counts = {k: sum(v.verdict == k for v in verdicts) for k in (SUPPORTED, REFUTED, NO_DATA)}
     n_bad = len(mismatches(findings))
-    lines.append(f"\n**Claims:** {counts[SUPPORTED]} supported, {counts[REFUTED]} refuted, {counts[NO_DATA]} not "
-                 f"enough data. **Audit of the paper's own numbers:** {n_bad} mismatches.")
-    claims_md = to_markdown(pd.DataFrame({"Claim": [v.id for v in verdicts], "Verdict": [v.verdict for v in verdicts],
-                                          "Numbers": [v.evidence for v in verdicts], "Rule": [v.rule for v in verdicts]}))
-    lines.append(_section("Claims", claims_md))
+    lines.append(f"\n**Claims:** {verdict_counts(verdicts)}. **Audit of the paper's own numbers:** {n_bad} "
+                 "mismatches.")
+    claims_note = ("Each claim is judged at its own budget (column Budget, from analysis/claim_budgets.csv, not "
+                   f"from the runs; the tables below use {ctx.budget_text()}) and only from cells with at least the "
+                   "seeds in column Seeds that reached it; otherwise the verdict is 'not enough data' with the "
+                   "reason.")
+    if any(v.indicative for v in verdicts):
+        claims_note += (" Entries marked 'indicative' are readings below a claim's budget or seed count, asked for "
+                        "with --indicative: they are not verdicts.")
+    lines.append(_section("Claims", claims_note + "\n\n" + to_markdown(claims_frame(verdicts))))
     bad = [f for f in findings if f.kind == "check" and not f.match]
     audit_md = to_markdown(pd.DataFrame({"Where": [f.where for f in bad], "What": [f.description for f in bad],
                                          "Paper prints": [f.printed for f in bad], "Recomputed": [f.recomputed for f in bad]}))

@@ -226,12 +226,18 @@ def test_speed_from_runs_and_bench(tmp_path):
 
 
 # ---------------------------------------------------------------- claims
-def _main_grid(root: Path, taco: dict[str, float], seeds: int = 2) -> None:
+CLAIM_FRAMES = 1_000_000  # the budget of the main-table claims (analysis/claim_budgets.csv)
+
+
+def _main_grid(root: Path, taco: dict[str, float], seeds: int = 3, frames: int = CLAIM_FRAMES,
+               experiment: str = "main") -> None:
     for task in DMC9:
         for s in range(seeds):
-            write_run(root, experiment="main", algo="drqv2", task=task, seed=s, final=400.0 + s)
+            write_run(root, experiment=experiment, algo="drqv2", task=task, seed=s, final=400.0 + s, frames=frames,
+                      eval_every=frames // 4)
             if task in taco:
-                write_run(root, experiment="main", algo="taco", task=task, seed=s, final=taco[task] + s)
+                write_run(root, experiment=experiment, algo="taco", task=task, seed=s, final=taco[task] + s,
+                          frames=frames, eval_every=frames // 4)
 
 
 def _verdicts(ctx: Context) -> dict[str, object]:
@@ -262,18 +268,117 @@ def test_claim_verdicts_supported_refuted_and_not_enough_data(tmp_path):
     assert _verdicts(_ctx(gaps))["online_beats_drqv2_all"].verdict == NO_DATA
 
 
-def test_claim_min_seeds(tmp_path):
-    _main_grid(tmp_path, {t: 600.0 for t in DMC9}, seeds=1)
-    assert _verdicts(_ctx(tmp_path))["online_beats_drqv2_all"].verdict == NO_DATA
-    assert _verdicts(_ctx(tmp_path, min_seeds=1))["online_beats_drqv2_all"].verdict == SUPPORTED
+def test_claim_min_seeds_come_from_the_budget_table(tmp_path):
+    two = tmp_path / "two"
+    _main_grid(two, {t: 600.0 for t in DMC9}, seeds=2)
+    v = _verdicts(_ctx(two, min_seeds=1))["online_beats_drqv2_all"]  # --min-seeds cannot go below the table's 3
+    assert v.verdict == NO_DATA and "need >= 3 seeds that reached 1M frames" in v.evidence and v.min_seeds == 3
+    three = tmp_path / "three"
+    _main_grid(three, {t: 600.0 for t in DMC9}, seeds=3)
+    assert _verdicts(_ctx(three, min_seeds=1))["online_beats_drqv2_all"].verdict == SUPPORTED
+    assert _verdicts(_ctx(three, min_seeds=4))["online_beats_drqv2_all"].verdict == NO_DATA  # but can go above
+
+
+def test_claims_below_their_budget_are_not_enough_data_with_the_reason(tmp_path):
+    # tiny runs (400 frames, 2 seeds) in which TACO loses everywhere: a universal claim is NOT refuted
+    _main_grid(tmp_path, {t: 300.0 for t in DMC9}, seeds=2, frames=400)
+    ctx = _ctx(tmp_path)
+    ctx.budget = 400  # even when the tables are scored at the runs' own budget (as `repro reproduce` does)
+    verdicts = evaluate_claims(ctx)
+    assert {v.verdict for v in verdicts} == {NO_DATA}
+    v = {x.id: x for x in verdicts}
+    assert "runs reach 400 frames; the claim is about 1M frames" in v["online_beats_drqv2_all"].evidence
+    assert "the claim is about 2M frames" in v["longer_training"].evidence
+    assert "the claim is about 30M frames" in v["manipulator"].evidence
+    assert all(not x.indicative for x in verdicts)
+
+
+def test_claims_at_their_own_budget_not_the_tables(tmp_path):
+    """Runs at 1M frames carry the 1M claims, not the 2M claim; runs at 2M carry both."""
+    _main_grid(tmp_path / "m1", {t: 600.0 for t in DMC9})
+    v = _verdicts(_ctx(tmp_path / "m1"))
+    assert v["online_beats_drqv2_all"].verdict == SUPPORTED
+    assert v["longer_training"].verdict == NO_DATA and "the claim is about 2M frames" in v["longer_training"].evidence
+    _main_grid(tmp_path / "m2", {t: 600.0 for t in DMC9}, frames=2_000_000)
+    v = _verdicts(_ctx(tmp_path / "m2"))
+    assert v["longer_training"].verdict == SUPPORTED, v["longer_training"].evidence
+    assert v["online_beats_drqv2_all"].verdict == SUPPORTED  # scored at 1M frames within the 2M runs
+
+
+def test_indicative_reading_is_labelled_and_never_a_verdict(tmp_path):
+    _main_grid(tmp_path / "ahead", {t: 600.0 for t in DMC9}, seeds=2, frames=400)
+    v = _verdicts(_ctx(tmp_path / "ahead", indicative=True))
+    w = v["online_beats_drqv2_all"]
+    assert w.verdict == NO_DATA and w.shown == w.indicative
+    assert w.indicative == "indicative: TACO ahead on every task (400 frames, 2 seeds)"
+    assert "runs reach 400 frames; the claim is about 1M frames" in w.evidence and "indicative reading" in w.evidence
+    _main_grid(tmp_path / "behind", {t: 300.0 for t in DMC9}, seeds=2, frames=400)
+    w = _verdicts(_ctx(tmp_path / "behind", indicative=True))["online_beats_drqv2_all"]
+    assert w.verdict == NO_DATA and w.indicative == "indicative: TACO behind on some task (400 frames, 2 seeds)"
+    # without the flag there is no reading at all
+    assert _verdicts(_ctx(tmp_path / "ahead"))["online_beats_drqv2_all"].indicative == ""
+
+
+def test_offline_claims_use_each_runs_own_budget(tmp_path):
+    from analysis.paper import OFFLINE_TASKS
+
+    def grid(root: Path, done: bool) -> None:
+        for task in OFFLINE_TASKS:
+            for ds in ("medium", "medium_replay", "full_replay"):
+                for algo in ("td3bc", "cql"):
+                    for s in range(3):
+                        for taco, final in ((False, 300.0), (True, 330.0)):
+                            write_run(root, experiment="offline", algo=algo, task=task, dataset=ds, seed=s,
+                                      variant=f"{ds}{'_taco' if taco else ''}", objectives={"taco": 1.0} if taco else {},
+                                      final=final + s, frames=1000, eval_every=500, done=done)
+
+    grid(tmp_path / "unfinished", done=False)
+    v = _verdicts(_ctx(tmp_path / "unfinished"))["offline_gain"]
+    assert v.verdict == NO_DATA and "has finished its configured offline.updates" in v.evidence
+    grid(tmp_path / "finished", done=True)  # 1000 'frames' is no obstacle: the budget is the run's own
+    v = _verdicts(_ctx(tmp_path / "finished"))["offline_gain"]
+    assert v.verdict == SUPPORTED, v.evidence
+
+
+def test_every_claim_has_a_budget_matching_its_text():
+    from analysis.claim_budget import load_budgets
+    from analysis.paper import PaperData
+
+    budgets = load_budgets()
+    claims = PaperData().claims.set_index("id")["claim"]
+    assert set(budgets) == set(claims.index)
+    for cid, text in claims.items():
+        for words, frames in (("at 1M", 1_000_000), (", 1M", 1_000_000), ("30M frames", 30_000_000)):
+            if words in text:
+                assert budgets[cid].budget == frames, cid
+    assert budgets["longer_training"].budget == 2_000_000 and budgets["offline_gain"].kind == "offline_updates"
+    assert all(b.min_seeds <= b.paper_seeds or b.paper_seeds == 1 for b in budgets.values())
+
+
+def test_report_of_tiny_runs_shows_no_verdict(tmp_path):
+    from analysis.report import build_markdown
+
+    # 3 seeds (the claims' minimum) so that only the budget stands between these runs and a verdict
+    _main_grid(tmp_path, {t: 300.0 for t in DMC9}, seeds=3, frames=400)
+    ctx = _ctx(tmp_path, min_seeds=1)
+    ctx.budget = 400
+    md = build_markdown(ctx, [], evaluate_claims(ctx), [])
+    assert "**Claims:** 0 supported, 0 refuted, 20 not enough data" in md
+    section = md.split("## Claims", 1)[1].split("\n## ", 1)[0]
+    rows = [ln for ln in section.splitlines() if ln.startswith("| ") and ln.split("|")[1].strip() in _verdicts(ctx)]
+    assert len(rows) == 20 and all(ln.split("|")[2].strip() == NO_DATA for ln in rows)
+    ctx = _ctx(tmp_path, indicative=True)
+    md = build_markdown(ctx, [], evaluate_claims(ctx), [])
+    assert "| indicative: TACO behind on some task (400 frames, 3 seeds) |" in md and "**Claims:** 0 supported, 0 refuted" in md
 
 
 def test_action_repeat_claim_refuted_when_best_k_differs(tmp_path):
     for ar in (1, 2, 4):
         for k in (1, 3, 5):
-            for s in range(2):
+            for s in range(3):
                 write_run(tmp_path, experiment="action_repeat", algo="taco", task="hopper_hop", K=k, action_repeat=ar,
-                          variant=f"ar{ar}_K{k}", seed=s, final=100.0 * k + s)  # K=5 always best
+                          variant=f"ar{ar}_K{k}", seed=s, final=100.0 * k + s, frames=CLAIM_FRAMES,
+                          eval_every=CLAIM_FRAMES // 2)  # K=5 always best
     v = _verdicts(_ctx(tmp_path))["action_repeat"]
     assert v.verdict == REFUTED and "AR4: K=5" in v.evidence
 
@@ -338,3 +443,20 @@ def test_cli_list_and_audit(tmp_path):
     audit = runner.invoke(_app(), ["audit", "--out", str(tmp_path)])
     assert audit.exit_code == 0 and "MISMATCH" in audit.output and (tmp_path / "audit.md").exists()
     assert pd.read_csv(tmp_path / "audit.csv")["match"].eq(False).sum() >= 7
+
+
+def test_cli_claims_indicative_flag(tmp_path):
+    _main_grid(tmp_path / "runs", {t: 600.0 for t in DMC9}, seeds=2, frames=400)
+    args = ["claims", "--results", str(tmp_path / "runs"), "--out", str(tmp_path / "out"), "--reps", "50"]
+    plain = CliRunner().invoke(_app(), args)
+    assert plain.exit_code == 0, plain.output
+    line = next(ln for ln in plain.output.splitlines() if ln.startswith("online_beats_drqv2_all"))
+    assert NO_DATA in line and "runs reach 400 frames; the claim is about 1M frames" in line and "indicative" not in line
+    flagged = CliRunner().invoke(_app(), [*args, "--indicative"])
+    assert flagged.exit_code == 0, flagged.output
+    line = next(ln for ln in flagged.output.splitlines() if ln.startswith("online_beats_drqv2_all"))
+    assert "indicative: TACO ahead on every task (400 frames, 2 seeds)" in line
+    assert not any(ln.split()[1:2] in (["supported"], ["refuted"]) for ln in flagged.output.splitlines())
+    table = pd.read_csv(tmp_path / "out" / "claims.csv", keep_default_na=False).set_index("id")
+    assert table.loc["online_beats_drqv2_all", "verdict"] == NO_DATA
+    assert table.loc["online_beats_drqv2_all", "indicative"].startswith("indicative: TACO ahead")

@@ -14,7 +14,7 @@ from analysis_fixtures import FRAMES, full_coverage_root
 from typer.testing import CliRunner
 
 import paper_figures
-from analysis.claims import REFUTED, SUPPORTED
+from analysis.claims import NO_DATA, SUPPORTED
 from repro_app.analysis_cli import register
 from analysis.context import Context
 from analysis.load import load_results
@@ -38,7 +38,7 @@ def assert_png_not_blank(path: Path) -> None:
 def full_report(tmp_path_factory):
     root = full_coverage_root(tmp_path_factory.mktemp("results"))
     ctx = Context(results=load_results(root), out_dir=tmp_path_factory.mktemp("report"), budget=FRAMES, reps=REPS,
-                  tsne_n=30, tsne_iter=250, render_envs=False)
+                  tsne_n=30, tsne_iter=250, render_envs=False, indicative=True)
     md, html = build_report(ctx)
     return ctx, md, html
 
@@ -75,11 +75,20 @@ def test_full_coverage_tables_and_claims(full_report):
     assert f9.loc[(1, "K=5"), "repro_mean"] == pytest.approx(395.0)
     f6 = pd.read_csv(ctx.out_dir / "F6.csv").set_index("space")
     assert f6.loc["latent", "silhouette_tsne_2d"] > 0.5 > f6.loc["raw", "silhouette_tsne_2d"]
-    claims = pd.read_csv(ctx.out_dir / "claims.csv").set_index("id")
-    for cid in ("online_beats_drqv2_all", "horizon_choice", "action_repeat", "batch_size", "objective_removal",
-                "action_dim", "tsne_clusters", "speed", "metaworld", "offline_gain", "vs_repr_objectives"):
-        assert claims.loc[cid, "verdict"] == SUPPORTED, (cid, claims.loc[cid, "evidence"])
-    assert claims.loc["offline_average", "verdict"] == REFUTED  # synthetic averages are far from 71.0 etc.
+    claims = pd.read_csv(ctx.out_dir / "claims.csv", keep_default_na=False).set_index("id")
+    # the synthetic runs stop at 100k frames with 2 seeds: below every claim's budget, so no verdict, but
+    # the indicative readings (asked for) show what the checks find
+    assert set(claims.drop(index="speed")["verdict"]) == {NO_DATA}
+    holds = {"online_beats_drqv2_all": "TACO ahead on every task", "horizon_choice": "K choice as stated",
+             "action_repeat": "best K as stated", "batch_size": "TACO grows with batch and DrQ-v2 flat",
+             "objective_removal": "removing TACO hurts most", "action_dim": "robust except at 6 and 24",
+             "metaworld": "TACO ahead on every task", "vs_repr_objectives": "TACO ahead of every objective",
+             "offline_gain": "TACO adds on every pair", "offline_average": "averages off the paper"}
+    for cid, words in holds.items():
+        assert claims.loc[cid, "indicative"].startswith(f"indicative: {words} ("), (cid, claims.loc[cid, "evidence"])
+    assert claims.loc["online_beats_drqv2_all", "indicative"].endswith("(100,000 frames, 2 seeds)")
+    assert claims.loc["speed", "verdict"] == SUPPORTED  # a timing: no training budget, one measurement a setting
+    assert claims.loc["tsne_clusters", "indicative"].startswith("indicative: latent actions cluster")
     text = md.read_text()
     for aid in EXPECTED:
         assert f"## {aid}:" in text
