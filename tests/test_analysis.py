@@ -356,7 +356,7 @@ def test_every_claim_has_a_budget_matching_its_text():
 
 
 def test_report_of_tiny_runs_shows_no_verdict(tmp_path):
-    from analysis.report import build_markdown
+    from repro_app.report import build_markdown
 
     # 3 seeds (the claims' minimum) so that only the budget stands between these runs and a verdict
     _main_grid(tmp_path, {t: 300.0 for t in DMC9}, seeds=3, frames=400)
