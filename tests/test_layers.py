@@ -25,6 +25,8 @@ CORE, TRAINING, ANALYSIS, FIGURES, APP = range(len(LAYERS))
 LAYER_OF = {
     "repro": CORE,  # config, schema, run format, envs, agent, replay, episodes, checkpoint, offline data, learners
     "repro.trainer": TRAINING,
+    "repro.trainer_base": TRAINING,  # on main since the learner seam: shared pieces of the training loops
+    "repro.offline_trainer": TRAINING,
     "repro.api": TRAINING,
     "repro.bench": TRAINING,
     "repro.launch": TRAINING,
