@@ -16,6 +16,7 @@ from repro.checkpoint import load_checkpoint, save_checkpoint
 from repro.config import compose, typed
 from repro.episodes import EpisodeStore
 from repro.logger import RunLogger
+from repro.offline.record import Recorder
 from repro.replay import ReplayBuffer
 from repro.schema import RunConfig
 from repro.trainer import Trainer
@@ -75,11 +76,12 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         state = load_checkpoint(ckpt_file) if resuming else None
         if state is None:
             episodes.prune(set())
+        recorder = Recorder.open(path, rc.agent, spec.obs_shape, spec.action_dim, state) if rc.runtime.record else None
         logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo)
         bar = _progress(rc, progress)
         trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
                           lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
-                          save_frames=lambda frames: _save_frames(path / "frames.npz", frames))
+                          save_frames=lambda frames: _save_frames(path / "frames.npz", frames), recorder=recorder)
         if state is not None:
             trainer.restore(state)
             episodes.prune({rec[0] for rec in state["buffer"]["episodes"]})
