@@ -19,7 +19,7 @@ from repro import api, rundir
 from repro.config import compose, typed
 from repro.agent.networks import Actor, Encoder
 from repro.offline import make as mk
-from repro.offline._dataset_shim import check_dataset, load_manifest
+from repro.offline._dataset_shim import check_dataset
 from repro.offline.make_cli import register
 from repro.offline.record import Recorder, load_snapshot, snapshot_steps
 from tests.test_train_e2e import TINY, _kill_when, _rows, deterministic
@@ -116,7 +116,7 @@ def test_medium_snapshot_is_nearest_the_fraction_of_the_best(synthetic: Path):
 
 
 def _hashes(folder: Path) -> list[str]:
-    return [e["sha256"] for e in load_manifest(folder)["episodes"]]
+    return [e["sha256"] for e in mk.manifest_json(folder)["episodes"]]
 
 
 def test_replay_kinds_from_a_synthetic_recording(synthetic: Path, tmp_path: Path):
@@ -124,7 +124,7 @@ def test_replay_kinds_from_a_synthetic_recording(synthetic: Path, tmp_path: Path
     # medium at 0.5: the step-20 snapshot; episodes ending by step 20: 0 (5), 1 (12), 2 (17) -> 17 transitions
     out = mk.make(run, "medium-replay", transitions=10, seed=1, echo=lambda s: None)
     assert out == tmp_path / "datasets" / "cheetah_run" / "medium-replay"
-    m = load_manifest(out)
+    m = mk.manifest_json(out)
     assert m["source"]["snapshot_step"] == 20 and m["source"]["best_return"] == 10.0
     assert set(m["rule"]["source_episodes"]) <= {0, 1, 2} and m["transitions"] >= 10
     assert m["rule"]["pool_episodes"] == 3 and m["source"]["config_hash"] == mk.config_hash(rundir.saved_identity(run))
@@ -138,7 +138,7 @@ def test_replay_kinds_from_a_synthetic_recording(synthetic: Path, tmp_path: Path
     # full-replay: uniform over all 23 transitions; the same seed gives the same files, another seed may not
     a = mk.make(run, "full-replay", transitions=12, seed=5, out=tmp_path / "a", echo=lambda s: None)
     b = mk.make(run, "full-replay", transitions=12, seed=5, out=tmp_path / "b", echo=lambda s: None)
-    assert _hashes(a) == _hashes(b) and load_manifest(a)["rule"] == load_manifest(b)["rule"]
+    assert _hashes(a) == _hashes(b) and mk.manifest_json(a)["rule"] == mk.manifest_json(b)["rule"]
     pool = mk.open_source(run).episodes
     draws = {tuple(e.ep_id for e in mk.draw_episodes(pool, 12, s, "x")) for s in range(20)}
     assert len(draws) > 1  # the draw depends on the seed
@@ -274,16 +274,16 @@ def test_make_each_kind_from_a_recorded_run(recorded: Path, unrecorded: Path, tm
     res = run_make("--source", str(recorded), "--kind", "medium-replay", "--transitions", "100",
                    "--medium-fraction", str(fraction), "--seed", "2", "--out", str(tmp_path / "mr"))
     assert res.exit_code == 0, res.output
-    m = load_manifest(tmp_path / "mr")
+    m = mk.manifest_json(tmp_path / "mr")
     assert m["source"]["snapshot_step"] == last.step and m["transitions"] >= 100
     assert all(source.episodes[i].end_step <= last.step for i in m["rule"]["source_episodes"])
     res = run_make("--source", str(recorded), "--kind", "full-replay", "--transitions", "150", "--seed", "2")
     assert res.exit_code == 0, res.output
     full = recorded.parents[4] / "datasets" / "cheetah_run" / "full-replay"
-    assert load_manifest(full)["transitions"] == 150 and not check_dataset(full)
+    assert mk.manifest_json(full)["transitions"] == 150 and not check_dataset(full)
     # medium: rollouts of the snapshot policy with its exploration noise, on fresh episode seeds
     a = mk.make(recorded, "medium", transitions=60, seed=4, out=tmp_path / "m1", device="cpu", echo=lambda s: None)
-    m = load_manifest(a)
+    m = mk.manifest_json(a)
     snap_step = m["source"]["snapshot_step"]
     snap = load_snapshot(recorded / "record" / "snapshots" / f"step_{snap_step:09d}.pt")
     assert m["kind"] == "medium" and m["transitions"] == 100 and len(m["episodes"]) == 2  # whole 50-step episodes

@@ -309,6 +309,12 @@ def _spec_action_dim(source: Source) -> int:
         return int(z["actions"].shape[-1])
 
 
+def manifest_json(folder: str | Path) -> dict[str, Any]:
+    """The manifest of a complete dataset as plain JSON (``load_manifest`` checks it first)."""
+    load_manifest(folder)
+    return json.loads((Path(folder) / "manifest.json").read_text())
+
+
 def _same_request(manifest: dict, fields: dict) -> bool:
     keys = ("task", "kind", "source", "rule")
     return all(json.loads(json.dumps(manifest.get(k))) == json.loads(json.dumps(fields[k])) for k in keys)
@@ -322,7 +328,7 @@ def make(source_dir: str | Path, kind: str, transitions: int | None = None, medi
     p = plan(source, kind, transitions, medium_fraction, seed, out, results_root, device)
     if p.out.exists():
         try:
-            manifest = load_manifest(p.out)
+            manifest = manifest_json(p.out)
         except DatasetError:
             if p.out.is_dir() and not any(p.out.iterdir()):
                 p.out.rmdir()
@@ -338,7 +344,8 @@ def make(source_dir: str | Path, kind: str, transitions: int | None = None, medi
     if staging.exists():
         shutil.rmtree(staging)
     staging.mkdir(parents=True)
-    manifest = write_dataset(staging, p.episodes(), p.fields)
+    write_dataset(staging, p.episodes(), p.fields)
+    manifest = manifest_json(staging)
     problems = check_dataset(staging)
     if problems:
         raise MakeError(f"{staging}: the dataset written fails its check: {problems[0]}")
