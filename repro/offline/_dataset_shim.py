@@ -49,13 +49,16 @@ def iter_episodes(folder: str | Path) -> Iterator[dict[str, np.ndarray]]:
             yield {k: z[k] for k in z.files}
 
 
-def write_dataset(folder: str | Path, episodes: Iterable[dict[str, np.ndarray]],
-                  manifest_fields: dict[str, Any]) -> dict[str, Any]:
+def write_dataset(folder: str | Path, episodes: Iterable[dict[str, np.ndarray]], *, task: str, kind: str,
+                  source: dict[str, Any] | None = None, rule: dict[str, Any] | None = None) -> dict[str, Any]:
+    """As the datasets helper's (keyword arguments; action_dim and frame_shape from the episodes)."""
     folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
     (folder / MANIFEST).unlink(missing_ok=True)
     rows, total = [], 0
     for i, ep in enumerate(episodes):
         name = f"{EPISODES}/ep_{i:07d}.npz"
+        ep = {**ep, "ep_id": np.array(i, dtype=np.int64)}
 
         def write(f, ep=ep) -> None:
             buf = io.BytesIO()
@@ -67,7 +70,10 @@ def write_dataset(folder: str | Path, episodes: Iterable[dict[str, np.ndarray]],
         total += n
         rows.append({"file": name, "sha256": _sha256(folder / name), "transitions": n,
                      "return": float(np.sum(ep["rewards"], dtype=np.float64))})
-    manifest = {"format": FORMAT, **manifest_fields, "transitions": total, "episodes": rows,
+    manifest = {"format": FORMAT, "task": task, "action_dim": int(ep["actions"].shape[1]),
+                "frame_shape": [int(x) for x in ep["frames"].shape[1:]], "kind": kind,
+                "source": json.loads(json.dumps(source or {})), "rule": json.loads(json.dumps(rule or {})),
+                "transitions": total, "episodes": rows,
                 "created_by": f"taco-repro {__version__}"}
     atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=2) + "\n")
     return manifest

@@ -248,7 +248,7 @@ def results_root_of(run_dir: Path, cfg: RunConfig) -> Path:
 class Plan:
     kind: str
     out: Path
-    fields: dict[str, Any]  # manifest fields but the episode list
+    fields: dict[str, Any]  # task, kind, source, rule (write_dataset's keyword arguments)
     episodes: Callable[[], Iterator[dict[str, np.ndarray]]]
 
 
@@ -298,15 +298,8 @@ def plan(source: Source, kind: str, transitions: int | None = None, medium_fract
                                   "transitions", "pool_episodes": len(pool),
                      "source_episodes": [e.ep_id for e in chosen]})
         episodes = lambda: _replay_episodes(chosen)  # noqa: E731
-    fields = {"task": source.task, "action_dim": _spec_action_dim(source),
-              "frame_shape": [3, source.cfg.env.image_size, source.cfg.env.image_size],
-              "kind": kind, "source": src, "rule": rule}
+    fields = {"task": source.task, "kind": kind, "source": src, "rule": rule}
     return Plan(kind, Path(out).expanduser().absolute(), fields, episodes)
-
-
-def _spec_action_dim(source: Source) -> int:
-    with np.load(source.episodes[0].path) as z:
-        return int(z["actions"].shape[-1])
 
 
 def manifest_json(folder: str | Path) -> dict[str, Any]:
@@ -344,7 +337,7 @@ def make(source_dir: str | Path, kind: str, transitions: int | None = None, medi
     if staging.exists():
         shutil.rmtree(staging)
     staging.mkdir(parents=True)
-    write_dataset(staging, p.episodes(), p.fields)
+    write_dataset(staging, p.episodes(), **p.fields)
     manifest = manifest_json(staging)
     problems = check_dataset(staging)
     if problems:

@@ -7,7 +7,8 @@ from typing import Optional
 
 import typer
 
-from repro.offline.make import KINDS, MakeError, make
+from repro.offline._dataset_shim import DatasetError
+from repro.offline.make import KINDS, make
 
 
 def register(dataset_app: typer.Typer) -> None:
@@ -29,6 +30,6 @@ def register(dataset_app: typer.Typer) -> None:
         """Make a medium, medium-replay or full-replay dataset from a recorded online run (docs/offline.md)."""
         try:
             make(source, kind, transitions, medium_fraction, seed, out, results, task, device, echo=typer.echo)
-        except MakeError as exc:
+        except DatasetError as exc:  # MakeError included
             typer.echo(f"error: {exc}", err=True)
             raise typer.Exit(2) from None
