@@ -22,7 +22,7 @@ from repro.offline import make as mk
 from repro.offline._dataset_shim import check_dataset
 from repro.offline.make_cli import register
 from repro.offline.record import Recorder, load_snapshot, snapshot_steps
-from tests.test_train_e2e import TINY, _kill_when, _rows, deterministic
+from tests.test_train_e2e import TINY, _kill_when, deterministic
 
 REL = Path("default/taco/base/cheetah_run/seed_3")
 

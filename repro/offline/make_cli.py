@@ -14,14 +14,16 @@ from repro.offline.make import KINDS, make
 def register(dataset_app: typer.Typer) -> None:
     @dataset_app.command("make")
     def make_cmd(
-        source: Path = typer.Option(..., "--source", help="Run directory of an online run trained with runtime.record=true."),
+        source: Path = typer.Option(
+            ..., "--source", help="Run directory of an online run trained with runtime.record=true."),
         kind: str = typer.Option(..., "--kind", help=f"Dataset kind: {' | '.join(KINDS)}."),
         transitions: Optional[int] = typer.Option(
             None, "--transitions", help="Transitions, whole episodes (default: 100000, quadruped_run 500000)."),
         medium_fraction: Optional[float] = typer.Option(
             None, "--medium-fraction", help="medium: snapshot nearest this fraction of the best return (default 0.5)."),
         seed: int = typer.Option(0, "--seed", help="Seed of the episode draw (replay kinds) or rollouts (medium)."),
-        out: Optional[Path] = typer.Option(None, "--out", help="Dataset folder (default: {results}/datasets/{task}/{kind})."),
+        out: Optional[Path] = typer.Option(
+            None, "--out", help="Dataset folder (default: {results}/datasets/{task}/{kind})."),
         results: Optional[Path] = typer.Option(
             None, "--results", "-r", help="Results root of the default folder (default: the source run's)."),
         task: Optional[str] = typer.Option(None, "--task", help="Refuse a source run of another task."),
