@@ -19,6 +19,7 @@ from repro.logger import RunLogger
 from repro.offline.reference import score_reference
 from repro.offline.replay import DatasetError, OfflineData, load_offline_data, resolve_dataset
 from repro.offline_trainer import OfflineLogger, OfflineTrainer
+from repro.offline.record import Recorder
 from repro.replay import ReplayBuffer
 from repro.schema import RunConfig
 from repro.trainer import Trainer
@@ -91,11 +92,12 @@ def _train_online(rc: RunConfig, path: Path, device: str, resuming: bool, echo: 
         state = load_checkpoint(ckpt_file) if resuming else None
         if state is None:
             episodes.prune(set())
+        recorder = Recorder.open(path, rc.agent, spec.obs_shape, spec.action_dim, state) if rc.runtime.record else None
         logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo)
         bar = _progress(rc, progress)
         trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
                           lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
-                          save_frames=lambda frames: _save_frames(path / "frames.npz", frames))
+                          save_frames=lambda frames: _save_frames(path / "frames.npz", frames), recorder=recorder)
         if state is not None:
             trainer.restore(state)
             episodes.prune({rec[0] for rec in state["buffer"]["episodes"]})

@@ -16,6 +16,7 @@ from repro.envs.base import Env
 from repro.episodes import EpisodeStore
 from repro.learners.base import OnlineLearner
 from repro.logger import RunLogger
+from repro.offline.record import Recorder
 from repro.replay import ReplayBuffer
 from repro.schema import TrainConfig
 from repro.trainer_base import episode_seed, rng_state, run_eval_episodes, set_rng_state
@@ -34,12 +35,13 @@ class Trainer:
     def __init__(self, cfg: TrainConfig, seed: int, action_repeat: int, env: Env, eval_env: Env, agent: OnlineLearner,
                  buffer: ReplayBuffer, logger: RunLogger, episodes: EpisodeStore,
                  save_checkpoint: Callable[[dict], None], progress=None,
-                 save_frames: Callable[[np.ndarray], None] | None = None):
+                 save_frames: Callable[[np.ndarray], None] | None = None, recorder: Recorder | None = None):
         self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
         self.env, self.eval_env, self.agent, self.buffer = env, eval_env, agent, buffer
         self.logger, self.episodes, self._save = logger, episodes, save_checkpoint
         self.progress = progress
         self.save_frames = save_frames
+        self.recorder = recorder  # runtime.record: keeps every episode and a policy snapshot per evaluation
         self.counters = Counters()
         self.batch_size = agent.cfg.batch_size
         self.has_success = env.spec.has_success
@@ -81,6 +83,8 @@ class Trainer:
         started = time.time()
         try:
             self._evaluate(record=final and self.cfg.save_frames)
+            if self.recorder is not None:
+                self.recorder.snapshot(self.agent, self.counters.step, self.frame, self.last_eval)
         finally:
             self._eval_seconds += time.time() - started
 
@@ -155,7 +159,10 @@ class Trainer:
                        "total_time": round(self.total_time(), 3)}
                 row.update({k: (sums[k] / n_updates if n_updates and k in sums else None) for k in metric_names})
                 self.logger.log_train(row)
-                self.episodes.save(self.buffer.end_episode())
+                episode = self.buffer.end_episode()
+                self.episodes.save(episode)
+                if self.recorder is not None:
+                    self.recorder.episode(episode, written=self.episodes.path(int(episode["ep_id"])))
                 if self.counters.episode % cfg.checkpoint_every_episodes == 0:
                     self._checkpoint()
                 ts = new_episode()

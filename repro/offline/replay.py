@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 # The one import of the dataset API (a private shim until repro.offline.dataset lands: same names).
-from repro.offline._dataset_shim import DatasetError, Manifest, iter_episodes, load_manifest, resolve_dataset
+from repro.offline.dataset import DatasetError, Manifest, iter_episodes, load_manifest, resolve_dataset
 from repro.replay import ReplayBuffer
 
 __all__ = ["DatasetError", "OfflineData", "load_offline_data", "resolve_dataset"]
@@ -74,7 +74,7 @@ def load_offline_data(directory: str | Path, *, task: str, action_dim: int, fram
     directory = Path(directory)
     manifest = load_manifest(directory)
     check_compatible(manifest, directory, task, action_dim, frame_shape)
-    lengths = [int(e["transitions"]) for e in manifest.episodes]
+    lengths = [int(e.transitions) for e in manifest.episodes]
     capacity = sum(n + 1 for n in lengths)
     buffer = ReplayBuffer(capacity, frame_shape, action_dim, frame_stack, nstep, K, discount, seed=seed,
                           device=device)
