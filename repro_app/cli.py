@@ -11,6 +11,7 @@ from omegaconf import OmegaConf
 
 from repro import bench
 from repro.launch import cli as launch_cli
+from repro.offline import make_cli
 from repro.offline.cli import dataset_app
 from repro_app import analysis_cli, reproduce
 
@@ -106,6 +107,7 @@ def _console():
 
 for _commands in (launch_cli, analysis_cli, bench, reproduce):
     _commands.register(app)
+make_cli.register(dataset_app)  # `repro dataset make` (training layer: it rolls out policies)
 app.add_typer(dataset_app, name="dataset")
 
 

@@ -6,14 +6,11 @@ are known functions of (episode, t), so tests can check what the replay samples.
 
 from __future__ import annotations
 
-import hashlib
-import io
-import json
 from pathlib import Path
 
 import numpy as np
 
-from repro.fsutil import atomic_write, atomic_write_text
+from repro.offline.dataset import write_dataset as real_write_dataset
 
 
 def reward_of(ep: int, t: int) -> float:
@@ -38,20 +35,10 @@ def make_episode(ep: int, transitions: int, frame_shape: tuple[int, int, int], a
 def write_dataset(directory: Path, task: str = "hopper_hop", lengths: tuple[int, ...] = (12, 9, 15),
                   frame_shape: tuple[int, int, int] = (3, 84, 84), action_dim: int = 4, kind: str = "medium",
                   best_return: float | None = None, seed: int = 0) -> Path:
+    """A tiny dataset written through the real dataset writer (repro.offline.dataset.write_dataset)."""
     directory = Path(directory)
     rng = np.random.default_rng(seed)
-    entries = []
-    for ep, n in enumerate(lengths):
-        data = make_episode(ep, n, frame_shape, action_dim, rng)
-        buf = io.BytesIO()
-        np.savez_compressed(buf, **data)
-        name = f"ep_{ep:07d}.npz"
-        atomic_write(directory / "episodes" / name, lambda f, b=buf.getvalue(): f.write(b))
-        entries.append({"file": name, "sha256": hashlib.sha256(buf.getvalue()).hexdigest(), "transitions": n,
-                        "return": float(data["rewards"].sum())})
+    episodes = [make_episode(ep, n, frame_shape, action_dim, rng) for ep, n in enumerate(lengths)]
     source = {"run_dir": "synthetic"} if best_return is None else {"run_dir": "synthetic", "best_return": best_return}
-    manifest = {"format": 1, "task": task, "action_dim": action_dim, "frame_shape": list(frame_shape), "kind": kind,
-                "transitions": int(sum(lengths)), "episodes": entries, "source": source,
-                "rule": {"synthetic": True}, "created_by": "tests/offline_fixtures.py"}
-    atomic_write_text(directory / "manifest.json", json.dumps(manifest, indent=1))
+    real_write_dataset(directory, episodes, task=task, kind=kind, source=source, rule={"synthetic": True})
     return directory

@@ -28,6 +28,8 @@ LAYER_OF = {
     "repro.trainer_base": TRAINING,  # on main since the learner seam: shared pieces of the training loops
     "repro.offline_trainer": TRAINING,
     "repro.api": TRAINING,
+    "repro.offline.make": TRAINING,  # rolls out recorded policies in the run's environment (repro.api)
+    "repro.offline.make_cli": TRAINING,
     "repro.bench": TRAINING,
     "repro.launch": TRAINING,
     "repro.__main__": APP,  # `python -m repro`: the entry shim of the app

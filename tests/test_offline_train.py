@@ -118,7 +118,7 @@ def test_bad_datasets_raise_one_line(tmp_path: Path):
         with pytest.raises(DatasetError) as err:
             _load(good, **kw)
         assert "\n" not in str(err.value), name
-    with pytest.raises(DatasetError, match="manifest"):
+    with pytest.raises(DatasetError, match="no dataset at"):
         _load(tmp_path / "nothing")
     bad = write_dataset(tmp_path / "truncated")
     f = bad / "episodes" / "ep_0000001.npz"
@@ -162,7 +162,7 @@ def test_dry_run_without_dataset_on_disk(tmp_path: Path):
     assert not (tmp_path / "default").exists()
 
 
-@pytest.mark.parametrize("extra, needle", [([], "not found"), (["task=walker_run"], "walker_run"),
+@pytest.mark.parametrize("extra, needle", [([], "unknown dataset"), (["task=walker_run"], "walker_run"),
                                            (["offline.dataset=null"], "offline.dataset")])
 def test_cli_bad_dataset_one_line_exit_2_nothing_written(tmp_path: Path, extra: list[str], needle: str):
     write_dataset(tmp_path / "elsewhere" / "medium", task="cheetah_run", action_dim=6)  # not under datasets/
