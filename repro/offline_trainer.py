@@ -20,7 +20,7 @@ import numpy as np
 from repro.envs.base import Env
 from repro.learners.base import Learner
 from repro.logger import CsvLog
-from repro.offline.columns import OFFLINE_EVAL_COLUMNS, OFFLINE_TRAIN_COLUMNS
+from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_TRAIN_COLUMNS
 from repro.offline.reference import normalized_score
 from repro.offline.replay import DatasetError
 from repro.replay import ReplayBuffer
@@ -29,7 +29,7 @@ from repro.trainer_base import WallClock, rng_state, run_eval_episodes, set_rng_
 
 
 class OfflineLogger:
-    """eval.csv and train.csv of an offline run (columns: repro/offline/columns.py)."""
+    """eval.csv and train.csv of an offline run (columns: repro/runformat.py)."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
                  offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print):

@@ -39,6 +39,16 @@ EVAL_REQUIRED = ("frame", "step", "episode", "episode_reward")  # a readable eva
 TRAIN_REQUIRED = ("frame", "fps")  # a readable train.csv has at least these
 
 
+# Offline runs (a learner trained from offline.dataset): one eval row per evaluation, one train row every
+# offline.log_every_updates updates. normalized_score = 100 x episode_reward / reference_return, the reference
+# being the dataset source run's best evaluation return (score_reference "source") or the paper's Table 1
+# TACO value for the task ("paper"); "none" when neither is known.
+OFFLINE_EVAL_COLUMNS = ["update", "episode_reward", "episode_reward_std", "episode_length", "success",
+                        "eval_episodes", "normalized_score", "reference_return", "score_reference", "total_time"]
+OFFLINE_TRAIN_COLUMNS = ["update", "updates_per_s", "total_time"]  # followed by the learner's metric names
+OFFLINE_WALLCLOCK_COLUMNS = ("total_time", "updates_per_s")
+
+
 def train_columns(metric_names: Sequence[str]) -> list[str]:
     """The header of train.csv for a learner with these metric names."""
     return [*TRAIN_COLUMNS, *metric_names]

@@ -26,7 +26,7 @@ from repro_app.cli import app  # noqa: E402
 from repro.config import compose, typed  # noqa: E402
 from repro.learners import LEARNERS, Learner, build_learner  # noqa: E402
 from repro.learners.bc import bc_loss  # noqa: E402
-from repro.offline.columns import OFFLINE_EVAL_COLUMNS, OFFLINE_WALLCLOCK_COLUMNS  # noqa: E402
+from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_WALLCLOCK_COLUMNS  # noqa: E402
 from repro.offline.reference import PAPER_TACO_RETURN, normalized_score, score_reference  # noqa: E402
 from repro.offline.replay import DatasetError, load_offline_data  # noqa: E402
 
