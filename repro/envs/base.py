@@ -47,4 +47,10 @@ class Env(Protocol):
 
     def step(self, action: np.ndarray) -> TimeStep: ...
 
+    def render_view(self, size: int) -> np.ndarray:
+        """The current scene from the observation camera at ``size`` x ``size`` pixels, (H, W, 3) uint8.
+
+        For people (evaluation videos), not for the agent: it does not touch the observation stack."""
+        ...
+
     def close(self) -> None: ...

@@ -79,6 +79,9 @@ class DMCEnv:
         size = self._image_size
         return self._env.physics.render(height=size, width=size, camera_id=self._camera)
 
+    def render_view(self, size: int) -> np.ndarray:
+        return self._env.physics.render(height=size, width=size, camera_id=self._camera)
+
     def _to_env_action(self, action: np.ndarray) -> np.ndarray:
         action = np.asarray(action, dtype=np.float64)
         if action.shape != (self.spec.action_dim,):

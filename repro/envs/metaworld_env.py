@@ -63,6 +63,7 @@ class MetaWorldEnv:
         self._frames = FrameStack(frame_stack)
         self._done = True
         self._state: np.ndarray | None = None
+        self._viewer: Any = None  # mujoco.Renderer for render_view, made on first use
         self.task_index = 0
         self.spec = EnvSpec(
             action_dim=int(self._env.action_space.shape[0]),
@@ -99,6 +100,19 @@ class MetaWorldEnv:
         if self._rotate:
             frame = frame[::-1, ::-1]
         return frame
+
+    def render_view(self, size: int) -> np.ndarray:
+        """The observation camera at ``size`` pixels through a separate MuJoCo renderer (same rotation rule)."""
+        import mujoco
+
+        if self._viewer is None or self._viewer.height != size:
+            if self._viewer is not None:
+                self._viewer.close()
+            self._viewer = mujoco.Renderer(self._env.model, height=size, width=size)
+        camera = self._camera if isinstance(self._camera, int) else self._env.model.camera(self._camera).id
+        self._viewer.update_scene(self._env.data, camera=camera)
+        frame = self._viewer.render()
+        return frame[::-1, ::-1].copy() if self._rotate else frame
 
     def reset(self, seed: int) -> TimeStep:
         self.task_index = int(np.random.default_rng(seed).integers(len(self._tasks)))
@@ -144,4 +158,6 @@ class MetaWorldEnv:
         )
 
     def close(self) -> None:
+        if self._viewer is not None:
+            self._viewer.close()
         self._env.close()

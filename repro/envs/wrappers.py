@@ -64,6 +64,9 @@ class DistractingActionDims:
             raise ValueError(f"expected action shape ({self.spec.action_dim},), got {action.shape}")
         return self.env.step(action[: self._inner_dim])
 
+    def render_view(self, size: int) -> np.ndarray:
+        return self.env.render_view(size)
+
     def close(self) -> None:
         self.env.close()
 
@@ -94,6 +97,9 @@ class TimeLimit:
             ts.last = True
         self._done = ts.last
         return ts
+
+    def render_view(self, size: int) -> np.ndarray:
+        return self.env.render_view(size)
 
     def close(self) -> None:
         self.env.close()

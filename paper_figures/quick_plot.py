@@ -1,0 +1,61 @@
+"""Learning curves of any set of runs (`repro plot`): one panel per task, one line per group, mean over seeds
+with a 95% bootstrap CI band (rliable, fixed random state), written as PNG and PDF."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from analysis.identity import task_display  # noqa: E402
+from paper_figures.common import curve_panel, palette, panel_grid, setup_style  # noqa: E402
+
+PLOT_REPS = 2_000  # bootstrap repetitions per plotted point (a quick look, not a paper table)
+
+
+def group_label(row: pd.Series, by: Sequence[str]) -> str:
+    """``taco / base`` from the ``by`` columns of one run."""
+    return " / ".join(str(row[c]) for c in by)
+
+
+def plot_curves(curves: pd.DataFrame, metric: str, out: Path, x: str = "frame", by: Sequence[str] = ("method",),
+                reps: int = PLOT_REPS, seed: int = 0) -> list[Path]:
+    """Write ``out`` (.png) and its .pdf sibling from tidy ``curves``: columns task, seed, label, ``x``, value.
+
+    A run with a single evaluation shows as a point; a group with one seed has no CI band."""
+    if curves.empty:
+        raise ValueError(f"no values of '{metric}' in the selected runs")
+    setup_style()
+    tasks = sorted(curves["task"].astype(str).unique())
+    labels = sorted(curves["label"].unique())
+    colors = palette(labels)
+    fig, axes = panel_grid(len(tasks), ncols=min(3, len(tasks)))
+    for ax, task in zip(axes, tasks):
+        rows = curves[curves["task"].astype(str) == task].rename(columns={x: "frame"})
+        curve_panel(ax, rows, labels, colors, reps=reps, seed=seed)
+        for lab in labels:  # single evaluations still show up
+            one = rows[rows["label"] == lab]
+            if not one.empty and one["frame"].nunique() == 1:
+                ax.scatter(one["frame"], one["value"], color=colors[lab], s=12)
+        ax.set_title(task_display(task))
+        ax.set_xlabel("frames" if x == "frame" else x)
+        ax.set_ylabel(metric)
+    handles, names = axes[0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, names, loc="lower center", ncol=min(4, len(names)), frameon=False,
+                   bbox_to_anchor=(0.5, -0.02))
+    fig.text(0.5, 1.0, f"{metric}: mean over seeds; band: 95% bootstrap CI of the mean (rliable, {reps:,} "
+             f"repetitions, random state {seed}); n = seeds; grouped by {', '.join(by)}",
+             ha="center", va="bottom", fontsize=8)
+    fig.tight_layout(rect=(0, 0.06, 1, 0.98))
+    out = Path(out).with_suffix(".png")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=150, bbox_inches="tight")
+    fig.savefig(out.with_suffix(".pdf"), bbox_inches="tight")
+    plt.close(fig)
+    return [out, out.with_suffix(".pdf")]
