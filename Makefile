@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: setup sysdeps repro test test-fast bench clean
+.PHONY: setup sysdeps repro lint test test-fast bench clean
 
 # Debian rendering packages (Mesa EGL); skipped when already present or when not root.
 sysdeps:
@@ -30,7 +30,12 @@ setup: $(STAMP)
 repro: $(STAMP)
 	$(BIN)/repro reproduce
 
-test: $(STAMP)
+# Static checks on the packages (ruff: pyproject [tool.ruff]; mypy: pyproject [tool.mypy]).
+lint: $(STAMP)
+	$(BIN)/ruff check repro analysis paper_figures tests benchmarks
+	$(BIN)/mypy
+
+test: lint
 	$(BIN)/python -m pytest -q -ra $(PYTEST_ARGS)
 
 test-fast: $(STAMP)
