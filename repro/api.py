@@ -142,6 +142,10 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, re
     try:
         spec = eval_env.spec
         learner = build_agent(rc, spec.obs_shape, spec.action_dim, device)
+        values = rundir.resolved_values(rc, learner)
+        values.update({"dataset_dir": str(data.directory), "dataset_kind": data.manifest.kind,
+                       "dataset_manifest_sha256": data.digest})
+        rundir.write_resolved(path, values)
         state = load_checkpoint(ckpt_file) if resuming else None
         logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo)
         bar = _progress(rc, progress, total=rc.offline.updates, unit="updates/s")

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import signal
@@ -208,6 +209,10 @@ def test_bc_end_to_end_run_files_and_normalised_scores(reference: Path):
     ckpt = torch.load(reference / "checkpoint.pt", weights_only=True)
     assert ckpt["offline"]["update"] == 20 and set(ckpt["agent"]) == {"encoder", "actor"}
     assert json.loads((reference / "DONE").read_text())["update"] == 20
+    resolved = json.loads((reference / "resolved.json").read_text())  # what analysis reads, from the run itself
+    assert (resolved["learner"], resolved["dataset"], resolved["dataset_kind"]) == ("bc", "medium", "medium")
+    assert resolved["dataset_manifest_sha256"] == hashlib.sha256(
+        (Path(resolved["dataset_dir"]) / "manifest.json").read_bytes()).hexdigest()
 
 
 def _rows(csv: Path) -> int:
