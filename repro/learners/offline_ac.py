@@ -98,7 +98,8 @@ class OfflineActorCritic(Agent):
         h = self._encode(obs)
         with torch.no_grad():
             next_h = self._encode(next_obs)
-        action, reward, discount = batch["action"], batch["reward"], batch["discount"]
+        # dataset actions are data: no gradient ever flows into them
+        action, reward, discount = batch["action"].detach(), batch["reward"], batch["discount"]
         if self.algorithm == "iql":
             metrics.update(self._iql_value_actor(h.detach(), action, step))
             metrics.update(self._iql_critic(h, action, reward, discount, next_h))
