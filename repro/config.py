@@ -10,6 +10,7 @@ from pathlib import Path
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from repro.runformat import is_folder_value
 from repro.schema import RunConfig
 
 CONF_DIR = Path(__file__).parent / "conf"
@@ -163,7 +164,7 @@ def _check_learner(cfg: DictConfig) -> None:
             raise ConfigError(f"offline.dataset is read by offline learners only (agent.learner={learner} "
                               "trains online); pick an offline agent, e.g. agent=bc.")
         return
-    if dataset is not None and "/" not in str(dataset) and not NAME_RE.match(str(dataset)):
+    if dataset is not None and not is_folder_value(str(dataset)) and not NAME_RE.match(str(dataset)):
         raise ConfigError(f"offline.dataset='{dataset}': a dataset kind may only contain letters, digits, '_', '.' "
                           "and '-' (a folder needs a '/', e.g. ./my_dataset).")
     for key in ("offline.updates", "offline.eval_every_updates", "offline.checkpoint_every_updates",
@@ -180,7 +181,7 @@ def _table6_alpha(task: str, dataset: str) -> float:
     """CQL's alpha from the paper's Table 6 for a dataset kind; a folder or an unlisted pair needs agent.cql.alpha."""
     from repro.offline.losses.cql import cql_alpha
 
-    if "/" in dataset:
+    if is_folder_value(dataset):
         raise ConfigError(f"agent.cql.alpha: Table 6 gives alpha per task and dataset kind, not for the folder "
                           f"'{dataset}'; set agent.cql.alpha (one of 0.5, 1, 2, 4, 8 in the paper).")
     try:

@@ -9,10 +9,9 @@ and reads small files; it imports nothing heavier than the standard library.
 from __future__ import annotations
 
 import hashlib
-import re
-
 import json
 import math
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -84,10 +83,15 @@ def run_path(results_root: str | Path, experiment: str, algo: str, variant: str,
     return task_dir / f"seed_{seed}"
 
 
+def is_folder_value(value: str) -> bool:
+    """An ``offline.dataset`` value naming a folder (has a '/', starts with '~', or is '.'/'..'), not a kind."""
+    return "/" in value or value.startswith("~") or value in (".", "..")
+
+
 def dataset_tag(value: str) -> str:
     """Run directory component of ``offline.dataset``: a kind (``medium``) as is; a folder: its name and the
     first 8 hex digits of the sha256 of the value as written (``84px-1a2b3c4d``), so two folders never share one."""
-    if "/" not in value:
+    if not is_folder_value(value):
         return value
     name = re.sub(r"[^A-Za-z0-9_.\-]", "_", Path(value.rstrip("/")).name) or "dataset"
     return f"{name}-{hashlib.sha256(value.encode()).hexdigest()[:8]}"

@@ -20,14 +20,16 @@ import math
 import re
 import zipfile
 import zlib
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping, Union
+from typing import Any, Union
 
 import numpy as np
 
 from repro import __version__
 from repro.fsutil import atomic_write, atomic_write_text
+from repro.runformat import is_folder_value
 
 FORMAT = 1
 MANIFEST = "manifest.json"
@@ -77,7 +79,7 @@ class Manifest:
                 "source": self.source, "rule": self.rule, "created_by": self.created_by}
 
     @classmethod
-    def from_json(cls, data: Any, where: str) -> "Manifest":
+    def from_json(cls, data: Any, where: str) -> Manifest:
         if not isinstance(data, dict):
             raise DatasetError(f"wrong format: {where} is not a JSON object")
         if data.get("format") != FORMAT:
@@ -364,11 +366,6 @@ def _episode_for(path: Path, item: EpisodeSource, i: int, action_dim: int | None
 
 
 # ---------------------------------------------------------------------------------------------- locating
-def is_folder_value(value: str) -> bool:
-    """A dataset value naming a folder (has a '/', starts with '~', or is '.'/'..') rather than a kind."""
-    return "/" in value or value.startswith("~") or value in (".", "..")
-
-
 def dataset_path(value: str, results_root: str | Path, task: str) -> Path:
     """Where ``value`` points, existing or not: a kind -> ``{results_root}/datasets/{task}/{kind}``."""
     value = str(value or "").strip()
