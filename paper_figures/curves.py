@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import pandas as pd
-
 from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter
 

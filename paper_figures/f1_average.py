@@ -24,8 +24,8 @@ from analysis.stats import (
 from analysis.tables import Cell, fmt_ci, fmt_num, write_table
 from paper_figures.common import (
     NO_RUNS_TEXT,
-    bar_caption,
     banner,
+    bar_caption,
     comparison_table,
     grouped_bars,
     palette,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import torch
 from omegaconf import DictConfig
@@ -16,10 +16,10 @@ from repro.config import compose, typed
 from repro.episodes import EpisodeStore
 from repro.learners import Learner, build_learner, is_offline
 from repro.logger import RunLogger
+from repro.offline.record import Recorder
 from repro.offline.reference import score_reference
 from repro.offline.replay import DatasetError, OfflineData, load_offline_data, resolve_dataset
 from repro.offline_trainer import OfflineLogger, OfflineTrainer
-from repro.offline.record import Recorder
 from repro.replay import ReplayBuffer
 from repro.schema import RunConfig
 from repro.trainer import Trainer
@@ -190,8 +190,14 @@ class _Progress:
     """A rich progress bar: frames (offline: updates), their rate, last eval return, ETA."""
 
     def __init__(self, total_frames: int, start_frame: int, label: str, unit: str = "fps"):
-        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
-                                   TimeRemainingColumn)
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
 
         self._p = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                            TextColumn(f"{{task.fields[fps]}} {unit}"), TextColumn("eval {task.fields[ret]}"),

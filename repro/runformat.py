@@ -9,10 +9,9 @@ and reads small files; it imports nothing heavier than the standard library.
 from __future__ import annotations
 
 import hashlib
-import re
-
 import json
 import math
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any

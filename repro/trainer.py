@@ -7,8 +7,8 @@ loop is repro/offline_trainer.py.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -36,12 +36,12 @@ OFFLINE_ALGOS = ("td3bc", "cql", "iql", "bc", "dt")  # learners named by agent.l
 _DICT_KEYS = ("agent.objectives",)  # dict values, passed through the cache below as JSON text
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _composed(agent: str, task: str) -> DictConfig:
     return compose([f"agent={agent}", f"task={task}"])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _validated(algo: str, task: str, overrides: tuple[tuple[str, Any], ...]) -> DictConfig:
     """The composed config of ``algo`` on ``task`` with dotted ``overrides`` applied in struct mode (a key the
     schema lacks raises) and validated like any training config."""

@@ -16,7 +16,6 @@ from typer.testing import CliRunner
 from analysis import select
 from analysis.audit import mismatches, run_audit
 from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims
-from repro_app.analysis_cli import register
 from analysis.context import Context
 from analysis.load import load_results
 from analysis.scores import best_online_returns, final_scores, learning_curves, normalize_offline
@@ -29,6 +28,7 @@ from analysis.stats import (
     seeded,
 )
 from analysis_fixtures import DMC9, FRAMES, write_run
+from repro_app.analysis_cli import register
 
 REPS = 200
 pytestmark = pytest.mark.filterwarnings("ignore:random_state is deprecated:FutureWarning")

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from repro_app.cli import app
 from repro.envs import TASKS
+from repro_app.cli import app
 
 runner = CliRunner()
 

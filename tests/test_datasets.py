@@ -21,8 +21,15 @@ import pytest
 from typer.testing import CliRunner
 
 from repro.offline.cli import dataset_app
-from repro.offline.dataset import (DatasetError, check_dataset, iter_episodes, load_manifest, open_dataset,
-                                   resolve_dataset, write_dataset)
+from repro.offline.dataset import (
+    DatasetError,
+    check_dataset,
+    iter_episodes,
+    load_manifest,
+    open_dataset,
+    resolve_dataset,
+    write_dataset,
+)
 
 TASK, A = "hopper_hop", 4  # hopper_hop's action dim
 LENGTHS = (5, 8, 6)  # transitions per episode: never assume 500

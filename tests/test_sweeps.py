@@ -15,14 +15,15 @@ import time
 from pathlib import Path
 
 import pytest
+import typer
 import yaml
 from typer.testing import CliRunner
 
-import typer
-from repro.launch import lock, spec as specs
+from repro.launch import lock
+from repro.launch import spec as specs
 from repro.launch.cli import register
 from repro.launch.runner import claim
-from repro.launch.state import RunRecord, write_record, state_dir
+from repro.launch.state import RunRecord, state_dir, write_record
 from repro.launch.status import collect
 
 TINY = ["profile=tiny", "env.max_episode_frames=50", "train.seed_frames=50", "train.update_every_steps=4",

@@ -6,7 +6,7 @@ import os
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import List, Optional
+from typing import Optional
 
 import typer
 from rich.console import Console
@@ -111,7 +111,7 @@ def register(app: typer.Typer) -> None:
         tasks: Optional[str] = typer.Option(None, "--tasks", help="Comma-separated tasks instead of the sweep's."),
         seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Use seeds 1..N."),
         frames: Optional[int] = typer.Option(None, "--frames", min=1, help="Frame budget of every run."),
-        sets: Optional[List[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
+        sets: Optional[list[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
         results_root: Optional[Path] = typer.Option(
             None, *RESULTS_FLAGS, help="Results root to write the runs under (the same as --set "
                                        "runtime.results_root=ROOT; default: the config's runtime.results_root)."),
@@ -196,7 +196,7 @@ def register(app: typer.Typer) -> None:
             raise _fail(str(exc)) from None
 
 
-def _with_results_root(sets: Optional[List[str]], results_root: Optional[Path]) -> tuple[str, ...]:
+def _with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) -> tuple[str, ...]:
     """The --set overrides, plus ``runtime.results_root`` when --results is given (not both)."""
     out = tuple(sets or ())
     if results_root is None:

@@ -6,9 +6,10 @@ import os
 import shutil
 import socket
 import traceback
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import submitit
 import yaml

@@ -5,9 +5,9 @@ from __future__ import annotations
 import csv
 import io
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 from repro.launch import lock
 from repro.launch.slurm_query import FAILED, QUEUED, job_states

@@ -20,9 +20,10 @@ import math
 import re
 import zipfile
 import zlib
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping, Union
+from typing import Any, Union
 
 import numpy as np
 
@@ -77,7 +78,7 @@ class Manifest:
                 "source": self.source, "rule": self.rule, "created_by": self.created_by}
 
     @classmethod
-    def from_json(cls, data: Any, where: str) -> "Manifest":
+    def from_json(cls, data: Any, where: str) -> Manifest:
         if not isinstance(data, dict):
             raise DatasetError(f"wrong format: {where} is not a JSON object")
         if data.get("format") != FORMAT:

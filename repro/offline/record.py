@@ -86,7 +86,7 @@ class Recorder:
 
     @classmethod
     def open(cls, run_dir: str | Path, agent_cfg: Any, obs_shape: tuple[int, int, int], action_dim: int,
-             checkpoint: dict | None) -> "Recorder":
+             checkpoint: dict | None) -> Recorder:
         """The recorder of a (re)starting run, rewound to ``checkpoint`` (None: a start from scratch)."""
         rec = cls(run_dir, PolicySpec(tuple(obs_shape), int(action_dim), int(agent_cfg.feature_dim),
                                       int(agent_cfg.hidden_dim)))

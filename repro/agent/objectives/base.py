@@ -3,18 +3,19 @@
 from __future__ import annotations
 
 import abc
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar
+from typing import Any, ClassVar
 
 import torch
 from torch import nn
 
 from repro.agent.networks import SharedHeads
 
-OBJECTIVES: dict[str, type["Objective"]] = {}
+OBJECTIVES: dict[str, type[Objective]] = {}
 
 
-def register(name: str) -> Callable[[type["Objective"]], type["Objective"]]:
+def register(name: str) -> Callable[[type[Objective]], type[Objective]]:
     """Class decorator adding an objective to the registry under ``name``."""
 
     def wrap(cls: type[Objective]) -> type[Objective]:

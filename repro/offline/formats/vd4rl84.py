@@ -8,8 +8,8 @@ Datasets per file: ``observation`` (N, 3, 84, 84) uint8 single frames, ``action`
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import h5py
 import numpy as np
