@@ -393,7 +393,9 @@ def load_results(root: Path | str) -> Results:
     else:
         dup = runs.duplicated(["experiment", "algo", "variant", "task", "seed"], keep=False)
         for run_id in runs.loc[dup, "run_id"]:
-            problems.append(Problem(str(root / run_id), "same experiment/algo/variant/task/seed as another run", "warning"))
+            problems.append(
+                Problem(str(root / run_id), "same experiment/algo/variant/task/seed as another run", "warning")
+            )
     if evals and not runs.empty:
         eval_all = pd.concat(evals, ignore_index=True).merge(runs[list(IDENTITY)], on="run_id", how="left")
     else:

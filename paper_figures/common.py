@@ -102,7 +102,18 @@ def grouped_bars(
     colors = colors or palette(list(hue_order))
     n_h = max(len(hue_order), 1)
     width = 0.8 / n_h
-    top = np.nanmax(np.r_[cf["ci_high"].to_numpy(dtype=float), cf["mean"].to_numpy(dtype=float), cf["paper"].to_numpy(dtype=float), 1.0]) if not cf.empty else 1.0
+    top = (
+        np.nanmax(
+            np.r_[
+                cf["ci_high"].to_numpy(dtype=float),
+                cf["mean"].to_numpy(dtype=float),
+                cf["paper"].to_numpy(dtype=float),
+                1.0,
+            ]
+        )
+        if not cf.empty
+        else 1.0
+    )
     for i, xv in enumerate(x_order):
         for j, hv in enumerate(hue_order):
             pos = i - 0.4 + width * (j + 0.5)
@@ -118,7 +129,9 @@ def grouped_bars(
                 ax.text(pos, (r["ci_high"] if not math.isnan(r["ci_high"]) else r["mean"]) + 0.015 * top,
                         f"n={int(r['n'])}", ha="center", va="bottom", fontsize=6.5, rotation=90)
             else:
-                ax.text(pos, 0.01 * top, "no runs", ha="center", va="bottom", fontsize=6.5, rotation=90, color="#777777")
+                ax.text(
+                    pos, 0.01 * top, "no runs", ha="center", va="bottom", fontsize=6.5, rotation=90, color="#777777"
+                )
             if not math.isnan(r["paper"]):
                 ax.plot([pos], [r["paper"]], **PAPER_MARK)
     ax.set_xticks(range(len(x_order)))

@@ -42,10 +42,16 @@ def render(ctx: Context) -> ArtifactResult:
         f"from {src}. Colours: centroid. Cluster quality: silhouette coefficient of the centroid labels "
         f"(≥ {CLUSTER_THRESHOLD} counts as 'forms clusters')."
     )
-    raw = pd.DataFrame([
-        {"space": "raw", "silhouette_tsne_2d": res.silhouette_raw_2d, "silhouette_original": res.silhouette_raw},
-        {"space": "latent", "silhouette_tsne_2d": res.silhouette_latent_2d, "silhouette_original": res.silhouette_latent},
-    ])
+    raw = pd.DataFrame(
+        [
+            {"space": "raw", "silhouette_tsne_2d": res.silhouette_raw_2d, "silhouette_original": res.silhouette_raw},
+            {
+                "space": "latent",
+                "silhouette_tsne_2d": res.silhouette_latent_2d,
+                "silhouette_original": res.silhouette_latent,
+            },
+        ]
+    )
     disp = pd.DataFrame([
         {"Actions": "raw", "Silhouette (t-SNE 2-D)": fmt_num(res.silhouette_raw_2d, 3),
          "Silhouette (original space)": fmt_num(res.silhouette_raw, 3), "Paper": "no clusters (by eye)"},

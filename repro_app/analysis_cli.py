@@ -161,7 +161,9 @@ def register(app: typer.Typer) -> None:
             status = "MISMATCH" if f in bad else ("ok" if f.kind == "check" else "info")
             typer.echo(f"{status:<8} [{f.where}] {f.description}: paper {f.printed} | recomputed {f.recomputed}")
         table = write_audit(out, findings)
-        typer.echo(f"{len(bad)} mismatches in {sum(f.kind == 'check' for f in findings)} checks; wrote {table.files[1]}")
+        typer.echo(
+            f"{len(bad)} mismatches in {sum(f.kind == 'check' for f in findings)} checks; wrote {table.files[1]}"
+        )
 
     @app.command("report")
     def report_cmd(

@@ -250,7 +250,9 @@ def test_update_rewrites_only_our_own_lock(tmp_path):
 
 def test_status_reports_each_state(tmp_path):
     sweep = write_sweep(tmp_path, "st", ["reacher_hard"], {"a": [], "b": [], "c": [], "d": []}, 1)
-    planned = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={tmp_path}",))))
+    planned = specs.plan(
+        specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={tmp_path}",)))
+    )
     root = specs.results_root_of(planned)
     sdir = state_dir(root, "st")
     a, b, c, d = planned
@@ -315,7 +317,9 @@ def _wait(pred, timeout: float, what: str) -> None:
 def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_path):
     """2 tasks x 2 variants x 2 seeds: kill the launcher halfway (SIGKILL), then two launchers at once
     finish the grid; every run ends DONE exactly once with complete, duplicate-free CSVs."""
-    sweep = write_sweep(tmp_path, "grid", ["reacher_hard", "cheetah_run"], {"K1": ["agent.K=1"], "K3": ["agent.K=3"]}, 2)
+    sweep = write_sweep(
+        tmp_path, "grid", ["reacher_hard", "cheetah_run"], {"K1": ["agent.K=1"], "K3": ["agent.K=3"]}, 2
+    )
     root = tmp_path / "results"
     common = [str(sweep), "--set", f"runtime.results_root={root}"]
     planned = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={root}",))))

@@ -113,16 +113,26 @@ def register(app: typer.Typer) -> None:
         frames: Optional[int] = typer.Option(None, "--frames", min=1, help="Frame budget of every run."),
         sets: Optional[list[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
         results_root: Optional[Path] = typer.Option(
-            None, *RESULTS_FLAGS, help="Results root to write the runs under (the same as --set "
-                                       "runtime.results_root=ROOT; default: the config's runtime.results_root)."),
-        dry_run: bool = typer.Option(False, "--dry-run", help="Print the grid (run dir, overrides, state); launch nothing."),
+            None,
+            *RESULTS_FLAGS,
+            help="Results root to write the runs under (the same as --set "
+            "runtime.results_root=ROOT; default: the config's runtime.results_root).",
+        ),
+        dry_run: bool = typer.Option(
+            False, "--dry-run", help="Print the grid (run dir, overrides, state); launch nothing."
+        ),
         launcher: Launcher = typer.Option(Launcher.local, "--launcher", help="Where to run."),
-        max_parallel: Optional[int] = typer.Option(None, "--max-parallel", min=1,
-                                                   help="Local: runs at once (default: cores / 2)."),
-        force: bool = typer.Option(False, "--force", help="Move aside run dirs whose saved config differs, then rerun."),
+        max_parallel: Optional[int] = typer.Option(
+            None, "--max-parallel", min=1, help="Local: runs at once (default: cores / 2)."
+        ),
+        force: bool = typer.Option(
+            False, "--force", help="Move aside run dirs whose saved config differs, then rerun."
+        ),
         cluster_config: Optional[Path] = typer.Option(
-            None, "--cluster-config", help="SLURM launcher YAML (default: $REPRO_SLURM_CONFIG or "
-                                           "~/.config/taco-repro/slurm.yaml)."),
+            None,
+            "--cluster-config",
+            help="SLURM launcher YAML (default: $REPRO_SLURM_CONFIG or ~/.config/taco-repro/slurm.yaml).",
+        ),
     ) -> None:
         """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
         from repro.launch.local import default_parallel, run_local

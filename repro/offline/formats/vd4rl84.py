@@ -26,7 +26,9 @@ def _open(path: Path) -> h5py.File:
     try:
         return h5py.File(path, "r")
     except OSError as exc:
-        raise DatasetError(f"corrupt or truncated file {path} (not readable as hdf5: {exc.__class__.__name__})") from None
+        raise DatasetError(
+            f"corrupt or truncated file {path} (not readable as hdf5: {exc.__class__.__name__})"
+        ) from None
 
 
 def split_episodes(step_type: np.ndarray, where: str) -> list[tuple[int, int]]:
