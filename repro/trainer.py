@@ -84,6 +84,7 @@ class Trainer:
         try:
             self._evaluate(record=final and self.cfg.save_frames)
             if self.recorder is not None:
+                assert self.last_eval is not None  # set by _evaluate
                 self.recorder.snapshot(self.agent, self.counters.step, self.frame, self.last_eval)
         finally:
             self._eval_seconds += time.time() - started
