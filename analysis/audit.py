@@ -93,7 +93,7 @@ def parse_row_table(tex: str, label: str, columns: list[str]) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-def parse_offline_table(tex: str) -> tuple[pd.DataFrame, dict[str, float]]:
+def parse_offline_table(tex: str) -> tuple[pd.DataFrame, dict[str, float | None]]:
     """Table 3 as rows (task, dataset, method, mean, std, bold) and its printed average row."""
     out, average, task = [], {}, None
     for cells in _rows(_tabular(tex, "tab:offline_table")):

@@ -15,7 +15,7 @@ from paper_figures.registry import ArtifactResult, register
 @register("F6", "t-SNE of raw vs latent actions", "figure", "fig:tsne_act")
 def render(ctx: Context) -> ArtifactResult:
     res, info = tsne_for_context(ctx)
-    colors = plt.get_cmap("tab10").colors
+    colors = plt.get_cmap("tab10").colors  # type: ignore[attr-defined]  # tab10 is a ListedColormap
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4.6))
     for ax, emb, sil, name in ((a1, res.raw_2d, res.silhouette_raw_2d, "raw actions"),
                                (a2, res.latent_2d, res.silhouette_latent_2d, "latent actions")):

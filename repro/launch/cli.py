@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Sequence
 from enum import Enum
 from pathlib import Path
 from typing import Optional
@@ -48,7 +49,7 @@ def _rel(path: Path, root: Path) -> str:
 
 
 def print_plan(planned: list[PlannedRun], spec: SweepSpec, root: Path, force: bool,
-               excluded: list[tuple[str, str, str, str]] = ()) -> None:
+               excluded: Sequence[tuple[str, str, str, str]] = ()) -> None:
     con = _console()
     for agent, variant, task, reason in excluded:
         con.print(f"[dim]{'n/a':<9}[/] {escape(f'{spec.experiment}/{agent}/{variant}/{task}')}  "
@@ -225,7 +226,7 @@ def _default_results_root() -> Path:
         raise SweepError(str(exc)) from None
 
 
-def _print_report(report, launcher: Launcher, sweep: str) -> None:  # type: ignore[no-untyped-def]
+def _print_report(report, launcher: Launcher, sweep: str) -> None:
     con = _console()
     parts = [f"{len(report.started)} {'submitted' if launcher == Launcher.slurm else 'started'}"]
     if launcher == Launcher.local:

@@ -23,7 +23,7 @@ from pathlib import Path
 GUARD_STALE_S = 30.0  # a break guard older than this is left over from a crashed breaker
 UNREADABLE_STALE_S = 60.0  # an unparseable lock older than this is treated as stale
 
-SlurmLookup = Callable[[list[str]], Mapping[str, str]]
+SlurmLookup = Callable[[list[str]], Mapping[str, str] | None]  # None: SLURM cannot be asked
 
 
 @dataclass

@@ -224,7 +224,7 @@ def submit(planned: Sequence[PlannedRun], sweep: str, sdir: Path, cluster: Clust
     return report
 
 
-def _queued(sdir: Path, c, job_id: str, paths) -> None:  # type: ignore[no-untyped-def]
+def _queued(sdir: Path, c, job_id: str, paths) -> None:
     """Record a submitted run's job id in its lock and run record."""
     lock.update(c.lock_path, c.info.token, job_id=job_id)
     existing = read_record(sdir, c.planned.key)
