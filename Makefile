@@ -32,7 +32,7 @@ repro: $(STAMP)
 
 # Static checks on the packages (ruff: pyproject [tool.ruff]; mypy: pyproject [tool.mypy]).
 lint: $(STAMP)
-	$(BIN)/ruff check repro analysis paper_figures tests benchmarks
+	$(BIN)/ruff check repro analysis paper_figures repro_app tests benchmarks
 	$(BIN)/mypy
 
 test: lint

@@ -93,7 +93,7 @@ def parse_row_table(tex: str, label: str, columns: list[str]) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-def parse_offline_table(tex: str) -> tuple[pd.DataFrame, dict[str, float]]:
+def parse_offline_table(tex: str) -> tuple[pd.DataFrame, dict[str, float | None]]:
     """Table 3 as rows (task, dataset, method, mean, std, bold) and its printed average row."""
     out, average, task = [], {}, None
     for cells in _rows(_tabular(tex, "tab:offline_table")):
@@ -129,14 +129,18 @@ def parse_cql_table(tex: str) -> pd.DataFrame:
 # ---------------------------------------------------------------- checks
 def _eq(a: float | None, b: float | None, tol: float = 1e-9) -> bool:
     if a is None or b is None or (isinstance(a, float) and math.isnan(a)) or (isinstance(b, float) and math.isnan(b)):
-        return (a is None or (isinstance(a, float) and math.isnan(a))) and (b is None or (isinstance(b, float) and math.isnan(b)))
+        return (a is None or (isinstance(a, float) and math.isnan(a))) and (
+            b is None or (isinstance(b, float) and math.isnan(b))
+        )
     return abs(float(a) - float(b)) <= tol
 
 
 def _pm(mean, std) -> str:
     if mean is None or (isinstance(mean, float) and math.isnan(mean)):
         return "N/A"
-    return f"{mean:g} ± {std:g}" if std is not None and not (isinstance(std, float) and math.isnan(std)) else f"{mean:g}"
+    return (
+        f"{mean:g} ± {std:g}" if std is not None and not (isinstance(std, float) and math.isnan(std)) else f"{mean:g}"
+    )
 
 
 def check_offline_average(p: PaperData) -> Iterable[Finding]:
@@ -169,8 +173,14 @@ def check_claim_text_numbers(p: PaperData) -> Iterable[Finding]:
     for key, pattern in quoted.items():
         m = re.search(pattern, speed)
         val = float(m.group(1)) if m else None
-        yield Finding("claim_speed_fps", "claims.csv vs T4/T5", f"claim speed quotes {key[0]} B{key[1]} FPS",
-                      f"{val:g}" if val is not None else "absent", f"{te[key]:g}", val is not None and _eq(val, te[key]))
+        yield Finding(
+            "claim_speed_fps",
+            "claims.csv vs T4/T5",
+            f"claim speed quotes {key[0]} B{key[1]} FPS",
+            f"{val:g}" if val is not None else "absent",
+            f"{te[key]:g}",
+            val is not None and _eq(val, te[key]),
+        )
 
 
 def check_online_gain(p: PaperData) -> Iterable[Finding]:
@@ -184,9 +194,15 @@ def check_online_gain(p: PaperData) -> Iterable[Finding]:
                   "1.4x", f"{per_task:.3f}x", abs(round(per_task, 1) - 1.4) < 1e-9, kind="info")
     best_mf = piv[[m for m in MODEL_FREE if m != "TACO"]].max(axis=1)
     r2 = piv["TACO"].mean() / best_mf.mean()
-    yield Finding("online_gain_vs_best_prior", "§1 contribution 4 vs T1",
-                  "'outperforms prior state-of-the-art model-free RL by 1.4x': TACO vs the best prior model-free per task",
-                  "1.4x", f"{r2:.3f}x", abs(round(r2, 1) - 1.4) < 1e-9, kind="info")
+    yield Finding(
+        "online_gain_vs_best_prior",
+        "§1 contribution 4 vs T1",
+        "'outperforms prior state-of-the-art model-free RL by 1.4x': TACO vs the best prior model-free per task",
+        "1.4x",
+        f"{r2:.3f}x",
+        abs(round(r2, 1) - 1.4) < 1e-9,
+        kind="info",
+    )
 
 
 def check_model_based(p: PaperData) -> Iterable[Finding]:
@@ -219,11 +235,19 @@ def check_t4_vs_t5(p: PaperData) -> Iterable[Finding]:
     tex = p.tex
     t4 = parse_single_row(tex, "tab:time_efficiency")
     t5 = parse_single_row(tex, "tab:time_efficiency_taco")
-    yield Finding("t4_vs_t5", "T4 vs T5", "TACO B1024 FPS in both tables", f"T5: {t5[0]:g}", f"T4: {t4[0]:g}", _eq(t4[0], t5[0]))
+    yield Finding(
+        "t4_vs_t5", "T4 vs T5", "TACO B1024 FPS in both tables", f"T5: {t5[0]:g}", f"T4: {t4[0]:g}", _eq(t4[0], t5[0])
+    )
     te = p.time_efficiency.set_index(["method", "batch_size"])["fps"]
     ratio = te[("DrQ-v2", 256)] / te[("TACO", 1024)]
-    yield Finding("speed_ratio", "App. C vs T4", "'about 3.6 times slower than DrQ-v2': FPS(DrQ-v2 B256) / FPS(TACO B1024)",
-                  "3.6", f"{ratio:.3f} (→ {ratio:.1f})", abs(round(ratio, 1) - 3.6) < 1e-9)
+    yield Finding(
+        "speed_ratio",
+        "App. C vs T4",
+        "'about 3.6 times slower than DrQ-v2': FPS(DrQ-v2 B256) / FPS(TACO B1024)",
+        "3.6",
+        f"{ratio:.3f} (→ {ratio:.1f})",
+        abs(round(ratio, 1) - 3.6) < 1e-9,
+    )
     yield Finding("speed_vs_drq", "App. C vs T4", "'similar time efficiency as DrQ': TACO B1024 vs DrQ B512 FPS",
                   "similar", f"{te[('TACO', 1024)]:g} vs {te[('DrQ', 512)]:g}", True, kind="info")
 
@@ -237,16 +261,25 @@ def check_action_repr_text(p: PaperData) -> Iterable[Finding]:
                   f"{from_taco:.1f}", f"{from_drq:.1f}", abs(from_taco / from_drq - 1) <= 0.02)
     no_repr_reacher = on[("reacher_hard", "DrQ-v2")] * 1.51
     gain = on[("reacher_hard", "TACO")] / no_repr_reacher - 1
-    yield Finding("action_repr_reacher", "§5.1 (F3) vs T1",
-                  "reacher_hard: w/o action repr = DrQ-v2 x 1.51 implies a TACO gain that should lie in the stated 12.2%-70.4% range",
-                  "12.2% to 70.4%", f"{100 * gain:.1f}% (w/o = {no_repr_reacher:.0f}, TACO = {on[('reacher_hard', 'TACO')]:g})",
-                  0.122 - 1e-9 <= gain <= 0.704 + 1e-9)
+    yield Finding(
+        "action_repr_reacher",
+        "§5.1 (F3) vs T1",
+        "reacher_hard: w/o action repr = DrQ-v2 x 1.51 implies a TACO gain that should lie in the stated "
+        "12.2%-70.4% range",
+        "12.2% to 70.4%",
+        f"{100 * gain:.1f}% (w/o = {no_repr_reacher:.0f}, TACO = {on[('reacher_hard', 'TACO')]:g})",
+        0.122 - 1e-9 <= gain <= 0.704 + 1e-9,
+    )
 
 
 def check_t2_text(p: PaperData) -> Iterable[Finding]:
     t2 = p.repr_objectives.pivot(index="task", columns="method", values="mean")
-    below = [f"{m} on {t} ({t2.loc[t, m]:g} < {t2.loc[t, 'DrQ-v2']:g})" for t in t2.index for m in ("SPR", "ATC", "DRIML")
-             if not math.isnan(t2.loc[t, m]) and t2.loc[t, m] < t2.loc[t, "DrQ-v2"]]
+    below = [
+        f"{m} on {t} ({t2.loc[t, m]:g} < {t2.loc[t, 'DrQ-v2']:g})"
+        for t in t2.index
+        for m in ("SPR", "ATC", "DRIML")
+        if not math.isnan(t2.loc[t, m]) and t2.loc[t, m] < t2.loc[t, "DrQ-v2"]
+    ]
     yield Finding("t2_objectives_beat_drqv2", "§5.1 text vs T2",
                   "'previous representation learning objectives ... surpass the DrQ-v2 baseline'", "all above DrQ-v2",
                   "below DrQ-v2: " + ("; ".join(below) if below else "none"), not below)
@@ -263,8 +296,14 @@ def check_offline_gain(p: PaperData) -> Iterable[Finding]:
         for base in ("TD3+BC", "CQL"):
             if not o[(task, dataset, f"{base}+TACO")] > o[(task, dataset, base)]:
                 fails.append(f"{task}/{dataset} {base}")
-    yield Finding("offline_gain", "claim offline_gain vs T3", "X+TACO above X on all 12 pairs for TD3+BC and CQL",
-                  "24 of 24", f"{24 - len(fails)} of 24" + (f" (fails: {', '.join(fails)})" if fails else ""), not fails)
+    yield Finding(
+        "offline_gain",
+        "claim offline_gain vs T3",
+        "X+TACO above X on all 12 pairs for TD3+BC and CQL",
+        "24 of 24",
+        f"{24 - len(fails)} of 24" + (f" (fails: {', '.join(fails)})" if fails else ""),
+        not fails,
+    )
 
 
 def check_bold_marks(p: PaperData) -> Iterable[Finding]:
@@ -301,14 +340,24 @@ def check_transcription(p: PaperData) -> Iterable[Finding]:
     pairs = [
         ("T1", parse_row_table(tex, "tab:online_table", T1_COLUMNS), p.online, ["task", "method"], "mean", "std"),
         ("T2", parse_row_table(tex, "tab:spr_table", T2_COLUMNS), p.repr_objectives, ["task", "method"], "mean", "std"),
-        ("T3", parse_offline_table(tex)[0], p.offline.rename(columns={"normalized_mean": "mean", "normalized_std": "std"}),
-         ["task", "dataset", "method"], "mean", "std"),
+        (
+            "T3",
+            parse_offline_table(tex)[0],
+            p.offline.rename(columns={"normalized_mean": "mean", "normalized_std": "std"}),
+            ["task", "dataset", "method"],
+            "mean",
+            "std",
+        ),
     ]
     for name, parsed, csv, keys, mcol, scol in pairs:
         merged = parsed.merge(csv, on=keys, how="outer", suffixes=("_tex", "_csv"), indicator=True)
         bad = 0
         for d in merged.to_dict("records"):
-            ok = d["_merge"] == "both" and _eq(d[f"{mcol}_tex"], d[f"{mcol}_csv"]) and _eq(d[f"{scol}_tex"], d[f"{scol}_csv"])
+            ok = (
+                d["_merge"] == "both"
+                and _eq(d[f"{mcol}_tex"], d[f"{mcol}_csv"])
+                and _eq(d[f"{scol}_tex"], d[f"{scol}_csv"])
+            )
             if not ok:
                 bad += 1
                 yield Finding("csv_vs_tex", f"{name} CSV vs LaTeX", " ".join(str(d[k]) for k in keys),
@@ -321,8 +370,11 @@ def check_transcription(p: PaperData) -> Iterable[Finding]:
         if not _eq(v, csv_v):
             yield Finding("csv_vs_tex", "T3 average CSV vs LaTeX", m, f"{csv_v:g}", f"{v:g}", False)
     t4 = parse_single_row(tex, "tab:time_efficiency")
-    t4_csv = [float(p.time_efficiency.set_index(["method", "batch_size"]).loc[k, "fps"]) for k in
-              [("TACO", 1024), ("DrQ-v2", 256), ("A-LIX", 256), ("DrQ", 512), ("CURL", 512), ("DreamerV3", 256), ("TD-MPC", 256)]]
+    t4_csv = [
+        float(p.time_efficiency.set_index(["method", "batch_size"]).loc[k, "fps"])
+        for k in [("TACO", 1024), ("DrQ-v2", 256), ("A-LIX", 256), ("DrQ", 512), ("CURL", 512), ("DreamerV3", 256),
+                  ("TD-MPC", 256)]
+    ]
     yield Finding("csv_vs_tex", "T4 CSV vs LaTeX", "FPS row", str(t4_csv), str(t4), t4 == t4_csv)
     cql = parse_cql_table(tex).merge(p.cql_alpha, on=["task", "dataset"], how="outer")
     ok = bool((cql["alpha"] == cql["alpha_cql"]).all())
@@ -332,11 +384,24 @@ def check_transcription(p: PaperData) -> Iterable[Finding]:
 def check_cql_alpha(p: PaperData) -> Iterable[Finding]:
     allowed = {0.5, 1.0, 2.0, 4.0, 8.0}
     used = sorted(set(p.cql_alpha["alpha_cql"].astype(float)))
-    yield Finding("cql_alpha_grid", "App. D text vs T6", "every alpha_CQL of Table 6 is in the stated grid {0.5, 1, 2, 4, 8}",
-                  "{0.5, 1, 2, 4, 8}", str(used), set(used) <= allowed)
+    yield Finding(
+        "cql_alpha_grid",
+        "App. D text vs T6",
+        "every alpha_CQL of Table 6 is in the stated grid {0.5, 1, 2, 4, 8}",
+        "{0.5, 1, 2, 4, 8}",
+        str(used),
+        set(used) <= allowed,
+    )
     printed = sorted(set(p.cql_alpha["dataset_as_printed"]))
-    yield Finding("dataset_names", "T3 vs T6", "Table 6 calls the full-replay dataset 'Replay' (cql_alpha.csv: full_replay)",
-                  "Full-replay (T3)", ", ".join(printed), True, kind="info")
+    yield Finding(
+        "dataset_names",
+        "T3 vs T6",
+        "Table 6 calls the full-replay dataset 'Replay' (cql_alpha.csv: full_replay)",
+        "Full-replay (T3)",
+        ", ".join(printed),
+        True,
+        kind="info",
+    )
 
 
 CHECK_FUNCS = (
@@ -369,13 +434,18 @@ def write_audit(out_dir, findings: list[Finding]):
     """Write ``audit.csv/.md/.tex``: mismatches first, then the checks that agree, then context rows."""
     order = sorted(findings, key=lambda f: (f.kind != "check", f.match))
     raw = pd.DataFrame([f.__dict__ for f in order])
-    disp = pd.DataFrame({
-        "Result": ["MISMATCH" if (f.kind == "check" and not f.match) else ("ok" if f.kind == "check" else "info") for f in order],
-        "Where": [f.where for f in order],
-        "What": [f.description for f in order],
-        "Paper prints": [f.printed for f in order],
-        "Recomputed": [f.recomputed for f in order],
-    })
+    disp = pd.DataFrame(
+        {
+            "Result": [
+                "MISMATCH" if (f.kind == "check" and not f.match) else ("ok" if f.kind == "check" else "info")
+                for f in order
+            ],
+            "Where": [f.where for f in order],
+            "What": [f.description for f in order],
+            "Paper prints": [f.printed for f in order],
+            "Recomputed": [f.recomputed for f in order],
+        }
+    )
     n_bad = len(mismatches(findings))
     caption = (f"Audit of the paper's derived numbers from its own tables: {n_bad} mismatches in "
                f"{sum(f.kind == 'check' for f in findings)} checks.")

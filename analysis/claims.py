@@ -90,6 +90,13 @@ def get(ctx: Context, table: dict[tuple, tuple[int, float]], *key) -> float | No
     return mean if n >= ctx.min_seeds else None
 
 
+def present(ctx: Context, table: dict[tuple, tuple[int, float]], *key) -> float:
+    """``get`` of a cell already known to have enough seeds (checked by ``require`` or by a ``get``)."""
+    value = get(ctx, table, *key)
+    assert value is not None, key
+    return value
+
+
 def require(ctx: Context, table: dict, keys: Sequence[tuple]) -> None:
     missing = [k for k in keys if get(ctx, table, *k) is None]
     if missing:
@@ -127,7 +134,8 @@ def labelled(df: pd.DataFrame) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------- checks
-@check("online_avg_gain", "mean over the 9 tasks of TACO / DrQ-v2 >= 1.3 (about 1.4x, tolerance 0.1); CI by rliable bootstrap")
+@check("online_avg_gain", "mean over the 9 tasks of TACO / DrQ-v2 >= 1.3 (about 1.4x, tolerance 0.1); CI by rliable "
+       "bootstrap")
 def _online_avg_gain(ctx: Context) -> tuple[str, str]:
     df = labelled(select.online_main(ctx.scores, ctx.experiment_map))
     table = means(df, ["task", "method"])
@@ -135,6 +143,7 @@ def _online_avg_gain(ctx: Context) -> tuple[str, str]:
     ok = df[df["reached"].astype(bool)]
     x, _ = score_matrix(ok[ok["method"] == "TACO"], DMC9)
     y, _ = score_matrix(ok[ok["method"] == "DrQ-v2"], DMC9)
+    assert x is not None and y is not None  # require() saw runs on every task
     r, lo, hi = ratio_of_means(x, y, ctx.reps, ctx.seed)
     verdict = SUPPORTED if r >= 1.3 else REFUTED
     return verdict, f"TACO/DrQ-v2 = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); paper: 1.4x (Table 1 gives 1.397)"
@@ -146,7 +155,8 @@ def _beats_drqv2(ctx: Context) -> tuple[str, str]:
     return universal(ctx, table, [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9])
 
 
-@check("online_beats_model_based", "TACO mean > both DreamerV3 and TD-MPC on >= 6 of 9 tasks (baselines from runs, else the paper's Table 1)")
+@check("online_beats_model_based", "TACO mean > both DreamerV3 and TD-MPC on >= 6 of 9 tasks (baselines from runs, "
+       "else the paper's Table 1)")
 def _beats_model_based(ctx: Context) -> tuple[str, str]:
     table = means(labelled(select.online_main(ctx.scores, ctx.experiment_map)), ["task", "method"])
     require(ctx, table, [(t, "TACO") for t in DMC9])
@@ -156,9 +166,11 @@ def _beats_model_based(ctx: Context) -> tuple[str, str]:
         for m in ("DreamerV3", "TD-MPC"):
             v = get(ctx, table, t, m)
             if v is None:
-                v, used_paper = ctx.paper.online_value(t, m)[0], True
+                printed = ctx.paper.online_value(t, m)
+                assert printed is not None  # Table 1 has both baselines on every DMC task
+                v, used_paper = printed[0], True
             base.append(v)
-        taco = get(ctx, table, t, "TACO")
+        taco = present(ctx, table, t, "TACO")
         wins += taco > max(base)
         lines.append(f"{t} {taco:.0f} vs {max(base):.0f}")
     src = " (DreamerV3/TD-MPC values from the paper, not rerun)" if used_paper else ""
@@ -175,7 +187,9 @@ def _mean_curves(ctx: Context, curves: pd.DataFrame, task: str) -> dict[str, pd.
     return out
 
 
-@check("reacher_speed", "on reacher_hard, with curves cut at the budget (1.5M) and target = 95% of TACO's best mean-curve value: TACO reaches it within 2/3 of the budget (1.0M frames) and DrQ-v2 needs >= 1.5x as many frames (or never does)")
+@check("reacher_speed", "on reacher_hard, with curves cut at the budget (1.5M) and target = 95% of TACO's best "
+       "mean-curve value: TACO reaches it within 2/3 of the budget (1.0M frames) and DrQ-v2 needs >= 1.5x as many "
+       "frames (or never does)")
 def _reacher_speed(ctx: Context) -> tuple[str, str]:
     curves = labelled(select.online_main(ctx.curves, ctx.experiment_map))
     mc = _mean_curves(ctx, curves, "reacher_hard")
@@ -188,10 +202,12 @@ def _reacher_speed(ctx: Context) -> tuple[str, str]:
     t_drq = float(hit.index.min()) if len(hit) else None
     ok = t_taco <= ctx.budget * 2 / 3 and (t_drq is None or t_drq >= 1.5 * t_taco)
     drq_text = f"{t_drq / 1e6:.2f}M" if t_drq is not None else f"not within {mc['DrQ-v2'].index.max() / 1e6:.2f}M"
-    return (SUPPORTED if ok else REFUTED), f"target {target:.0f}: TACO at {t_taco / 1e6:.2f}M, DrQ-v2 {drq_text} (paper: 0.75M vs 1.5M)"
+    return (SUPPORTED if ok else REFUTED), (f"target {target:.0f}: TACO at {t_taco / 1e6:.2f}M, DrQ-v2 {drq_text} "
+                                            "(paper: 0.75M vs 1.5M)")
 
 
-@check("longer_training", "TACO mean > DrQ-v2 mean at the last common frame (>= the budget, 2M) on quadruped_run, hopper_hop, walker_run, cheetah_run")
+@check("longer_training", "TACO mean > DrQ-v2 mean at the last common frame (>= the budget, 2M) on quadruped_run, "
+       "hopper_hop, walker_run, cheetah_run")
 def _longer(ctx: Context) -> tuple[str, str]:
     curves = labelled(select.online_main(ctx.curves, ctx.experiment_map))
     lines, fails, missing = [], [], []
@@ -223,22 +239,26 @@ def _metaworld(ctx: Context) -> tuple[str, str]:
     return verdict, ev + ("" if "A-LIX" in bases else " (A-LIX not run: checked against DrQ-v2 only)")
 
 
-@check("action_repr_gain", "TACO mean > TACO w/o action repr mean on every task of the action_repr sweep (named: quadruped_run, hopper_hop, reacher_hard)")
+@check("action_repr_gain", "TACO mean > TACO w/o action repr mean on every task of the action_repr sweep (named: "
+       "quadruped_run, hopper_hop, reacher_hard)")
 def _action_repr_gain(ctx: Context) -> tuple[str, str]:
     df = select.action_repr(ctx.scores, ctx.experiment_map)
     table = means(df, ["task", "label"])
-    tasks = sorted({k[0] for k in table if k[1] == "TACO w/o action repr"} | {"quadruped_run", "hopper_hop", "reacher_hard"})
+    tasks = sorted({k[0] for k in table if k[1] == "TACO w/o action repr"}
+                   | {"quadruped_run", "hopper_hop", "reacher_hard"})
     verdict, ev = universal(ctx, table, [((t, "TACO"), (t, "TACO w/o action repr"), t) for t in tasks])
-    gains = [f"{t} {pct(get(ctx, table, t, 'TACO'), get(ctx, table, t, 'TACO w/o action repr'))}" for t in tasks
+    gains = [f"{t} {pct(present(ctx, table, t, 'TACO'), present(ctx, table, t, 'TACO w/o action repr'))}" for t in tasks
              if get(ctx, table, t, "TACO") and get(ctx, table, t, "TACO w/o action repr")]
     return verdict, f"gains {', '.join(gains)} (paper: +12.2% quadruped_run ... +70.4% hopper_hop). {ev}"
 
 
-@check("no_action_repr_vs_drqv2", "TACO w/o action repr beats DrQ-v2 on quadruped_run and reacher_hard, and is within ±20% of DrQ-v2 on the other tasks of the sweep")
+@check("no_action_repr_vs_drqv2", "TACO w/o action repr beats DrQ-v2 on quadruped_run and reacher_hard, and is within "
+       "±20% of DrQ-v2 on the other tasks of the sweep")
 def _no_repr_vs_drqv2(ctx: Context) -> tuple[str, str]:
     df = select.action_repr(ctx.scores, ctx.experiment_map)
     table = means(df, ["task", "label"])
-    require(ctx, table, [(t, lab) for t in ("quadruped_run", "reacher_hard") for lab in ("TACO w/o action repr", "DrQ-v2")])
+    require(ctx, table, [(t, lab) for t in ("quadruped_run", "reacher_hard")
+                         for lab in ("TACO w/o action repr", "DrQ-v2")])
     lines, ok = [], True
     for t in sorted({k[0] for k in table}):
         a, b = get(ctx, table, t, "TACO w/o action repr"), get(ctx, table, t, "DrQ-v2")
@@ -246,10 +266,12 @@ def _no_repr_vs_drqv2(ctx: Context) -> tuple[str, str]:
             continue
         lines.append(f"{t} {pct(a, b)}")
         ok &= (a > b) if t in ("quadruped_run", "reacher_hard") else abs(a / b - 1) <= 0.2
-    return (SUPPORTED if ok else REFUTED), "w/o action repr vs DrQ-v2: " + ", ".join(lines) + " (paper: +18% quadruped_run, +51% reacher_hard)"
+    return (SUPPORTED if ok else REFUTED), ("w/o action repr vs DrQ-v2: " + ", ".join(lines)
+                                            + " (paper: +18% quadruped_run, +51% reacher_hard)")
 
 
-@check("tsne_clusters", f"silhouette of the 4 centroid labels on the t-SNE embedding: latent >= {CLUSTER_THRESHOLD} and raw < {CLUSTER_THRESHOLD}")
+@check("tsne_clusters", f"silhouette of the 4 centroid labels on the t-SNE embedding: latent >= {CLUSTER_THRESHOLD} "
+       f"and raw < {CLUSTER_THRESHOLD}")
 def _tsne(ctx: Context) -> tuple[str, str]:
     if not ctx.results.runs.empty and "tsne" not in ctx.cache:
         from analysis.tsne import find_tsne_run
@@ -271,13 +293,15 @@ def _tsne(ctx: Context) -> tuple[str, str]:
         f"spaces: raw {res.silhouette_raw:.3f}, latent {res.silhouette_latent:.3f}); run {info['run_id']}")
 
 
-@check("batch_size", "on quadruped_run TACO's mean is non-decreasing in batch size and >= 10% higher at the largest than at the smallest; DrQ-v2's range is <= 15% of its mean")
+@check("batch_size", "on quadruped_run TACO's mean is non-decreasing in batch size and >= 10% higher at the largest "
+       "than at the smallest; DrQ-v2's range is <= 15% of its mean")
 def _batch(ctx: Context) -> tuple[str, str]:
     df = select.batch_size(ctx.scores, ctx.experiment_map)
     table = means(df, ["method", "batch_size"])
     series = {}
     for m in ("TACO", "DrQ-v2"):
-        pts = sorted((int(k[1]), get(ctx, table, *k)) for k in table if k[0] == m and get(ctx, table, *k) is not None)
+        pts = sorted((int(k[1]), present(ctx, table, *k)) for k in table
+                     if k[0] == m and get(ctx, table, *k) is not None)
         if len(pts) < 2:
             raise NotEnoughData(f"need {m} at >= 2 batch sizes (have {len(pts)})")
         series[m] = pts
@@ -289,14 +313,16 @@ def _batch(ctx: Context) -> tuple[str, str]:
     return (SUPPORTED if grows and flat else REFUTED), ev + f" (TACO grows: {grows}; DrQ-v2 flat: {flat})"
 
 
-@check("objective_removal", "on quadruped_run the drop full - no TACO is positive and larger than the drops of no CURL and no reward")
+@check("objective_removal", "on quadruped_run the drop full - no TACO is positive and larger than the drops of no "
+       "CURL and no reward")
 def _objectives(ctx: Context) -> tuple[str, str]:
     table = means(select.objective_removal(ctx.scores, ctx.experiment_map), ["label"])
     require(ctx, table, [("full",), ("no TACO",), ("no CURL",), ("no reward",)])
-    full = get(ctx, table, "full")
-    drops = {k: full - get(ctx, table, k) for k in ("no TACO", "no CURL", "no reward")}
+    full = present(ctx, table, "full")
+    drops = {k: full - present(ctx, table, k) for k in ("no TACO", "no CURL", "no reward")}
     ok = drops["no TACO"] > 0 and drops["no TACO"] > max(drops["no CURL"], drops["no reward"])
-    return (SUPPORTED if ok else REFUTED), f"full {full:.0f}; drops: " + ", ".join(f"{k} {v:.0f}" for k, v in drops.items())
+    return (SUPPORTED if ok else REFUTED), (f"full {full:.0f}; drops: "
+                                            + ", ".join(f"{k} {v:.0f}" for k, v in drops.items()))
 
 
 @check("vs_repr_objectives", "TACO mean > SPR, ATC and DRIML (where the paper has DRIML) on each of the 5 tasks")
@@ -335,7 +361,8 @@ def _offline_gain(ctx: Context) -> tuple[str, str]:
     return universal(ctx, table, pairs)
 
 
-@check("offline_average", "each printed average (TD3+BC+TACO 71.0, TD3+BC 68.2, CQL+TACO 72.1, CQL 66.7) lies in the 95% CI of the reproduced average normalised score over the 12 pairs")
+@check("offline_average", "each printed average (TD3+BC+TACO 71.0, TD3+BC 68.2, CQL+TACO 72.1, CQL 66.7) lies in the "
+       "95% CI of the reproduced average normalised score over the 12 pairs")
 def _offline_average(ctx: Context) -> tuple[str, str]:
     table, df = _offline_table(ctx, "normalized")
     printed = {"TD3+BC+TACO": 71.0, "TD3+BC": 68.2, "CQL+TACO": 72.1, "CQL": 66.7}
@@ -346,6 +373,7 @@ def _offline_average(ctx: Context) -> tuple[str, str]:
         rows = df[(df["method"] == m) & df["reached"].astype(bool)]
         rows = rows.assign(task=rows["task"] + "/" + rows["dataset"])
         matrix, _ = score_matrix(rows, [f"{t}/{d}" for t, d in pairs], value="normalized")
+        assert matrix is not None  # require() saw runs on every pair
         mean, lo, hi = grand_mean_ci(matrix, ctx.reps, ctx.seed)
         inside = lo <= p <= hi
         ok &= inside
@@ -353,26 +381,31 @@ def _offline_average(ctx: Context) -> tuple[str, str]:
     return (SUPPORTED if ok else REFUTED), "; ".join(lines)
 
 
-@check("horizon_choice", "K=3 > K=1 on hopper_hop, quadruped_walk, acrobot_swingup, reacher_hard; K=1 > K=3 on quadruped_run, walker_run; K=1 and K=3 > DrQ-v2 on all 9 tasks")
+@check("horizon_choice", "K=3 > K=1 on hopper_hop, quadruped_walk, acrobot_swingup, reacher_hard; K=1 > K=3 on "
+       "quadruped_run, walker_run; K=1 and K=3 > DrQ-v2 on all 9 tasks")
 def _horizon(ctx: Context) -> tuple[str, str]:
     table = means(select.horizon(ctx.scores, ctx.experiment_map), ["task", "label"])
-    pairs = [((t, "K=3"), (t, "K=1"), f"{t} K3>K1") for t in ("hopper_hop", "quadruped_walk", "acrobot_swingup", "reacher_hard")]
+    pairs = [((t, "K=3"), (t, "K=1"), f"{t} K3>K1")
+             for t in ("hopper_hop", "quadruped_walk", "acrobot_swingup", "reacher_hard")]
     pairs += [((t, "K=1"), (t, "K=3"), f"{t} K1>K3") for t in ("quadruped_run", "walker_run")]
     pairs += [((t, k), (t, "DrQ-v2"), f"{t} {k}>DrQ-v2") for t in DMC9 for k in ("K=1", "K=3")]
     return universal(ctx, table, pairs)
 
 
-@check("action_repeat", "on hopper_hop the K in {1,3,5} with the highest mean is 5 at action repeat 1, 3 at 2 and 1 at 4")
+@check("action_repeat", "on hopper_hop the K in {1,3,5} with the highest mean is 5 at action repeat 1, 3 at 2 and 1 "
+       "at 4")
 def _action_repeat(ctx: Context) -> tuple[str, str]:
     table = means(select.action_repeat(ctx.scores, ctx.experiment_map), ["label"])
     keys = [(f"AR={a}, K={k}",) for a in (1, 2, 4) for k in (1, 3, 5)]
     require(ctx, table, keys)
-    best = {a: max((1, 3, 5), key=lambda k: get(ctx, table, f"AR={a}, K={k}")) for a in (1, 2, 4)}
+    best = {a: max((1, 3, 5), key=lambda k: present(ctx, table, f"AR={a}, K={k}")) for a in (1, 2, 4)}
     ok = best == {1: 5, 2: 3, 4: 1}
-    return (SUPPORTED if ok else REFUTED), "best K: " + ", ".join(f"AR{a}: K={k}" for a, k in best.items()) + " (paper: AR1 K=5, AR2 K=3, AR4 K=1)"
+    return (SUPPORTED if ok else REFUTED), ("best K: " + ", ".join(f"AR{a}: K={k}" for a, k in best.items())
+                                            + " (paper: AR1 K=5, AR2 K=3, AR4 K=1)")
 
 
-@check("action_dim", "on quadruped_run the means at dims 6 and 24 are below every intermediate dim's, and the intermediate dims' range is <= 15% of their mean")
+@check("action_dim", "on quadruped_run the means at dims 6 and 24 are below every intermediate dim's, and the "
+       "intermediate dims' range is <= 15% of their mean")
 def _action_dim(ctx: Context) -> tuple[str, str]:
     df = select.action_dim(ctx.scores, ctx.experiment_map)
     table = means(df, ["dim"]) if not df.empty else {}
@@ -380,12 +413,15 @@ def _action_dim(ctx: Context) -> tuple[str, str]:
     mid = [d for d in have if 6 < d < 24]
     if 6 not in have or 24 not in have or not mid:
         raise NotEnoughData(f"need dims 6, 24 and one in between (have {have})")
-    mids = [get(ctx, table, d) for d in mid]
-    ok = max(get(ctx, table, 6), get(ctx, table, 24)) < min(mids) and (max(mids) - min(mids)) <= 0.15 * np.mean(mids)
+    mids = [present(ctx, table, d) for d in mid]
+    ok = (max(present(ctx, table, 6), present(ctx, table, 24)) < min(mids)
+          and (max(mids) - min(mids)) <= 0.15 * np.mean(mids))
     return (SUPPORTED if ok else REFUTED), ", ".join(f"d={d} {get(ctx, table, d):.0f}" for d in have)
 
 
-@check("speed", "on one hardware, FPS(DrQ-v2 B256) / FPS(TACO B1024) within ±25% of 3.6, and TACO's FPS decreases with batch size where measured (from `repro bench` files and runs of experiment 'speed'; other runs' FPS only in an indicative reading)")
+@check("speed", "on one hardware, FPS(DrQ-v2 B256) / FPS(TACO B1024) within ±25% of 3.6, and TACO's FPS decreases "
+       "with batch size where measured (from `repro bench` files and runs of experiment 'speed'; other runs' FPS only "
+       "in an indicative reading)")
 def _speed(ctx: Context) -> tuple[str, str]:
     meas = speed_measurements(ctx.results, fallback=ctx.below_budget)
     meas = meas[meas["speedup"] == "plain"]
@@ -404,7 +440,8 @@ def _speed(ctx: Context) -> tuple[str, str]:
     raise NotEnoughData("need TACO B1024 and DrQ-v2 B256 FPS measured on the same hardware")
 
 
-@check("seed_robustness", "TACO's std over seeds < DrQ-v2's on >= 7 of the 9 tasks, and DrQ-v2 has >= 1 broken seed (below half its cell's median)")
+@check("seed_robustness", "TACO's std over seeds < DrQ-v2's on >= 7 of the 9 tasks, and DrQ-v2 has >= 1 broken seed "
+       "(below half its cell's median)")
 def _seeds(ctx: Context) -> tuple[str, str]:
     df = select.online_main(ctx.scores, ctx.experiment_map)
     df = df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df
@@ -418,10 +455,13 @@ def _seeds(ctx: Context) -> tuple[str, str]:
     less = sum(s.loc[(t, "TACO"), "std"] < s.loc[(t, "DrQ-v2"), "std"] for t in tasks)
     broken = int(got[got["label"] == "DrQ-v2"]["broken"].sum())
     ok = less >= 7 and broken >= 1
-    return (SUPPORTED if ok else REFUTED), f"TACO's std lower on {less}/9 tasks; DrQ-v2 broken seeds: {broken}; TACO broken seeds: {int(got[got['label'] == 'TACO']['broken'].sum())}"
+    taco_broken = int(got[got["label"] == "TACO"]["broken"].sum())
+    return (SUPPORTED if ok else REFUTED), (f"TACO's std lower on {less}/9 tasks; DrQ-v2 broken seeds: {broken}; "
+                                            f"TACO broken seeds: {taco_broken}")
 
 
-@check("manipulator", "within the budget (30M frames) TACO solves (an eval return >= 500) at least a third of its seeds (paper 3/6) and DrQ-v2 none")
+@check("manipulator", "within the budget (30M frames) TACO solves (an eval return >= 500) at least a third of its "
+       "seeds (paper 3/6) and DrQ-v2 none")
 def _manipulator(ctx: Context) -> tuple[str, str]:
     curves = select.manipulator(ctx.curves, ctx.experiment_map)
     solved = solved_counts(curves, ctx.budget)
@@ -431,7 +471,8 @@ def _manipulator(ctx: Context) -> tuple[str, str]:
     if "TACO" not in s.index or "DrQ-v2" not in s.index or min(s["runs"]) < ctx.min_seeds:
         raise NotEnoughData("need TACO and DrQ-v2 runs on manipulator_bring_ball")
     taco_frac = s.loc["TACO", "solved"] / s.loc["TACO", "runs"]
-    ev = f"TACO {int(s.loc['TACO', 'solved'])}/{int(s.loc['TACO', 'runs'])}, DrQ-v2 0/{int(s.loc['DrQ-v2', 'runs'])} solved"
+    ev = (f"TACO {int(s.loc['TACO', 'solved'])}/{int(s.loc['TACO', 'runs'])}, "
+          f"DrQ-v2 0/{int(s.loc['DrQ-v2', 'runs'])} solved")
     if taco_frac >= 1 / 3:
         return SUPPORTED, ev
     if min(s["last_frame"]) >= ctx.budget:
@@ -485,7 +526,8 @@ def _indicative(ctx: Context, spec: ClaimBudget, fn: Callable[[Context], tuple[s
     if spec.kind == "frames" and spec.budget is not None:
         r = reach(runs)
         if r.runs == 0 or not r.lowest > 0:
-            return "", "no indicative reading: " + ("no runs" if r.runs == 0 else "a run has no evaluation past frame 0")
+            return "", "no indicative reading: " + ("no runs" if r.runs == 0
+                                                     else "a run has no evaluation past frame 0")
         budget = int(min(r.lowest, spec.budget))
         where = frames_text(budget)
     else:
@@ -506,7 +548,8 @@ def evaluate_claims(ctx: Context) -> list[Verdict]:
         fn, rule = CHECKS.get(row.id, (None, "no check implemented"))
         spec = budgets.get(row.id)
         if fn is None or spec is None:
-            why = "no check implemented for this claim" if fn is None else "no budget for this claim in claim_budgets.csv"
+            why = ("no check implemented for this claim" if fn is None
+                   else "no budget for this claim in claim_budgets.csv")
             out.append(Verdict(row.id, row.claim, NO_DATA, why, rule))
             continue
         seeds = max(spec.min_seeds, ctx.min_seeds)

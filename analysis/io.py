@@ -27,7 +27,7 @@ def atomic_write_bytes(path: Path | str, data: bytes) -> Path:
     return _atomic_replace(Path(path), lambda fh: fh.write(data))
 
 
-def atomic_savefig(fig: "Figure", path: Path | str, **kwargs) -> Path:
+def atomic_savefig(fig: Figure, path: Path | str, **kwargs) -> Path:
     """Save a matplotlib figure atomically; the format comes from the suffix of ``path``."""
     path = Path(path)
     fmt = path.suffix.lstrip(".")

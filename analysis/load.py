@@ -237,7 +237,8 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 def _provenance(meta: dict[str, Any]) -> dict[str, Any]:
     """Flatten the provenance fields of meta.json that the report shows."""
-    git = meta.get("git") if isinstance(meta.get("git"), dict) else {}
+    git_field = meta.get("git")
+    git = git_field if isinstance(git_field, dict) else {}
     versions = meta.get("versions") or meta.get("package_versions") or {}
     return {
         "git_sha": meta.get("git_sha") or git.get("sha"),
@@ -393,7 +394,9 @@ def load_results(root: Path | str) -> Results:
     else:
         dup = runs.duplicated(["experiment", "algo", "variant", "task", "seed"], keep=False)
         for run_id in runs.loc[dup, "run_id"]:
-            problems.append(Problem(str(root / run_id), "same experiment/algo/variant/task/seed as another run", "warning"))
+            problems.append(
+                Problem(str(root / run_id), "same experiment/algo/variant/task/seed as another run", "warning")
+            )
     if evals and not runs.empty:
         eval_all = pd.concat(evals, ignore_index=True).merge(runs[list(IDENTITY)], on="run_id", how="left")
     else:

@@ -89,7 +89,7 @@ def learning_curves(results: Results, grid: np.ndarray | None = None, step: int 
     if grid is None:
         grid = common_grid(results.eval, step=step)
     parts = []
-    for run_id, rows in results.eval.groupby("run_id", sort=False):
+    for _run_id, rows in results.eval.groupby("run_id", sort=False):
         rows = rows.sort_values("frame")
         metric = metric_of(rows["suite"].iloc[0])
         vals = _values(rows, metric).to_numpy(dtype=float)
@@ -108,7 +108,9 @@ def learning_curves(results: Results, grid: np.ndarray | None = None, step: int 
     return pd.concat(parts, ignore_index=True)[cols]
 
 
-def best_online_returns(results: Results, method: str = "TACO", prefer: tuple[str, ...] = ("main",)) -> dict[str, float]:
+def best_online_returns(
+    results: Results, method: str = "TACO", prefer: tuple[str, ...] = ("main",)
+) -> dict[str, float]:
     """Per task, the best evaluation return reached during online training of ``method``.
 
     This is the paper's offline normaliser ("dividing the offline RL reward by the best reward we get

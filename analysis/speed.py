@@ -53,7 +53,11 @@ def speed_measurements(results: Results, experiments: tuple[str, ...] = ("speed"
             )
     for bench in results.benches:
         hw = bench.get("hardware")
-        hw_text = hw if isinstance(hw, str) else (hardware_label(hw.get("device"), hw.get("cpu")) if isinstance(hw, dict) else "unknown hardware")
+        hw_text = (
+            hw
+            if isinstance(hw, str)
+            else (hardware_label(hw.get("device"), hw.get("cpu")) if isinstance(hw, dict) else "unknown hardware")
+        )
         for res in bench.get("results", []):
             if not isinstance(res, dict) or "algo" not in res:
                 continue

@@ -88,7 +88,9 @@ def make_actions(true_dim: int, distracting_dims: int, n: int, seed: int = 0) ->
 def tsne_2d(x: np.ndarray, seed: int = 0, max_iter: int = 1000) -> np.ndarray:
     """2-D t-SNE (scikit-learn, PCA init, perplexity 30 or less for small inputs)."""
     perplexity = min(30.0, (len(x) - 1) / 3.0)
-    return TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed, max_iter=max_iter).fit_transform(x)
+    return TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed, max_iter=max_iter).fit_transform(
+        x
+    )
 
 
 @dataclass

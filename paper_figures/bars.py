@@ -12,8 +12,8 @@ from analysis.compare import build_cells, cells_frame
 from analysis.context import Context
 from paper_figures.common import (
     NO_RUNS_TEXT,
-    bar_caption,
     banner,
+    bar_caption,
     comparison_table,
     grouped_bars,
     has_data,

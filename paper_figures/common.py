@@ -6,6 +6,7 @@ import math
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -15,6 +16,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import seaborn as sns  # noqa: E402
+from matplotlib.artist import Artist  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
@@ -38,7 +40,7 @@ METHOD_COLORS = {
     "DRIML": "#ff7f0e",
     "TACO w/o action repr": "#ff9896",
 }
-PAPER_MARK = dict(marker="D", color="black", markersize=6, linestyle="none", zorder=5)
+PAPER_MARK: dict[str, Any] = dict(marker="D", color="black", markersize=6, linestyle="none", zorder=5)
 NO_RUNS_TEXT = "no runs found: paper values only"
 
 
@@ -102,7 +104,18 @@ def grouped_bars(
     colors = colors or palette(list(hue_order))
     n_h = max(len(hue_order), 1)
     width = 0.8 / n_h
-    top = np.nanmax(np.r_[cf["ci_high"].to_numpy(dtype=float), cf["mean"].to_numpy(dtype=float), cf["paper"].to_numpy(dtype=float), 1.0]) if not cf.empty else 1.0
+    top = (
+        np.nanmax(
+            np.r_[
+                cf["ci_high"].to_numpy(dtype=float),
+                cf["mean"].to_numpy(dtype=float),
+                cf["paper"].to_numpy(dtype=float),
+                1.0,
+            ]
+        )
+        if not cf.empty
+        else 1.0
+    )
     for i, xv in enumerate(x_order):
         for j, hv in enumerate(hue_order):
             pos = i - 0.4 + width * (j + 0.5)
@@ -118,14 +131,16 @@ def grouped_bars(
                 ax.text(pos, (r["ci_high"] if not math.isnan(r["ci_high"]) else r["mean"]) + 0.015 * top,
                         f"n={int(r['n'])}", ha="center", va="bottom", fontsize=6.5, rotation=90)
             else:
-                ax.text(pos, 0.01 * top, "no runs", ha="center", va="bottom", fontsize=6.5, rotation=90, color="#777777")
+                ax.text(
+                    pos, 0.01 * top, "no runs", ha="center", va="bottom", fontsize=6.5, rotation=90, color="#777777"
+                )
             if not math.isnan(r["paper"]):
                 ax.plot([pos], [r["paper"]], **PAPER_MARK)
     ax.set_xticks(range(len(x_order)))
     ax.set_xticklabels(list(x_labels) if x_labels is not None else [str(v) for v in x_order])
     ax.set_xlim(-0.6, len(x_order) - 0.4)
     ax.set_ylim(0, top * 1.15)
-    handles = [Patch(color=colors[h], label=str(h)) for h in hue_order]
+    handles: list[Artist] = [Patch(color=colors[h], label=str(h)) for h in hue_order]
     handles.append(Line2D([], [], label="paper (reported)", **PAPER_MARK))
     ax.legend(handles=handles, fontsize=7.5, loc="upper left", bbox_to_anchor=(1.0, 1.0))
 

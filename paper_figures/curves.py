@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import pandas as pd
-
 from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter
 
@@ -85,6 +84,6 @@ def render_curves(
              f"lines: mean over seeds; bands: 95% stratified-bootstrap CI of the mean at each frame (rliable, "
              f"{ctx.curve_reps:,} repetitions, random state {ctx.seed}); curves are interpolated on a common "
              "frame grid and not extrapolated past a run's last evaluation")
-    marks = " Diamonds at 1M frames: the paper's Table 1 values." if paper_marks else ""
-    return ArtifactResult(artifact_id, title, f"{caption} {bands[0].upper() + bands[1:]}.{marks}", figures=[png],
+    marks_text = " Diamonds at 1M frames: the paper's Table 1 values." if paper_marks else ""
+    return ArtifactResult(artifact_id, title, f"{caption} {bands[0].upper() + bands[1:]}.{marks_text}", figures=[png],
                           has_runs=any_data)

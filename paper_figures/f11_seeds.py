@@ -31,10 +31,18 @@ def render(ctx: Context) -> ArtifactResult:
         for lab in LABELS:
             r = spread[(spread["task"] == task) & (spread["label"] == lab)]
             r = r.iloc[0] if not r.empty else None
-            disp.append({"Task": task_display(task), "Method": lab, "n": 0 if r is None else int(r["n"]),
-                         "Mean": fmt_num(None if r is None else r["mean"]), "Std (ddof=1)": fmt_num(None if r is None else r["std"]),
-                         "Min": fmt_num(None if r is None else r["min"]), "Max": fmt_num(None if r is None else r["max"]),
-                         "Broken seeds": "—" if r is None else int(r["broken"])})
+            disp.append(
+                {
+                    "Task": task_display(task),
+                    "Method": lab,
+                    "n": 0 if r is None else int(r["n"]),
+                    "Mean": fmt_num(None if r is None else r["mean"]),
+                    "Std (ddof=1)": fmt_num(None if r is None else r["std"]),
+                    "Min": fmt_num(None if r is None else r["min"]),
+                    "Max": fmt_num(None if r is None else r["max"]),
+                    "Broken seeds": "—" if r is None else int(r["broken"]),
+                }
+            )
     tcap = (f"Spread over seeds of the return at {ctx.budget_text()} (the paper gives no numbers for this figure). "
             f"A seed is 'broken' if its return is below {BROKEN_FRACTION:g} x the median of its cell.")
     table = write_table(ctx.out_dir, "F11", spread, tcap, pd.DataFrame(disp))

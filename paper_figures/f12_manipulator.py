@@ -29,10 +29,19 @@ def render(ctx: Context) -> ArtifactResult:
     disp = []
     for lab in LABELS:
         r = solved[solved["label"] == lab]
-        disp.append({"Method": lab, "Paper: seeds solved": paper[lab],
-                     "Reproduced: seeds solved": "—" if r.empty else f"{int(r.iloc[0]['solved'])} of {int(r.iloc[0]['runs'])}",
-                     "Frames reached": "—" if r.empty else fmt_num(r.iloc[0]["last_frame"], 0)})
-    tcap = (f"Seeds that solve manipulator bring_ball within 30M frames: a seed counts as solved once an "
-            f"evaluation return reaches {SOLVED_RETURN:g} (of 1000); the paper reports 3 of 6 for TACO and none for DrQ-v2.")
+        disp.append(
+            {
+                "Method": lab,
+                "Paper: seeds solved": paper[lab],
+                "Reproduced: seeds solved": "—"
+                if r.empty
+                else f"{int(r.iloc[0]['solved'])} of {int(r.iloc[0]['runs'])}",
+                "Frames reached": "—" if r.empty else fmt_num(r.iloc[0]["last_frame"], 0),
+            }
+        )
+    tcap = (
+        f"Seeds that solve manipulator bring_ball within 30M frames: a seed counts as solved once an "
+        f"evaluation return reaches {SOLVED_RETURN:g} (of 1000); the paper reports 3 of 6 for TACO and none for DrQ-v2."
+    )
     result.tables.append(write_table(ctx.out_dir, "F12", solved, tcap, pd.DataFrame(disp)))
     return result

@@ -123,7 +123,9 @@ def render(ctx: Context) -> ArtifactResult:
     if not any_frames:
         banner(fig, "no frames: no run saved any and no environment could be rendered (placeholders only)")
     elif not any_trained:
-        banner(fig, "no trained agent's frames: rows show random-action rollouts or placeholders, not expert trajectories")
+        banner(
+            fig, "no trained agent's frames: rows show random-action rollouts or placeholders, not expert trajectories"
+        )
     png = save_figure(fig, ctx, "F13")
     caption = (
         "Frames along one trajectory per task, left to right. The paper shows expert (trained-agent) "
@@ -131,5 +133,11 @@ def render(ctx: Context) -> ArtifactResult:
         "because no run saved frames (frames.npz or frames/*.png in a TACO run directory of the task). "
         "Sources: " + "; ".join(sources) + "."
     )
-    return ArtifactResult("F13", "Trajectory frames", caption, figures=[png], has_runs=any_trained,
-                          notes=[] if any_trained else ["Needs trained TACO runs that save frames for: " + ", ".join(TASKS)])
+    return ArtifactResult(
+        "F13",
+        "Trajectory frames",
+        caption,
+        figures=[png],
+        has_runs=any_trained,
+        notes=[] if any_trained else ["Needs trained TACO runs that save frames for: " + ", ".join(TASKS)],
+    )

@@ -24,8 +24,8 @@ from analysis.stats import (
 from analysis.tables import Cell, fmt_ci, fmt_num, write_table
 from paper_figures.common import (
     NO_RUNS_TEXT,
-    bar_caption,
     banner,
+    bar_caption,
     comparison_table,
     grouped_bars,
     palette,
@@ -56,7 +56,11 @@ def render(ctx: Context) -> ArtifactResult:
     paper = ctx.paper.online.groupby("method", sort=False)["mean"].mean()
     mats, mat_notes = average_matrices(ctx)
     normed = {m: x / SCALE for m, x in mats.items()}
-    agg = aggregate_estimates(normed, reps=ctx.reps, seed=ctx.seed) if normed else pd.DataFrame(columns=["method", "metric"])
+    agg = (
+        aggregate_estimates(normed, reps=ctx.reps, seed=ctx.seed)
+        if normed
+        else pd.DataFrame(columns=["method", "metric"])
+    )
     methods = list(paper.index) + [m for m in mats if m not in paper.index]
     cells, extra_rows = [], []
     for method in methods:
@@ -71,13 +75,19 @@ def render(ctx: Context) -> ArtifactResult:
                               mean_row["ci_low"] * SCALE, mean_row["ci_high"] * SCALE)
             iqm = a[a["metric"] == "IQM"].iloc[0]
             og = a[a["metric"] == "Optimality Gap"].iloc[0]
-            row["IQM"] = f"{fmt_num(iqm['value'] * SCALE, 0)} {fmt_ci(iqm['ci_low'] * SCALE, iqm['ci_high'] * SCALE, 0)}"
+            row["IQM"] = (
+                f"{fmt_num(iqm['value'] * SCALE, 0)} {fmt_ci(iqm['ci_low'] * SCALE, iqm['ci_high'] * SCALE, 0)}"
+            )
             row["Optimality gap"] = f"{og['value']:.3f} {fmt_ci(og['ci_low'], og['ci_high'], 3)}"
             if "TACO" in mats and method != "TACO":
-                p, lo, hi = probability_of_improvement(normed["TACO"], normed[method], min(ctx.reps, POI_REPS), ctx.seed)
+                p, lo, hi = probability_of_improvement(
+                    normed["TACO"], normed[method], min(ctx.reps, POI_REPS), ctx.seed
+                )
                 row["P(TACO > method)"] = f"{p:.2f} {fmt_ci(lo, hi, 2)}"
         note = mat_notes.get(method, "no runs") if method not in mats else mat_notes[method]
-        cells.append(Cell({"method": method}, float(paper[method]) if method in paper.index else None, None, stats, note=note))
+        cells.append(
+            Cell({"method": method}, float(paper[method]) if method in paper.index else None, None, stats, note=note)
+        )
         extra_rows.append(row)
     caption = (
         "Average episode return over the nine DMC tasks at the frame budget. Paper: the mean of Table 1's nine "
@@ -117,6 +127,12 @@ def render(ctx: Context) -> ArtifactResult:
     if ctx.no_runs:
         banner(fig, NO_RUNS_TEXT)
     png = save_figure(fig, ctx, "F1")
-    full_caption = caption + " " + bar_caption(ctx, "Right: run-score performance profiles with 95% bootstrap bands (rliable, 2,000 repetitions).")
+    full_caption = (
+        caption
+        + " "
+        + bar_caption(
+            ctx, "Right: run-score performance profiles with 95% bootstrap bands (rliable, 2,000 repetitions)."
+        )
+    )
     return ArtifactResult("F1", "Average performance", full_caption, figures=[png], tables=[table], notes=table.notes,
                           has_runs=bool(mats))

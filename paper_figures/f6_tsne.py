@@ -15,7 +15,7 @@ from paper_figures.registry import ArtifactResult, register
 @register("F6", "t-SNE of raw vs latent actions", "figure", "fig:tsne_act")
 def render(ctx: Context) -> ArtifactResult:
     res, info = tsne_for_context(ctx)
-    colors = plt.get_cmap("tab10").colors
+    colors = plt.get_cmap("tab10").colors  # type: ignore[attr-defined]  # tab10 is a ListedColormap
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4.6))
     for ax, emb, sil, name in ((a1, res.raw_2d, res.silhouette_raw_2d, "raw actions"),
                                (a2, res.latent_2d, res.silhouette_latent_2d, "latent actions")):
@@ -42,10 +42,16 @@ def render(ctx: Context) -> ArtifactResult:
         f"from {src}. Colours: centroid. Cluster quality: silhouette coefficient of the centroid labels "
         f"(≥ {CLUSTER_THRESHOLD} counts as 'forms clusters')."
     )
-    raw = pd.DataFrame([
-        {"space": "raw", "silhouette_tsne_2d": res.silhouette_raw_2d, "silhouette_original": res.silhouette_raw},
-        {"space": "latent", "silhouette_tsne_2d": res.silhouette_latent_2d, "silhouette_original": res.silhouette_latent},
-    ])
+    raw = pd.DataFrame(
+        [
+            {"space": "raw", "silhouette_tsne_2d": res.silhouette_raw_2d, "silhouette_original": res.silhouette_raw},
+            {
+                "space": "latent",
+                "silhouette_tsne_2d": res.silhouette_latent_2d,
+                "silhouette_original": res.silhouette_latent,
+            },
+        ]
+    )
     disp = pd.DataFrame([
         {"Actions": "raw", "Silhouette (t-SNE 2-D)": fmt_num(res.silhouette_raw_2d, 3),
          "Silhouette (original space)": fmt_num(res.silhouette_raw, 3), "Paper": "no clusters (by eye)"},

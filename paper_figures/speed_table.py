@@ -45,7 +45,9 @@ def speed_cells(ctx: Context, wanted: list[tuple[str, int]]) -> tuple[list[Cell]
     return cells, bool(len(meas))
 
 
-def render_speed(ctx: Context, artifact_id: str, title: str, wanted: list[tuple[str, int]], caption: str) -> ArtifactResult:
+def render_speed(
+    ctx: Context, artifact_id: str, title: str, wanted: list[tuple[str, int]], caption: str
+) -> ArtifactResult:
     cells, any_meas = speed_cells(ctx, wanted)
     notes = [
         "The paper's FPS were measured on an NVIDIA A100; reproduced FPS are labelled with the hardware they "

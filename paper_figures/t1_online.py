@@ -35,4 +35,6 @@ def render(ctx: Context) -> ArtifactResult:
     if not any(c.stats.n for c in cells if c.keys["method"] in ("DreamerV3", "TD-MPC", "A-LIX", "DrQ", "CURL")):
         notes.append("Baselines without runs (A-LIX, DrQ, CURL, DreamerV3, TD-MPC here) show the paper's value only.")
     table = comparison_table(ctx, "T1", cells, caption, notes, digits=0)
-    return ArtifactResult("T1", "Online DMC at 1M", caption, tables=[table], notes=table.notes, has_runs=has_data(cells))
+    return ArtifactResult(
+        "T1", "Online DMC at 1M", caption, tables=[table], notes=table.notes, has_runs=has_data(cells)
+    )

@@ -34,4 +34,6 @@ def render(ctx: Context) -> ArtifactResult:
         "to 'main' runs where the sweep has none)."
     )
     table = comparison_table(ctx, "T2", cells, caption, digits=0)
-    return ArtifactResult("T2", "Representation objectives", caption, tables=[table], notes=table.notes, has_runs=has_data(cells))
+    return ArtifactResult(
+        "T2", "Representation objectives", caption, tables=[table], notes=table.notes, has_runs=has_data(cells)
+    )

@@ -42,7 +42,13 @@ def _average_cells(ctx: Context, df, cells: list[Cell]) -> list[Cell]:
             matrix, mnote = score_matrix(rows, pair_ids, value="normalized")
             if matrix is not None:
                 mean, lo, hi = grand_mean_ci(matrix, ctx.reps, ctx.seed)
-                stats = CellStats(int(matrix.shape[0]), mean, float(np.std(matrix.mean(axis=1), ddof=1)) if matrix.shape[0] > 1 else math.nan, lo, hi)
+                stats = CellStats(
+                    int(matrix.shape[0]),
+                    mean,
+                    float(np.std(matrix.mean(axis=1), ddof=1)) if matrix.shape[0] > 1 else math.nan,
+                    lo,
+                    hi,
+                )
                 note += f"; {mnote}; std over runs of the per-run average"
         elif covered:
             note += f"; only {covered}/{len(pairs)} pairs have runs: no average"
@@ -57,7 +63,9 @@ def render(ctx: Context) -> ArtifactResult:
     df = relabel(select.offline(ctx.scores, ctx.experiment_map), "method")
     df = normalize_offline(df, normalizers) if not df.empty else df.assign(normalized=[])
     paper = ctx.paper.offline
-    expected = [{"task": t, "dataset": d, "method": m} for t, d, m in zip(paper["task"], paper["dataset"], paper["method"])]
+    expected = [
+        {"task": t, "dataset": d, "method": m} for t, d, m in zip(paper["task"], paper["dataset"], paper["method"])
+    ]
 
     def note(key: dict, rows) -> str:
         if not rows.empty and key["task"] not in normalizers:
@@ -70,11 +78,15 @@ def render(ctx: Context) -> ArtifactResult:
     caption = (
         "Offline normalised score: 100 x offline return at the budget / best evaluation return of online TACO "
         "on the task (max over all evaluations of the online TACO runs of experiment 'main', or of any "
-        "experiment if main has none on the task; the paper normalises by the best online TACO return). Average row: mean over the 12 task/dataset pairs; the "
+        "experiment if main has none on the task; the paper normalises by the best online TACO return). "
+        "Average row: mean over the 12 task/dataset pairs; the "
         "paper column is the average row as printed."
     )
     notes = []
     if normalizers:
-        notes.append("Normalisers (best online TACO return): " + ", ".join(f"{k} {v:.1f}" for k, v in sorted(normalizers.items())))
+        notes.append(
+            "Normalisers (best online TACO return): "
+            + ", ".join(f"{k} {v:.1f}" for k, v in sorted(normalizers.items()))
+        )
     table = comparison_table(ctx, "T3", cells, caption, notes)
     return ArtifactResult("T3", "Offline RL", caption, tables=[table], notes=table.notes, has_runs=has_data(cells))

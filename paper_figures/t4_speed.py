@@ -6,7 +6,8 @@ from analysis.context import Context
 from paper_figures.registry import ArtifactResult, register
 from paper_figures.speed_table import render_speed
 
-WANTED = [("TACO", 1024), ("DrQ-v2", 256), ("A-LIX", 256), ("DrQ", 512), ("CURL", 512), ("DreamerV3", 256), ("TD-MPC", 256)]
+WANTED = [("TACO", 1024), ("DrQ-v2", 256), ("A-LIX", 256), ("DrQ", 512), ("CURL", 512), ("DreamerV3", 256),
+          ("TD-MPC", 256)]
 
 
 @register("T4", "Speed of each algorithm (FPS)", "table", "tab:time_efficiency")

@@ -18,7 +18,13 @@ def render(ctx: Context) -> ArtifactResult:
     cql = runs[runs["algo"] == "cql"] if not runs.empty else runs
     raw, disp = [], []
     for r in paper.itertuples(index=False):
-        used = sorted({float(a) for a in cql[(cql["task"] == r.task) & (cql["dataset"] == r.dataset)]["cql_alpha"].dropna()}) if not cql.empty else []
+        used = (
+            sorted(
+                {float(a) for a in cql[(cql["task"] == r.task) & (cql["dataset"] == r.dataset)]["cql_alpha"].dropna()}
+            )
+            if not cql.empty
+            else []
+        )
         match = None if not used else (used == [float(r.alpha_cql)])
         raw.append({"task": r.task, "dataset": r.dataset, "paper_alpha": r.alpha_cql,
                     "runs_alpha": ";".join(f"{a:g}" for a in used), "match": match})

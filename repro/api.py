@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
+from typing import Any, cast
 
 import torch
 from omegaconf import DictConfig
@@ -14,12 +15,12 @@ from repro import rundir
 from repro.checkpoint import load_checkpoint, save_checkpoint
 from repro.config import compose, typed
 from repro.episodes import EpisodeStore
-from repro.learners import Learner, build_learner, is_offline
+from repro.learners import Learner, OnlineLearner, build_learner, is_offline
 from repro.logger import RunLogger
+from repro.offline.record import Recorder
 from repro.offline.reference import score_reference
 from repro.offline.replay import DatasetError, OfflineData, load_offline_data, resolve_dataset
 from repro.offline_trainer import OfflineLogger, OfflineTrainer
-from repro.offline.record import Recorder
 from repro.replay import ReplayBuffer
 from repro.schema import RunConfig
 from repro.trainer import Trainer
@@ -83,7 +84,7 @@ def _train_online(rc: RunConfig, path: Path, device: str, resuming: bool, echo: 
     eval_env = build_env(rc, rc.seed + 10_000)
     try:
         spec = env.spec
-        agent = build_agent(rc, spec.obs_shape, spec.action_dim, device)
+        agent = cast(OnlineLearner, build_agent(rc, spec.obs_shape, spec.action_dim, device))  # not is_offline
         rundir.write_resolved(path, rundir.resolved_values(rc, agent))
         replay_device = resolve_device(rc.replay.device)
         buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
@@ -194,8 +195,14 @@ class _Progress:
     """A rich progress bar: frames (offline: updates), their rate, last eval return, ETA."""
 
     def __init__(self, total_frames: int, start_frame: int, label: str, unit: str = "fps"):
-        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
-                                   TimeRemainingColumn)
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
 
         self._p = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                            TextColumn(f"{{task.fields[fps]}} {unit}"), TextColumn("eval {task.fields[ret]}"),
@@ -207,7 +214,7 @@ class _Progress:
     def update(self, frame: int, last_eval: float | None) -> None:
         now = time.time()
         fps = (frame - self._f) / max(now - self._t, 1e-9)
-        fields = {"ret": f"{last_eval:.1f}" if last_eval is not None else "-"}
+        fields: dict[str, Any] = {"ret": f"{last_eval:.1f}" if last_eval is not None else "-"}
         if now - self._t > 2.0:
             fields["fps"] = f"{fps:.0f}"
             self._t, self._f = now, frame

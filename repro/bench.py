@@ -22,6 +22,7 @@ import typer
 
 from repro.fsutil import atomic_write_text
 
+
 def _batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(0)
     u8 = lambda: torch.randint(0, 256, (B, 9, 84, 84), dtype=torch.uint8, generator=g).to(device)  # noqa: E731

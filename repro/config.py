@@ -6,6 +6,7 @@ import difflib
 import re
 from collections.abc import Iterable
 from pathlib import Path
+from typing import cast
 
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -122,7 +123,7 @@ def validate(raw: DictConfig) -> DictConfig:
     """Resolve interpolations, check types against the schema and value choices."""
     try:
         OmegaConf.resolve(raw)
-        cfg = OmegaConf.merge(OmegaConf.structured(RunConfig), raw)
+        cfg = cast(DictConfig, OmegaConf.merge(OmegaConf.structured(RunConfig), raw))  # dict merged into dict
     except OmegaConfBaseException as exc:
         key = getattr(exc, "full_key", None)
         first = str(exc).strip().splitlines()[0]

@@ -24,7 +24,7 @@ class EpisodeStore:
     def save(self, data: dict[str, np.ndarray]) -> None:
         def write(f) -> None:
             buf = io.BytesIO()
-            np.savez_compressed(buf, **data)
+            np.savez_compressed(buf, **data)  # type: ignore[arg-type]  # numpy stub matches **kwds against allow_pickle
             f.write(buf.getvalue())
 
         atomic_write(self.path(int(data["ep_id"])), write)

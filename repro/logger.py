@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from repro.runformat import EVAL, EVAL_COLUMNS, TRAIN, TRAIN_COLUMNS, WALLCLOCK_COLUMNS, train_columns
 

@@ -12,18 +12,19 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
 from repro.envs.base import Env
 from repro.learners.base import Learner
 from repro.logger import CsvLog
-from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_TRAIN_COLUMNS
 from repro.offline.reference import normalized_score
 from repro.offline.replay import DatasetError
 from repro.replay import ReplayBuffer
+from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_TRAIN_COLUMNS
 from repro.schema import OfflineConfig
 from repro.trainer_base import WallClock, rng_state, run_eval_episodes, set_rng_state
 

@@ -19,8 +19,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from repro.config import identity
 from repro.fsutil import atomic_write_text
-from repro.runformat import CHECKPOINT, CONFIG, DONE, META, RESOLVED, resolved_json, run_path, run_state
 from repro.learners.registry import is_offline
+from repro.runformat import CHECKPOINT, CONFIG, DONE, META, RESOLVED, resolved_json, run_path, run_state
 from repro.schema import RunConfig
 
 __all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "RESOLVED", "RunDirMismatch", "config_diff", "config_matches",

@@ -7,8 +7,8 @@ loop is repro/offline_trainer.py.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -84,6 +84,7 @@ class Trainer:
         try:
             self._evaluate(record=final and self.cfg.save_frames)
             if self.recorder is not None:
+                assert self.last_eval is not None  # set by _evaluate
                 self.recorder.snapshot(self.agent, self.counters.step, self.frame, self.last_eval)
         finally:
             self._eval_seconds += time.time() - started

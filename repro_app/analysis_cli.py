@@ -6,7 +6,7 @@ Bad input (unknown artifact id, missing results root, bad option) prints one lin
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import NoReturn, Optional
 
 import typer
 
@@ -34,7 +34,7 @@ RENDER_OPT = typer.Option(
 )
 
 
-def _fail(message: str) -> None:
+def _fail(message: str) -> NoReturn:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(code=2)
 
@@ -110,7 +110,7 @@ def register(app: typer.Typer) -> None:
         if not all_ and not ids:
             _fail("name artifact ids (e.g. 'repro figures F8 T1'), or pass --all or --list")
         try:
-            arts = resolve(ordered_ids() if all_ else ids)
+            arts = resolve(ordered_ids() if all_ else (ids or []))  # ids is set unless --all
         except UnknownArtifactError as exc:
             _fail(str(exc))
         ctx = make_context(results, out, frames, reps, seed, experiment_map=experiment_map, tsne_n=tsne_n,
@@ -161,7 +161,9 @@ def register(app: typer.Typer) -> None:
             status = "MISMATCH" if f in bad else ("ok" if f.kind == "check" else "info")
             typer.echo(f"{status:<8} [{f.where}] {f.description}: paper {f.printed} | recomputed {f.recomputed}")
         table = write_audit(out, findings)
-        typer.echo(f"{len(bad)} mismatches in {sum(f.kind == 'check' for f in findings)} checks; wrote {table.files[1]}")
+        typer.echo(
+            f"{len(bad)} mismatches in {sum(f.kind == 'check' for f in findings)} checks; wrote {table.files[1]}"
+        )
 
     @app.command("report")
     def report_cmd(

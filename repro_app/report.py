@@ -20,7 +20,8 @@ from analysis.tables import to_markdown
 from paper_figures.catalog import ordered_ids, resolve
 from paper_figures.render import render_artifacts
 
-PACKAGES = ("numpy", "pandas", "scipy", "rliable", "arch", "scikit-learn", "matplotlib", "seaborn", "torch", "taco-repro")
+PACKAGES = ("numpy", "pandas", "scipy", "rliable", "arch", "scikit-learn", "matplotlib", "seaborn", "torch",
+            "taco-repro")
 
 
 def _git(*args: str) -> str | None:
@@ -87,10 +88,22 @@ def build_markdown(ctx: Context, artifacts, verdicts, findings) -> str:
                         "with --indicative: they are not verdicts.")
     lines.append(_section("Claims", claims_note + "\n\n" + to_markdown(claims_frame(verdicts))))
     bad = [f for f in findings if f.kind == "check" and not f.match]
-    audit_md = to_markdown(pd.DataFrame({"Where": [f.where for f in bad], "What": [f.description for f in bad],
-                                         "Paper prints": [f.printed for f in bad], "Recomputed": [f.recomputed for f in bad]}))
-    lines.append(_section("Audit: mismatches in the paper's derived numbers",
-                          audit_md + f"\nAll {len(findings)} checks, including those that agree: [audit.md](audit.md)."))
+    audit_md = to_markdown(
+        pd.DataFrame(
+            {
+                "Where": [f.where for f in bad],
+                "What": [f.description for f in bad],
+                "Paper prints": [f.printed for f in bad],
+                "Recomputed": [f.recomputed for f in bad],
+            }
+        )
+    )
+    lines.append(
+        _section(
+            "Audit: mismatches in the paper's derived numbers",
+            audit_md + f"\nAll {len(findings)} checks, including those that agree: [audit.md](audit.md).",
+        )
+    )
     for art in artifacts:
         body = [f"_{art.caption}_", ""] if art.figures else []
         for png in art.figures:

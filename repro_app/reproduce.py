@@ -18,13 +18,16 @@ import typer
 
 def register(app: typer.Typer) -> None:
     @app.command()
-    def reproduce(results_root: Path = typer.Option(Path("runs/tiny"), "--results", help="Results root."),
-                  out: Path = typer.Option(Path("results/tiny"), "--out", help="Where tables, figures and the report go."),
-                  sweep: str = typer.Option("tiny", help="Sweep to train before reporting."),
-                  max_parallel: Optional[int] = typer.Option(None, "--max-parallel", help="Runs at once (default: cores / 2)."),
-                  reps: int = typer.Option(2000, help="Bootstrap repetitions (rliable's default is 50,000)."),
-                  render_envs: bool = typer.Option(False, "--render-envs/--no-render-envs",
-                                                   help="Let F13 render random-action frames for tasks without runs.")):
+    def reproduce(
+        results_root: Path = typer.Option(Path("runs/tiny"), "--results", help="Results root."),
+        out: Path = typer.Option(Path("results/tiny"), "--out", help="Where tables, figures and the report go."),
+        sweep: str = typer.Option("tiny", help="Sweep to train before reporting."),
+        max_parallel: Optional[int] = typer.Option(None, "--max-parallel", help="Runs at once (default: cores / 2)."),
+        reps: int = typer.Option(2000, help="Bootstrap repetitions (rliable's default is 50,000)."),
+        render_envs: bool = typer.Option(
+            False, "--render-envs/--no-render-envs", help="Let F13 render random-action frames for tasks without runs."
+        ),
+    ):
         """Train the tiny sweep locally, then build every table, figure, claim and the report from it."""
         t0 = time.time()
         cmd = [sys.executable, "-m", "repro", "sweep", sweep, "--results", str(results_root)]

@@ -36,12 +36,12 @@ OFFLINE_ALGOS = ("td3bc", "cql", "iql", "bc", "dt")  # learners named by agent.l
 _DICT_KEYS = ("agent.objectives",)  # dict values, passed through the cache below as JSON text
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _composed(agent: str, task: str) -> DictConfig:
     return compose([f"agent={agent}", f"task={task}"])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _validated(algo: str, task: str, overrides: tuple[tuple[str, Any], ...]) -> DictConfig:
     """The composed config of ``algo`` on ``task`` with dotted ``overrides`` applied in struct mode (a key the
     schema lacks raises) and validated like any training config."""
@@ -197,8 +197,26 @@ def full_coverage_root(root: Path, seeds: int = 2) -> Path:
             _seeds(root, seeds, experiment="action_repeat", algo="taco", task="hopper_hop", K=k, action_repeat=ar,
                    variant=f"ar{ar}_K{k}", final=400 if best[ar] == k else 300)
     for b, (ft, fd) in {256: (400, 300), 512: (450, 305), 1024: (500, 300)}.items():
-        _seeds(root, seeds, experiment="batch_size", algo="taco", task="quadruped_run", batch_size=b, variant=f"bs{b}", final=ft)
-        _seeds(root, seeds, experiment="batch_size", algo="drqv2", task="quadruped_run", batch_size=b, variant=f"bs{b}", final=fd)
+        _seeds(
+            root,
+            seeds,
+            experiment="batch_size",
+            algo="taco",
+            task="quadruped_run",
+            batch_size=b,
+            variant=f"bs{b}",
+            final=ft,
+        )
+        _seeds(
+            root,
+            seeds,
+            experiment="batch_size",
+            algo="drqv2",
+            task="quadruped_run",
+            batch_size=b,
+            variant=f"bs{b}",
+            final=fd,
+        )
     for name, f in (("no_taco", 300), ("no_curl", 400), ("no_reward", 410)):
         obj = {"taco": 1.0, "curl": 1.0, "reward": 1.0}
         obj[name[3:]] = 0.0

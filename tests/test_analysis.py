@@ -16,7 +16,6 @@ from typer.testing import CliRunner
 from analysis import select
 from analysis.audit import mismatches, run_audit
 from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims
-from repro_app.analysis_cli import register
 from analysis.context import Context
 from analysis.load import load_results
 from analysis.scores import best_online_returns, final_scores, learning_curves, normalize_offline
@@ -29,6 +28,7 @@ from analysis.stats import (
     seeded,
 )
 from analysis_fixtures import DMC9, FRAMES, write_run
+from repro_app.analysis_cli import register
 
 REPS = 200
 pytestmark = pytest.mark.filterwarnings("ignore:random_state is deprecated:FutureWarning")
@@ -89,7 +89,9 @@ def test_missing_root_raises_clear_error(tmp_path):
 # ---------------------------------------------------------------- scores
 def test_score_at_budget_takes_largest_frame_not_past_budget(tmp_path):
     write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=500.0)
-    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=1, final=500.0, frames=60_000, done=False)
+    write_run(
+        tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=1, final=500.0, frames=60_000, done=False
+    )
     res = load_results(tmp_path)
     s = final_scores(res, 100_000).set_index("seed")
     assert s.loc[0, "score"] == pytest.approx(500.0) and bool(s.loc[0, "reached"])
@@ -145,7 +147,9 @@ def test_cell_cis_equal_rliables_own():
     _, cis = rly.get_interval_estimates({"cells": np.stack(cols, axis=1)}, lambda x: np.mean(x, axis=0), reps=REPS,
                                         random_state=np.random.RandomState(7))
     assert ours == [(float(cis["cells"][0][j]), float(cis["cells"][1][j])) for j in range(3)]
-    assert mean_cis([np.array([3.0])], reps=REPS) == [(math.nan, math.nan)] or math.isnan(mean_cis([np.array([3.0])])[0][0])
+    assert mean_cis([np.array([3.0])], reps=REPS) == [(math.nan, math.nan)] or math.isnan(
+        mean_cis([np.array([3.0])])[0][0]
+    )
 
 
 def test_aggregates_and_poi_equal_rliables_own():
@@ -163,8 +167,12 @@ def test_aggregates_and_poi_equal_rliables_own():
         assert (df.loc[name, "ci_low"], df.loc[name, "ci_high"]) == (cis["A"][0][k], cis["A"][1][k])
     p, lo, hi = probability_of_improvement(x, y, reps=REPS, seed=4)
     np.random.seed(4)
-    pt, ci = rly.get_interval_estimates({"p": [x, y]}, lambda a, b: np.array([metrics.probability_of_improvement(a, b)]),
-                                        reps=REPS, random_state=np.random.RandomState(4))
+    pt, ci = rly.get_interval_estimates(
+        {"p": [x, y]},
+        lambda a, b: np.array([metrics.probability_of_improvement(a, b)]),
+        reps=REPS,
+        random_state=np.random.RandomState(4),
+    )
     assert (p, lo, hi) == (pt["p"][0], ci["p"][0][0], ci["p"][1][0])
 
 
@@ -189,7 +197,13 @@ def test_t1_cells_exact(tmp_path):
     table = render(ctx).tables[0]
     t = table.data.set_index(["task", "method"])
     taco = t.loc[("quadruped_run", "TACO")]
-    assert (taco["n"], taco["repro_mean"], taco["repro_std"], taco["paper_mean"], taco["diff"]) == (3, 540.0, 10.0, 541.0, -1.0)
+    assert (taco["n"], taco["repro_mean"], taco["repro_std"], taco["paper_mean"], taco["diff"]) == (
+        3,
+        540.0,
+        10.0,
+        541.0,
+        -1.0,
+    )
     lo, hi = mean_cis([np.array([530.0, 540.0, 550.0])], reps=REPS, seed=0)[0]
     assert (taco["ci_low"], taco["ci_high"]) == (lo, hi)
     assert taco["paper_in_ci"] == (lo <= 541.0 <= hi)
@@ -328,9 +342,20 @@ def test_offline_claims_use_each_runs_own_budget(tmp_path):
                 for algo in ("td3bc", "cql"):
                     for s in range(3):
                         for taco, final in ((False, 300.0), (True, 330.0)):
-                            write_run(root, experiment="offline", algo=algo, task=task, dataset=ds, seed=s,
-                                      variant=f"{ds}{'_taco' if taco else ''}", objectives={"taco": 1.0} if taco else {},
-                                      final=final + s, frames=1000, eval_every=500, done=done)
+                            write_run(
+                                root,
+                                experiment="offline",
+                                algo=algo,
+                                task=task,
+                                dataset=ds,
+                                seed=s,
+                                variant=f"{ds}{'_taco' if taco else ''}",
+                                objectives={"taco": 1.0} if taco else {},
+                                final=final + s,
+                                frames=1000,
+                                eval_every=500,
+                                done=done,
+                            )
 
     grid(tmp_path / "unfinished", done=False)
     v = _verdicts(_ctx(tmp_path / "unfinished"))["offline_gain"]
@@ -369,7 +394,10 @@ def test_report_of_tiny_runs_shows_no_verdict(tmp_path):
     assert len(rows) == 20 and all(ln.split("|")[2].strip() == NO_DATA for ln in rows)
     ctx = _ctx(tmp_path, indicative=True)
     md = build_markdown(ctx, [], evaluate_claims(ctx), [])
-    assert "| indicative: TACO behind on some task (400 frames, 3 seeds) |" in md and "**Claims:** 0 supported, 0 refuted" in md
+    assert (
+        "| indicative: TACO behind on some task (400 frames, 3 seeds) |" in md
+        and "**Claims:** 0 supported, 0 refuted" in md
+    )
 
 
 def test_action_repeat_claim_refuted_when_best_k_differs(tmp_path):
@@ -451,7 +479,9 @@ def test_cli_claims_indicative_flag(tmp_path):
     plain = CliRunner().invoke(_app(), args)
     assert plain.exit_code == 0, plain.output
     line = next(ln for ln in plain.output.splitlines() if ln.startswith("online_beats_drqv2_all"))
-    assert NO_DATA in line and "runs reach 400 frames; the claim is about 1M frames" in line and "indicative" not in line
+    assert (
+        NO_DATA in line and "runs reach 400 frames; the claim is about 1M frames" in line and "indicative" not in line
+    )
     flagged = CliRunner().invoke(_app(), [*args, "--indicative"])
     assert flagged.exit_code == 0, flagged.output
     line = next(ln for ln in flagged.output.splitlines() if ln.startswith("online_beats_drqv2_all"))

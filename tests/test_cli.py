@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from repro_app.cli import app
 from repro.envs import TASKS
+from repro_app.cli import app
 
 runner = CliRunner()
 
@@ -21,10 +21,10 @@ def test_tasks_lists_every_task_with_action_dim_and_defaults():
     result = runner.invoke(app, ["tasks"], terminal_width=200)
     assert result.exit_code == 0, result.output
     for name, info in TASKS.items():
-        line = next(l for l in result.output.splitlines() if f" {name} " in l)
+        line = next(ln for ln in result.output.splitlines() if f" {name} " in ln)
         assert f" {info.action_dim} " in line
-    qr = next(l for l in result.output.splitlines() if " quadruped_run " in l)
-    hh = next(l for l in result.output.splitlines() if " hopper_hop " in l)
+    qr = next(ln for ln in result.output.splitlines() if " quadruped_run " in ln)
+    hh = next(ln for ln in result.output.splitlines() if " hopper_hop " in ln)
     assert " 1 " in qr.split("medium")[1][:6]  # K=1 on quadruped_run
     assert " 3 " in hh.split("medium")[1][:6]  # K=3 on hopper_hop
 

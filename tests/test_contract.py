@@ -10,12 +10,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import torch
-from analysis_fixtures import FRAMES, run_config, write_run
 from omegaconf.errors import ConfigAttributeError
 
 from analysis import select
 from analysis.context import Context
 from analysis.load import IDENTITY, load_results
+from analysis_fixtures import FRAMES, run_config, write_run
 from paper_figures import f10_action_dim
 from repro import api, rundir, runformat
 from repro.config import compose, typed

@@ -21,8 +21,15 @@ import pytest
 from typer.testing import CliRunner
 
 from repro.offline.cli import dataset_app
-from repro.offline.dataset import (DatasetError, check_dataset, iter_episodes, load_manifest, open_dataset,
-                                   resolve_dataset, write_dataset)
+from repro.offline.dataset import (
+    DatasetError,
+    check_dataset,
+    iter_episodes,
+    load_manifest,
+    open_dataset,
+    resolve_dataset,
+    write_dataset,
+)
 
 TASK, A = "hopper_hop", 4  # hopper_hop's action dim
 LENGTHS = (5, 8, 6)  # transitions per episode: never assume 500
@@ -384,7 +391,10 @@ def test_default_import_location_is_under_the_results_root(tmp_path):
     result = invoke("import", src, "--format", "drqv2", "--task", TASK, "-r", tmp_path / "runs")
     assert result.exit_code == 0, result.output
     assert load_manifest(tmp_path / "runs/datasets" / TASK / "imported-drqv2").episodes
-    assert resolve_dataset("imported-drqv2", tmp_path / "runs", TASK) == tmp_path / "runs/datasets" / TASK / "imported-drqv2"
+    assert (
+        resolve_dataset("imported-drqv2", tmp_path / "runs", TASK)
+        == tmp_path / "runs/datasets" / TASK / "imported-drqv2"
+    )
 
 
 # ------------------------------------------------------------------ the dataset format itself
@@ -542,7 +552,10 @@ write(Path({out!r}), gen())
 def test_killed_write_is_incomplete_and_a_rerun_ends_identical(tmp_path, kill_at):
     d = tmp_path / "d"
     script = KILL_SCRIPT.format(tests=str(Path(__file__).parent), kill_at=kill_at, out=str(d))
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[1]), os.environ.get("PYTHONPATH", "")])}
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[1]), os.environ.get("PYTHONPATH", "")]),
+    }
     proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == -signal.SIGKILL, proc.stderr
     assert len(list((d / "episodes").glob("ep_*.npz"))) == kill_at

@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 import torch
 import typer
-from analysis_fixtures import FRAMES, full_coverage_root
 from typer.testing import CliRunner
 
 import paper_figures
 from analysis.claims import NO_DATA, SUPPORTED
-from repro_app.analysis_cli import register
 from analysis.context import Context
 from analysis.load import load_results
-from repro_app.report import build_report
 from analysis.tsne import build_step_mlp, find_action_encoder_state, run_tsne
+from analysis_fixtures import FRAMES, full_coverage_root
+from repro_app.analysis_cli import register
+from repro_app.report import build_report
 
 REPS = 200
 EXPECTED = ["T1", "T2", "T3", "T4", "T5", "T6", "F1", "F3", "F4", "F5", "F6", "F7a", "F7b", "F8", "F9", "F10",

@@ -98,7 +98,12 @@ def cql_reference(qd, qu, qp, qnp, alpha, temp, is_=False, lp=None, lnp=None, ac
 def test_cql_regulariser_known_answer(temp, mode):
     kw = {}
     if mode == "is":
-        kw = {"importance_sampling": True, "action_dim": 3, "log_prob_policy": t64(LP), "log_prob_next_policy": t64(LNP)}
+        kw = {
+            "importance_sampling": True,
+            "action_dim": 3,
+            "log_prob_policy": t64(LP),
+            "log_prob_next_policy": t64(LNP),
+        }
     reg, parts = cql.regulariser(t64(QD), t64(QU), t64(QP), t64(QNP), alpha=2.0, temperature=temp,
                                  include_data_in_logsumexp=mode == "with_data", **kw)
     ref, lse = cql_reference(QD, QU, QP, QNP, 2.0, temp, is_=mode == "is", lp=LP, lnp=LNP, action_dim=3,
@@ -233,7 +238,9 @@ def test_iql_critic_target_and_loss():
     q1, q2 = leaf([2.5, 0.5, -1.0]), leaf([3.0, -0.5, -2.0])
     loss, _ = iql.critic_loss(q1, q2, target)
     tl = target.tolist()
-    ref = sum((a - t) ** 2 for a, t in zip(q1.tolist(), tl)) / 3 + sum((b - t) ** 2 for b, t in zip(q2.tolist(), tl)) / 3
+    ref = (
+        sum((a - t) ** 2 for a, t in zip(q1.tolist(), tl)) / 3 + sum((b - t) ** 2 for b, t in zip(q2.tolist(), tl)) / 3
+    )
     assert loss.item() == pytest.approx(ref, rel=1e-12)
     loss.backward()
     assert next_v.grad is None

@@ -21,15 +21,14 @@ from typer.testing import CliRunner
 sys.path.insert(0, str(Path(__file__).parent))
 
 from offline_fixtures import action_of, reward_of, write_dataset  # noqa: E402
-
 from repro import api, rundir  # noqa: E402
-from repro_app.cli import app  # noqa: E402
 from repro.config import compose, typed  # noqa: E402
 from repro.learners import LEARNERS, Learner, build_learner  # noqa: E402
 from repro.learners.bc import bc_loss  # noqa: E402
-from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_WALLCLOCK_COLUMNS  # noqa: E402
 from repro.offline.reference import PAPER_TACO_RETURN, normalized_score, score_reference  # noqa: E402
 from repro.offline.replay import DatasetError, load_offline_data  # noqa: E402
+from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_WALLCLOCK_COLUMNS  # noqa: E402
+from repro_app.cli import app  # noqa: E402
 
 TINY = ["agent=bc", "task=cheetah_run", "profile=tiny", "seed=2", "runtime.threads=1", "offline.dataset=medium",
         "offline.updates=20", "offline.eval_every_updates=10", "offline.eval_episodes=1",

@@ -16,8 +16,8 @@ import typer
 from typer.testing import CliRunner
 
 from repro import api, rundir
-from repro.config import compose, typed
 from repro.agent.networks import Actor, Encoder
+from repro.config import compose, typed
 from repro.offline import make as mk
 from repro.offline.dataset import check_dataset
 from repro.offline.make_cli import register

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from test_sweeps import write_sweep  # the same tiny-run sweep files as the local launcher tests
 
 pytestmark = [pytest.mark.slurm, pytest.mark.slow]

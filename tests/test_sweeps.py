@@ -15,14 +15,15 @@ import time
 from pathlib import Path
 
 import pytest
+import typer
 import yaml
 from typer.testing import CliRunner
 
-import typer
-from repro.launch import lock, spec as specs
+from repro.launch import lock
+from repro.launch import spec as specs
 from repro.launch.cli import register
 from repro.launch.runner import claim
-from repro.launch.state import RunRecord, write_record, state_dir
+from repro.launch.state import RunRecord, state_dir, write_record
 from repro.launch.status import collect
 
 TINY = ["profile=tiny", "env.max_episode_frames=50", "train.seed_frames=50", "train.update_every_steps=4",
@@ -249,7 +250,9 @@ def test_update_rewrites_only_our_own_lock(tmp_path):
 
 def test_status_reports_each_state(tmp_path):
     sweep = write_sweep(tmp_path, "st", ["reacher_hard"], {"a": [], "b": [], "c": [], "d": []}, 1)
-    planned = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={tmp_path}",))))
+    planned = specs.plan(
+        specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={tmp_path}",)))
+    )
     root = specs.results_root_of(planned)
     sdir = state_dir(root, "st")
     a, b, c, d = planned
@@ -314,7 +317,9 @@ def _wait(pred, timeout: float, what: str) -> None:
 def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_path):
     """2 tasks x 2 variants x 2 seeds: kill the launcher halfway (SIGKILL), then two launchers at once
     finish the grid; every run ends DONE exactly once with complete, duplicate-free CSVs."""
-    sweep = write_sweep(tmp_path, "grid", ["reacher_hard", "cheetah_run"], {"K1": ["agent.K=1"], "K3": ["agent.K=3"]}, 2)
+    sweep = write_sweep(
+        tmp_path, "grid", ["reacher_hard", "cheetah_run"], {"K1": ["agent.K=1"], "K3": ["agent.K=3"]}, 2
+    )
     root = tmp_path / "results"
     common = [str(sweep), "--set", f"runtime.results_root={root}"]
     planned = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={root}",))))

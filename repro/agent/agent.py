@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 from collections import OrderedDict
+from typing import cast
 
 import numpy as np
 import torch
@@ -13,7 +14,7 @@ from torch import nn
 
 from repro.agent.aug import RandomShift
 from repro.agent.networks import ActionEncoder, Actor, Critic, Encoder, default_latent_action_dim
-from repro.agent.objectives import OBJECTIVES, AuxBatch, ObjectiveContext
+from repro.agent.objectives import OBJECTIVES, AuxBatch, Objective, ObjectiveContext
 from repro.schema import AgentConfig
 
 CRITIC_METRICS = ("critic_loss", "critic_q1", "critic_q2", "critic_target_q")
@@ -100,14 +101,16 @@ class Agent:
         return mods
 
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:
-        opts = {"encoder": self.encoder_opt, "actor": self.actor_opt, "critic": self.critic_opt}
+        opts: dict[str, torch.optim.Optimizer] = {"encoder": self.encoder_opt, "actor": self.actor_opt,
+                                                  "critic": self.critic_opt}
         if self.aux_opt is not None:
             opts["aux"] = self.aux_opt
         return opts
 
     def parameter_counts(self) -> list[tuple[str, int]]:
         """Trainable parameters per module (target critic excluded: it is not trained) and no double count."""
-        rows, seen = [], set()
+        rows: list[tuple[str, int]] = []
+        seen: set[int] = set()
         for name, mod in self.modules().items():
             if name == "critic_target":
                 continue
@@ -118,7 +121,7 @@ class Agent:
 
     def metric_names(self) -> list[str]:
         names = list(CRITIC_METRICS) + list(ACTOR_METRICS)
-        for objective in self.objectives.values():
+        for objective in cast("dict[str, Objective]", self.objectives).values():
             names += objective.metric_keys()
         if self.objectives:
             names.append("aux_loss")
@@ -235,7 +238,7 @@ class Agent:
         self.aux_opt.zero_grad(set_to_none=True)
         total.backward()
         self.aux_opt.step()
-        for objective in self.objectives.values():
+        for objective in cast("dict[str, Objective]", self.objectives).values():
             objective.after_update()
         metrics["aux_loss"] = total.item()
         return metrics

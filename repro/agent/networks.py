@@ -68,7 +68,9 @@ class TruncatedNormal(torch.distributions.Normal):
         clamped = torch.clamp(x, self.low + self.eps, self.high - self.eps)
         return x - x.detach() + clamped.detach()
 
-    def sample(self, clip: float | None = None, sample_shape: torch.Size = torch.Size()) -> torch.Tensor:
+    # DrQ-v2's signature: clip first, unlike torch's Distribution.sample(sample_shape)
+    def sample(self, clip: float | None = None,  # type: ignore[override]
+               sample_shape: torch.Size = torch.Size()) -> torch.Tensor:
         shape = self._extended_shape(sample_shape)
         eps = torch.randn(shape, dtype=self.loc.dtype, device=self.loc.device) * self.scale
         if clip is not None:

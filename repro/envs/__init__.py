@@ -6,6 +6,8 @@ so ``import repro.envs`` stays cheap.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from repro.envs.base import Env, EnvSpec, TimeStep
 from repro.envs.registry import TASKS, TaskInfo, UnknownTaskError, get_task
 from repro.envs.wrappers import DistractingActionDims, TimeLimit
@@ -50,6 +52,7 @@ def make_env(
         camera: override of the task's camera (id or name).
     """
     info = get_task(task)
+    env_class: Callable[..., Env]
     if info.suite in ("dmc", "manipulation"):
         from repro.envs.dmc import DMCEnv as env_class
     elif info.suite == "metaworld":

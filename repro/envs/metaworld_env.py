@@ -65,8 +65,10 @@ class MetaWorldEnv:
         self._state: np.ndarray | None = None
         self._viewer: Any = None  # mujoco.Renderer for render_view, made on first use
         self.task_index = 0
+        action_shape = self._env.action_space.shape
+        assert action_shape is not None  # a Box space
         self.spec = EnvSpec(
-            action_dim=int(self._env.action_space.shape[0]),
+            action_dim=int(action_shape[0]),
             obs_shape=(3 * frame_stack, image_size, image_size),
             has_success=True,
         )

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Sequence
 from enum import Enum
 from pathlib import Path
-from typing import List, Optional
+from typing import Optional
 
 import typer
 from rich.console import Console
@@ -48,7 +49,7 @@ def _rel(path: Path, root: Path) -> str:
 
 
 def print_plan(planned: list[PlannedRun], spec: SweepSpec, root: Path, force: bool,
-               excluded: list[tuple[str, str, str, str]] = ()) -> None:
+               excluded: Sequence[tuple[str, str, str, str]] = ()) -> None:
     con = _console()
     for agent, variant, task, reason in excluded:
         con.print(f"[dim]{'n/a':<9}[/] {escape(f'{spec.experiment}/{agent}/{variant}/{task}')}  "
@@ -111,18 +112,28 @@ def register(app: typer.Typer) -> None:
         tasks: Optional[str] = typer.Option(None, "--tasks", help="Comma-separated tasks instead of the sweep's."),
         seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Use seeds 1..N."),
         frames: Optional[int] = typer.Option(None, "--frames", min=1, help="Frame budget of every run."),
-        sets: Optional[List[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
+        sets: Optional[list[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
         results_root: Optional[Path] = typer.Option(
-            None, *RESULTS_FLAGS, help="Results root to write the runs under (the same as --set "
-                                       "runtime.results_root=ROOT; default: the config's runtime.results_root)."),
-        dry_run: bool = typer.Option(False, "--dry-run", help="Print the grid (run dir, overrides, state); launch nothing."),
+            None,
+            *RESULTS_FLAGS,
+            help="Results root to write the runs under (the same as --set "
+            "runtime.results_root=ROOT; default: the config's runtime.results_root).",
+        ),
+        dry_run: bool = typer.Option(
+            False, "--dry-run", help="Print the grid (run dir, overrides, state); launch nothing."
+        ),
         launcher: Launcher = typer.Option(Launcher.local, "--launcher", help="Where to run."),
-        max_parallel: Optional[int] = typer.Option(None, "--max-parallel", min=1,
-                                                   help="Local: runs at once (default: cores / 2)."),
-        force: bool = typer.Option(False, "--force", help="Move aside run dirs whose saved config differs, then rerun."),
+        max_parallel: Optional[int] = typer.Option(
+            None, "--max-parallel", min=1, help="Local: runs at once (default: cores / 2)."
+        ),
+        force: bool = typer.Option(
+            False, "--force", help="Move aside run dirs whose saved config differs, then rerun."
+        ),
         cluster_config: Optional[Path] = typer.Option(
-            None, "--cluster-config", help="SLURM launcher YAML (default: $REPRO_SLURM_CONFIG or "
-                                           "~/.config/taco-repro/slurm.yaml)."),
+            None,
+            "--cluster-config",
+            help="SLURM launcher YAML (default: $REPRO_SLURM_CONFIG or ~/.config/taco-repro/slurm.yaml).",
+        ),
     ) -> None:
         """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
         from repro.launch.local import default_parallel, run_local
@@ -196,7 +207,7 @@ def register(app: typer.Typer) -> None:
             raise _fail(str(exc)) from None
 
 
-def _with_results_root(sets: Optional[List[str]], results_root: Optional[Path]) -> tuple[str, ...]:
+def _with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) -> tuple[str, ...]:
     """The --set overrides, plus ``runtime.results_root`` when --results is given (not both)."""
     out = tuple(sets or ())
     if results_root is None:
@@ -215,7 +226,7 @@ def _default_results_root() -> Path:
         raise SweepError(str(exc)) from None
 
 
-def _print_report(report, launcher: Launcher, sweep: str) -> None:  # type: ignore[no-untyped-def]
+def _print_report(report, launcher: Launcher, sweep: str) -> None:
     con = _console()
     parts = [f"{len(report.started)} {'submitted' if launcher == Launcher.slurm else 'started'}"]
     if launcher == Launcher.local:

@@ -16,14 +16,14 @@ import os
 import socket
 import time
 import uuid
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping
 
 GUARD_STALE_S = 30.0  # a break guard older than this is left over from a crashed breaker
 UNREADABLE_STALE_S = 60.0  # an unparseable lock older than this is treated as stale
 
-SlurmLookup = Callable[[list[str]], Mapping[str, str]]
+SlurmLookup = Callable[[list[str]], Mapping[str, str] | None]  # None: SLURM cannot be asked
 
 
 @dataclass
@@ -42,7 +42,7 @@ class LockInfo:
     created: float = field(default_factory=time.time)
 
     @classmethod
-    def mine(cls, launcher: str, sweep: str = "") -> "LockInfo":
+    def mine(cls, launcher: str, sweep: str = "") -> LockInfo:
         """A new lock owned by this process."""
         return cls(token=uuid.uuid4().hex, host=socket.gethostname(), pid=os.getpid(),
                    pid_start=process_start(os.getpid()), launcher=launcher, sweep=sweep)

@@ -6,9 +6,10 @@ import os
 import shutil
 import socket
 import traceback
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import submitit
 import yaml
@@ -223,7 +224,7 @@ def submit(planned: Sequence[PlannedRun], sweep: str, sdir: Path, cluster: Clust
     return report
 
 
-def _queued(sdir: Path, c, job_id: str, paths) -> None:  # type: ignore[no-untyped-def]
+def _queued(sdir: Path, c, job_id: str, paths) -> None:
     """Record a submitted run's job id in its lock and run record."""
     lock.update(c.lock_path, c.info.token, job_id=job_id)
     existing = read_record(sdir, c.planned.key)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import csv
 import io
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 from repro.launch import lock
 from repro.launch.slurm_query import FAILED, QUEUED, job_states
@@ -58,8 +58,9 @@ def progress(run_dir: Path) -> tuple[int | None, float | None]:
     """(last frame seen in train.csv or eval.csv, last evaluation return)."""
     ev = last_row(run_dir / EVAL)
     tr = last_row(run_dir / TRAIN)
-    frames = [f for f in (_num(ev and ev.get("frame")), _num(tr and tr.get("frame"))) if f is not None]
-    return (int(max(frames)) if frames else None, _num(ev and ev.get("episode_reward")))
+    frames = [f for f in (_num(ev.get("frame") if ev else None), _num(tr.get("frame") if tr else None))
+              if f is not None]
+    return (int(max(frames)) if frames else None, _num(ev.get("episode_reward") if ev else None))
 
 
 def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,

@@ -56,7 +56,8 @@ class OnlineLearner(Learner, Protocol):
 
 def count_parameters(modules: dict[str, torch.nn.Module]) -> list[tuple[str, int]]:
     """Trainable parameters per named module, a parameter shared by two modules counted at the first."""
-    rows, seen = [], set()
+    rows: list[tuple[str, int]] = []
+    seen: set[int] = set()
     for name, mod in modules.items():
         params = [p for p in mod.parameters() if p.requires_grad and id(p) not in seen]
         seen.update(id(p) for p in params)

@@ -12,11 +12,14 @@ IQL as the reference code (value, actor, critic with the encoder, target, auxili
 
 from __future__ import annotations
 
+from typing import cast
+
 import torch
 from torch import nn
 
 from repro.agent.agent import Agent, soft_update
 from repro.agent.networks import mlp, orthogonal_init, trunk
+from repro.agent.objectives import Objective
 from repro.offline.losses import cql as cql_loss
 from repro.offline.losses import iql as iql_loss
 from repro.offline.losses import td3bc as td3bc_loss
@@ -76,7 +79,7 @@ class OfflineActorCritic(Agent):
             names += list(CQL_METRICS) + ["actor_loss", "actor_logprob", "actor_ent"]
         else:
             names += ["value_loss", "value_v", "actor_loss", "actor_adv", "actor_weight", "actor_logprob"]
-        for objective in self.objectives.values():
+        for objective in cast("dict[str, Objective]", self.objectives).values():
             names += objective.metric_keys()
         if self.objectives:
             names.append("aux_loss")

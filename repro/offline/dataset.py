@@ -91,7 +91,7 @@ class Manifest:
             if len(shape) != 3:
                 raise ValueError("frame_shape")
             return cls(task=str(data["task"]), action_dim=int(data["action_dim"]),
-                       frame_shape=shape, kind=str(data["kind"]),  # type: ignore[arg-type]
+                       frame_shape=shape, kind=str(data["kind"]),
                        transitions=int(data["transitions"]), episodes=episodes,
                        source=dict(data.get("source") or {}), rule=dict(data.get("rule") or {}),
                        created_by=str(data.get("created_by", "")), format=FORMAT)
@@ -315,10 +315,10 @@ def _claim(d: Path, identity: dict[str, Any]) -> None:
         raise _AlreadyComplete(m)
     if (d / PENDING).exists():
         try:
-            have = json.loads((d / PENDING).read_text())
+            pending = json.loads((d / PENDING).read_text())
         except (OSError, json.JSONDecodeError):
-            have = None
-        if have != identity:
+            pending = None
+        if pending != identity:
             raise DatasetError(f"{d} holds a partial dataset made from other inputs; remove it or choose "
                                "another folder")
         return
@@ -359,7 +359,7 @@ def _episode_for(path: Path, item: EpisodeSource, i: int, action_dim: int | None
             and set(on_disk[0]) == set(ep):
         return on_disk
     buf = io.BytesIO()
-    np.savez_compressed(buf, **ep)
+    np.savez_compressed(buf, **ep)  # type: ignore[arg-type]  # numpy stub matches **kwds against allow_pickle
     raw = buf.getvalue()
     atomic_write(path, lambda f: f.write(raw))
     return ep, raw

@@ -20,7 +20,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -86,9 +86,10 @@ class Recorder:
 
     @classmethod
     def open(cls, run_dir: str | Path, agent_cfg: Any, obs_shape: tuple[int, int, int], action_dim: int,
-             checkpoint: dict | None) -> "Recorder":
+             checkpoint: dict | None) -> Recorder:
         """The recorder of a (re)starting run, rewound to ``checkpoint`` (None: a start from scratch)."""
-        rec = cls(run_dir, PolicySpec(tuple(obs_shape), int(action_dim), int(agent_cfg.feature_dim),
+        shape = cast("tuple[int, int, int]", tuple(obs_shape))
+        rec = cls(run_dir, PolicySpec(shape, int(action_dim), int(agent_cfg.feature_dim),
                                       int(agent_cfg.hidden_dim)))
         counters = checkpoint["counters"] if checkpoint else {"episode": 0, "step": 0}
         rec.rewind(int(counters["episode"]), int(counters["step"]))

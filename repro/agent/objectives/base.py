@@ -3,18 +3,19 @@
 from __future__ import annotations
 
 import abc
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar
+from typing import Any, ClassVar
 
 import torch
 from torch import nn
 
 from repro.agent.networks import SharedHeads
 
-OBJECTIVES: dict[str, type["Objective"]] = {}
+OBJECTIVES: dict[str, type[Objective]] = {}
 
 
-def register(name: str) -> Callable[[type["Objective"]], type["Objective"]]:
+def register(name: str) -> Callable[[type[Objective]], type[Objective]]:
     """Class decorator adding an objective to the registry under ``name``."""
 
     def wrap(cls: type[Objective]) -> type[Objective]:
@@ -55,7 +56,7 @@ class AuxBatch:
     K steps ahead, no gradient).
     """
 
-    def __init__(self, batch: dict[str, torch.Tensor], encoder: nn.Module, aug: Callable,
+    def __init__(self, batch: dict[str, torch.Tensor], encoder: Callable[[torch.Tensor], torch.Tensor], aug: Callable,
                  encode_actions: Callable[[torch.Tensor], torch.Tensor], reward_target: str,
                  encode_action_steps: Callable[[torch.Tensor], torch.Tensor] | None = None):
         self.batch = batch
@@ -94,7 +95,8 @@ class AuxBatch:
         """Each action a_t..a_{t+K-1} encoded on its own (no sequence encoder): (B, K, step_dim)."""
         if self._encode_steps is None:
             raise ValueError("this AuxBatch was built without a per-step action encoder")
-        return self.memo("u_steps", lambda: self._encode_steps(self.batch["action_seq"]))
+        encode_steps = self._encode_steps
+        return self.memo("u_steps", lambda: encode_steps(self.batch["action_seq"]))
 
     def future_at(self, k: int) -> torch.Tensor:
         """encoder(aug(obs_{t+k})) for k in 1..K, no gradient (needs a batch sampled with future_seq)."""

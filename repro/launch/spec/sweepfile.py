@@ -36,7 +36,7 @@ class SweepSpec:
     common: tuple[str, ...]
     variants: dict[str, tuple[str, ...]]
     path: Path
-    exclude: tuple["Exclusion", ...] = ()
+    exclude: tuple[Exclusion, ...] = ()
 
     def budget_overrides(self) -> tuple[str, ...]:
         """Frame budget and evaluation schedule as overrides (fields left null are not set)."""

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Iterator
 
 from repro.offline.dataset import DatasetError, Episode
 from repro.offline.formats import drqv2, vd4rl64, vd4rl84

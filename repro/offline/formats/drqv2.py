@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import io
 import re
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -104,7 +104,7 @@ def write(episodes: Iterable[Episode], out: Path) -> list[Path]:
                   "discount": discount[:, None]}
         path = out / f"20000101T000000_{i}_{len(frames) - 1}.npz"  # the stamp is fixed; the index orders
         buf = io.BytesIO()
-        np.savez_compressed(buf, **arrays)
+        np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]  # numpy stub matches **kwds against allow_pickle
         path.write_bytes(buf.getvalue())
         paths.append(path)
     return paths

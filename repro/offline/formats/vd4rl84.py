@@ -8,8 +8,8 @@ Datasets per file: ``observation`` (N, 3, 84, 84) uint8 single frames, ``action`
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import h5py
 import numpy as np
@@ -26,7 +26,9 @@ def _open(path: Path) -> h5py.File:
     try:
         return h5py.File(path, "r")
     except OSError as exc:
-        raise DatasetError(f"corrupt or truncated file {path} (not readable as hdf5: {exc.__class__.__name__})") from None
+        raise DatasetError(
+            f"corrupt or truncated file {path} (not readable as hdf5: {exc.__class__.__name__})"
+        ) from None
 
 
 def split_episodes(step_type: np.ndarray, where: str) -> list[tuple[int, int]]:
