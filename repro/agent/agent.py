@@ -13,6 +13,7 @@ import torch
 from torch import nn
 
 from repro.agent.aug import RandomShift
+from repro.agent.modules import ModuleSet
 from repro.agent.networks import ActionEncoder, Actor, Critic, Encoder, default_latent_action_dim
 from repro.agent.objectives import OBJECTIVES, AuxBatch, Objective, ObjectiveContext
 from repro.schema import AgentConfig
@@ -27,8 +28,10 @@ def soft_update(net: nn.Module, target: nn.Module, tau: float) -> None:
             tp.lerp_(p, tau)
 
 
-class Agent:
+class Agent(ModuleSet):
     """DrQ-v2 actor-critic with an optional action encoder and pluggable auxiliary objectives."""
+
+    untrained = ("critic_target",)  # the target critic follows by soft updates: eval mode, not counted
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
@@ -107,18 +110,6 @@ class Agent:
             opts["aux"] = self.aux_opt
         return opts
 
-    def parameter_counts(self) -> list[tuple[str, int]]:
-        """Trainable parameters per module (target critic excluded: it is not trained) and no double count."""
-        rows: list[tuple[str, int]] = []
-        seen: set[int] = set()
-        for name, mod in self.modules().items():
-            if name == "critic_target":
-                continue
-            params = [p for p in mod.parameters() if p.requires_grad and id(p) not in seen]
-            seen.update(id(p) for p in params)
-            rows.append((name, sum(p.numel() for p in params)))
-        return rows
-
     def metric_names(self) -> list[str]:
         names = list(CRITIC_METRICS) + list(ACTOR_METRICS)
         for objective in cast("dict[str, Objective]", self.objectives).values():
@@ -126,22 +117,6 @@ class Agent:
         if self.objectives:
             names.append("aux_loss")
         return names
-
-    def state_dict(self) -> dict:
-        return {"modules": {k: m.state_dict() for k, m in self.modules().items()},
-                "optimizers": {k: o.state_dict() for k, o in self.optimizers().items()}}
-
-    def load_state_dict(self, state: dict) -> None:
-        for k, m in self.modules().items():
-            m.load_state_dict(state["modules"][k])
-        for k, o in self.optimizers().items():
-            o.load_state_dict(state["optimizers"][k])
-
-    def train(self, training: bool = True) -> None:
-        self.training = training
-        for name, mod in self.modules().items():
-            if name != "critic_target":
-                mod.train(training)
 
     # ----------------------------------------------------------------- acting
     def encode_action(self, action: torch.Tensor) -> torch.Tensor:

@@ -10,8 +10,8 @@ import numpy as np
 import torch
 
 from repro.agent.aug import RandomShift
+from repro.agent.modules import ModuleSet
 from repro.agent.networks import Actor, Encoder
-from repro.learners.base import count_parameters
 from repro.schema import AgentConfig
 
 METRICS = ("bc_loss",)
@@ -24,7 +24,7 @@ def bc_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return (predicted - target).pow(2).mean()
 
 
-class BCLearner:
+class BCLearner(ModuleSet):
     """Offline learner ``bc``."""
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
@@ -46,26 +46,8 @@ class BCLearner:
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:
         return {"encoder": self.encoder_opt, "actor": self.actor_opt}
 
-    def parameter_counts(self) -> list[tuple[str, int]]:
-        return count_parameters(self.modules())
-
     def metric_names(self) -> list[str]:
         return list(METRICS)
-
-    def state_dict(self) -> dict:
-        return {"modules": {k: m.state_dict() for k, m in self.modules().items()},
-                "optimizers": {k: o.state_dict() for k, o in self.optimizers().items()}}
-
-    def load_state_dict(self, state: dict) -> None:
-        for k, m in self.modules().items():
-            m.load_state_dict(state["modules"][k])
-        for k, o in self.optimizers().items():
-            o.load_state_dict(state["optimizers"][k])
-
-    def train(self, training: bool = True) -> None:
-        self.training = training
-        for mod in self.modules().values():
-            mod.train(training)
 
     def policy(self, obs: torch.Tensor) -> torch.Tensor:
         """Deterministic action in [-1, 1] for float observations (B, C, H, W)."""
