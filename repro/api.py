@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import torch
 from omegaconf import DictConfig
@@ -14,12 +14,12 @@ from repro import rundir
 from repro.checkpoint import load_checkpoint, save_checkpoint
 from repro.config import compose, typed
 from repro.episodes import EpisodeStore
-from repro.learners import Learner, build_learner, is_offline
+from repro.learners import Learner, ReturnConditioned, SequenceLearner, build_learner, is_offline, samples_episodes
 from repro.logger import RunLogger
-from repro.offline.reference import score_reference
-from repro.offline.replay import DatasetError, OfflineData, load_offline_data, resolve_dataset
-from repro.offline_trainer import OfflineLogger, OfflineTrainer
 from repro.offline.record import Recorder
+from repro.offline.reference import score_reference
+from repro.offline.replay import DatasetError, OfflineData, load_offline_data, load_offline_episodes, resolve_dataset
+from repro.offline_trainer import BatchSource, OfflineLogger, OfflineTrainer
 from repro.replay import ReplayBuffer
 from repro.schema import RunConfig
 from repro.trainer import Trainer
@@ -122,6 +122,10 @@ def _load_dataset(rc: RunConfig) -> OfflineData:
         raise DatasetError(f"agent.learner={rc.agent.learner} trains from a dataset: set offline.dataset="
                            "medium|medium-replay|full-replay (under the results root) or a dataset folder.")
     directory = resolve_dataset(rc.offline.dataset, rc.runtime.results_root, rc.task.name)
+    if samples_episodes(rc.agent.learner):  # the learner samples its own windows: episodes, no replay
+        return load_offline_episodes(directory, task=rc.task.name, action_dim=run_action_dim(rc),
+                                     frame_shape=(3, rc.env.image_size, rc.env.image_size),
+                                     max_length=rc.agent.dt.max_timestep)
     return load_offline_data(directory, task=rc.task.name, action_dim=run_action_dim(rc),
                              frame_shape=(3, rc.env.image_size, rc.env.image_size), frame_stack=rc.env.frame_stack,
                              nstep=rc.agent.nstep, K=rc.agent.K, discount=rc.agent.discount, seed=rc.seed,
@@ -143,12 +147,14 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, re
         spec = eval_env.spec
         learner = build_agent(rc, spec.obs_shape, spec.action_dim, device)
         state = load_checkpoint(ckpt_file) if resuming else None
-        logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo)
+        logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo,
+                               return_conditioned=isinstance(learner, ReturnConditioned))
         bar = _progress(rc, progress, total=rc.offline.updates, unit="updates/s")
-        trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner, data.buffer, logger,
-                                 lambda s: save_checkpoint(ckpt_file, s),
+        trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner,
+                                 _batch_source(learner, data, rc.seed), logger, lambda s: save_checkpoint(ckpt_file, s),
                                  reference=score_reference(rc.task.name, data.manifest.source),
-                                 dataset_digest=data.digest, progress=bar.update if bar else None)
+                                 dataset_digest=data.digest, progress=bar.update if bar else None,
+                                 dataset_best_return=data.best_return)
         if state is not None:
             trainer.restore(state)
             echo(f"resumed {path} at update {trainer.update}")
@@ -163,6 +169,17 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, re
                                  "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
     finally:
         eval_env.close()
+
+
+def _batch_source(learner: Learner, data: OfflineData, seed: int) -> BatchSource:
+    """The replay loaded from the dataset, or a SequenceLearner's sampler over its episodes."""
+    if isinstance(learner, SequenceLearner):
+        if data.episodes is None:
+            raise DatasetError(f"{data.directory}: loaded as a replay, but this learner samples episode windows")
+        return learner.make_sampler(data.episodes, seed)
+    if data.buffer is None:
+        raise DatasetError(f"{data.directory}: loaded as episodes, but this learner samples a replay")
+    return data.buffer
 
 
 def _save_frames(path: Path, frames) -> None:
@@ -190,8 +207,14 @@ class _Progress:
     """A rich progress bar: frames (offline: updates), their rate, last eval return, ETA."""
 
     def __init__(self, total_frames: int, start_frame: int, label: str, unit: str = "fps"):
-        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
-                                   TimeRemainingColumn)
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
 
         self._p = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                            TextColumn(f"{{task.fields[fps]}} {unit}"), TextColumn("eval {task.fields[ret]}"),

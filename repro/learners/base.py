@@ -8,6 +8,7 @@ containers (``{"modules": {...}, "optimizers": {...}}``) so checkpoints load wit
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -54,9 +55,50 @@ class OnlineLearner(Learner, Protocol):
         ...
 
 
+class Sampler(Protocol):
+    """Batches for a learner that does not sample single transitions (``SequenceLearner.make_sampler``).
+    ``rng`` is its only state: the offline loop checkpoints ``rng.bit_generator.state`` (exact resume)."""
+
+    rng: np.random.Generator
+
+    def sample(self, batch_size: int) -> Mapping[str, Any]:
+        ...
+
+
+@runtime_checkable
+class SequenceLearner(Protocol):
+    """An offline learner trained on windows of whole episodes (Decision Transformer): the offline loop
+    builds its batches from the dataset's episodes with ``make_sampler`` instead of loading a replay."""
+
+    def make_sampler(self, episodes: Sequence[Mapping[str, np.ndarray]], seed: int) -> Sampler:
+        ...
+
+
+@runtime_checkable
+class EpisodicActor(Protocol):
+    """A learner whose acting depends on the episode so far: evaluation calls ``begin_episode()`` before
+    each episode's first ``act`` and ``observe(action, reward)`` after every environment step."""
+
+    def begin_episode(self) -> None:
+        ...
+
+    def observe(self, action: np.ndarray, reward: float) -> None:
+        ...
+
+
+@runtime_checkable
+class ReturnConditioned(EpisodicActor, Protocol):
+    """A learner evaluated at a target return (Decision Transformer); the offline loop evaluates it at the
+    best online return and at the dataset's best return (eval.csv: runformat.RETURN_TARGET_EVAL_COLUMNS)."""
+
+    def set_target_return(self, value: float) -> None:
+        ...
+
+
 def count_parameters(modules: dict[str, torch.nn.Module]) -> list[tuple[str, int]]:
     """Trainable parameters per named module, a parameter shared by two modules counted at the first."""
-    rows, seen = [], set()
+    rows: list[tuple[str, int]] = []
+    seen: set[int] = set()
     for name, mod in modules.items():
         params = [p for p in mod.parameters() if p.requires_grad and id(p) not in seen]
         seen.update(id(p) for p in params)
