@@ -182,6 +182,25 @@ class _CountingEnv:
         pass
 
 
+class _TargetEnv(_CountingEnv):
+    """Rewards that depend on the action taken; logs (the learner's target, the episode's return)."""
+
+    def __init__(self, learner: DTLearner):
+        self.learner, self.log = learner, []
+
+    def reset(self, seed: int):
+        self.total = 0.0
+        return super().reset(seed)
+
+    def step(self, action):
+        ts = super().step(action)
+        ts.reward = float(ts.reward + action[0])
+        self.total += ts.reward
+        if ts.last:
+            self.log.append((self.learner.target_return, self.total))
+        return ts
+
+
 def test_eval_rollouts_drive_the_episodic_hooks():
     learner = _dt()
     seen = _spy(learner)
@@ -274,21 +293,24 @@ def test_offline_loop_evaluates_at_both_targets(tmp_path: Path):
     data_dir = write_dataset(tmp_path / "d", frame_shape=(3, 32, 32), best_return=200.0)
     best = float(load_manifest(data_dir).returns.max())
     learner = _dt()
-    targets: list[float] = []
-    set_target = learner.set_target_return
-    learner.set_target_return = lambda v: (targets.append(v), set_target(v))  # type: ignore[method-assign]
+    env = _TargetEnv(learner)
     (tmp_path / "run").mkdir()
-    trainer, logger, data = _trainer(tmp_path / "run", learner, data_dir, 2, 1, env=_CountingEnv())
-    assert data.best_return == best == max(float(e["rewards"].sum()) for e in data.episodes)
+    trainer, logger, data = _trainer(tmp_path / "run", learner, data_dir, 2, 1, env=env)
+    assert data.best_return == best == max(float(e["rewards"].sum()) for e in data.episodes) != 200.0
     trainer.run()
     logger.close()
     ev = pd.read_csv(tmp_path / "run" / "eval.csv")
     assert list(ev.columns) == offline_eval_columns(True) == OFFLINE_EVAL_COLUMNS + RETURN_TARGET_EVAL_COLUMNS
-    assert list(ev["update"]) == [0, 2] and sorted(set(targets)) == sorted({200.0, best})
+    assert list(ev["update"]) == [0, 2] and len(env.log) == 4  # 2 evaluations x 2 targets x 1 episode
     assert (ev["target_return"] == 200.0).all() and (ev["target_reference"] == "source").all()
     assert (ev["dataset_target_return"] == best).all()
-    assert (ev["episode_reward"] == 15.0).all() and (ev["episode_reward_dataset_target"] == 15.0).all()
-    assert np.allclose(ev["normalized_score_dataset_target"], 100 * 15.0 / 200.0)
+    online = [ret for target, ret in env.log if target == 200.0]
+    dataset = [ret for target, ret in env.log if target == best]
+    assert online != dataset  # the conditioning changes the actions, the actions the rewards
+    assert list(ev["episode_reward"]) == pytest.approx(online, abs=1e-12)
+    assert list(ev["episode_reward_dataset_target"]) == pytest.approx(dataset, abs=1e-12)
+    assert np.allclose(ev["normalized_score"], 100 * ev["episode_reward"] / 200.0)
+    assert np.allclose(ev["normalized_score_dataset_target"], 100 * ev["episode_reward_dataset_target"] / 200.0)
     # without an online reference the primary target falls back to the dataset's best
     trainer.reference_return, trainer.reference_kind = None, "none"
     assert trainer.eval_targets() == [(best, "dataset"), (best, "dataset")]
@@ -307,6 +329,16 @@ def test_dry_run_without_dataset_on_disk(tmp_path: Path):
     for row in ("│ encoder", "│ embeddings", "│ transformer", "│ head"):
         assert row in out.output, row
     assert "context: 5" in out.output and not (tmp_path / "default").exists()
+
+
+def test_dt_loads_episodes_not_a_replay(tmp_path: Path):
+    write_dataset(tmp_path / "datasets" / "cheetah_run" / "medium", task="cheetah_run", action_dim=6)
+    data = api._load_dataset(typed(compose(TINY + [f"runtime.results_root={tmp_path}"])))
+    assert data.buffer is None and data.episodes is not None
+    assert [len(e["actions"]) for e in data.episodes] == [12, 9, 15]
+    assert data.raw_frame_bytes == (12 + 9 + 15 + 3) * 3 * 84 * 84
+    bc = api._load_dataset(typed(compose(["agent=bc", *TINY[1:11], f"runtime.results_root={tmp_path}"])))
+    assert bc.buffer is not None and bc.episodes is None
 
 
 def test_episode_longer_than_the_timestep_embedding_is_one_line(tmp_path: Path):
