@@ -15,12 +15,20 @@ from repro import rundir
 from repro.checkpoint import load_checkpoint, save_checkpoint
 from repro.config import compose, typed
 from repro.episodes import EpisodeStore
-from repro.learners import Learner, OnlineLearner, build_learner, is_offline
+from repro.learners import (
+    Learner,
+    OnlineLearner,
+    ReturnConditioned,
+    SequenceLearner,
+    build_learner,
+    is_offline,
+    samples_episodes,
+)
 from repro.logger import RunLogger
 from repro.offline.record import Recorder
 from repro.offline.reference import score_reference
-from repro.offline.replay import DatasetError, OfflineData, load_offline_data, resolve_dataset
-from repro.offline_trainer import OfflineLogger, OfflineTrainer
+from repro.offline.replay import DatasetError, OfflineData, load_offline_data, load_offline_episodes, resolve_dataset
+from repro.offline_trainer import BatchSource, OfflineLogger, OfflineTrainer
 from repro.replay import ReplayBuffer
 from repro.schema import RunConfig
 from repro.trainer import Trainer
@@ -123,6 +131,10 @@ def _load_dataset(rc: RunConfig) -> OfflineData:
         raise DatasetError(f"agent.learner={rc.agent.learner} trains from a dataset: set offline.dataset="
                            "medium|medium-replay|full-replay (under the results root) or a dataset folder.")
     directory = resolve_dataset(rc.offline.dataset, rc.runtime.results_root, rc.task.name)
+    if samples_episodes(rc.agent.learner):  # the learner samples its own windows: episodes, no replay
+        return load_offline_episodes(directory, task=rc.task.name, action_dim=run_action_dim(rc),
+                                     frame_shape=(3, rc.env.image_size, rc.env.image_size),
+                                     max_length=rc.agent.dt.max_timestep)
     return load_offline_data(directory, task=rc.task.name, action_dim=run_action_dim(rc),
                              frame_shape=(3, rc.env.image_size, rc.env.image_size), frame_stack=rc.env.frame_stack,
                              nstep=rc.agent.nstep, K=rc.agent.K, discount=rc.agent.discount, seed=rc.seed,
@@ -148,12 +160,14 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, re
                        "dataset_manifest_sha256": data.digest})
         rundir.write_resolved(path, values)
         state = load_checkpoint(ckpt_file) if resuming else None
-        logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo)
+        logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo,
+                               return_conditioned=isinstance(learner, ReturnConditioned))
         bar = _progress(rc, progress, total=rc.offline.updates, unit="updates/s")
-        trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner, data.buffer, logger,
-                                 lambda s: save_checkpoint(ckpt_file, s),
+        trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner,
+                                 _batch_source(learner, data, rc.seed), logger, lambda s: save_checkpoint(ckpt_file, s),
                                  reference=score_reference(rc.task.name, data.manifest.source),
-                                 dataset_digest=data.digest, progress=bar.update if bar else None)
+                                 dataset_digest=data.digest, progress=bar.update if bar else None,
+                                 dataset_best_return=data.best_return)
         if state is not None:
             trainer.restore(state)
             echo(f"resumed {path} at update {trainer.update}")
@@ -168,6 +182,17 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, re
                                  "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
     finally:
         eval_env.close()
+
+
+def _batch_source(learner: Learner, data: OfflineData, seed: int) -> BatchSource:
+    """The replay loaded from the dataset, or a SequenceLearner's sampler over its episodes."""
+    if isinstance(learner, SequenceLearner):
+        if data.episodes is None:
+            raise DatasetError(f"{data.directory}: loaded as a replay, but this learner samples episode windows")
+        return learner.make_sampler(data.episodes, seed)
+    if data.buffer is None:
+        raise DatasetError(f"{data.directory}: loaded as episodes, but this learner samples a replay")
+    return data.buffer
 
 
 def _save_frames(path: Path, frames) -> None:

@@ -5,6 +5,10 @@ then stop if u == updates, else sample a batch and update. After an update, a tr
 log_every_updates and a checkpoint every checkpoint_every_updates. A resume from a checkpoint at u truncates
 the CSVs to the offsets stored in it and recomputes everything after, so the files equal an uninterrupted
 run's in every non-wall-clock column.
+
+Batches come from a ReplayBuffer of single transitions or, for a ``SequenceLearner`` (Decision
+Transformer), from the learner's own sampler over the dataset's episodes; either way the batch source's RNG
+is checkpointed. A ``ReturnConditioned`` learner is evaluated at two target returns (see ``evaluate``).
 """
 
 from __future__ import annotations
@@ -14,28 +18,32 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Union
 
 import numpy as np
 
 from repro.envs.base import Env
-from repro.learners.base import Learner
+from repro.learners.base import Learner, ReturnConditioned, Sampler
 from repro.logger import CsvLog
 from repro.offline.reference import normalized_score
 from repro.offline.replay import DatasetError
 from repro.replay import ReplayBuffer
-from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_TRAIN_COLUMNS
+from repro.runformat import OFFLINE_TRAIN_COLUMNS, offline_eval_columns
 from repro.schema import OfflineConfig
-from repro.trainer_base import WallClock, rng_state, run_eval_episodes, set_rng_state
+from repro.trainer_base import EvalResult, WallClock, rng_state, run_eval_episodes, set_rng_state
+
+BatchSource = Union[ReplayBuffer, Sampler]  # where update batches come from (both have ``rng`` and ``sample``)
+LEARNER_STATE = ("modules", "optimizers")  # learner state_dict keys stored as "agent" / "optimizers"
 
 
 class OfflineLogger:
     """eval.csv and train.csv of an offline run (columns: repro/runformat.py)."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
-                 offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print):
+                 offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print,
+                 return_conditioned: bool = False):
         offsets = offsets or {}
-        self.eval = CsvLog(Path(run_dir) / "eval.csv", OFFLINE_EVAL_COLUMNS, offsets.get("eval"))
+        self.eval = CsvLog(Path(run_dir) / "eval.csv", offline_eval_columns(return_conditioned), offsets.get("eval"))
         self.train = CsvLog(Path(run_dir) / "train.csv", OFFLINE_TRAIN_COLUMNS + list(metric_names),
                             offsets.get("train"))
         self.echo = echo
@@ -47,6 +55,8 @@ class OfflineLogger:
         self.eval.write(row)
         score = row.get("normalized_score")
         extra = f"  score {score:.1f} ({row['score_reference']})" if score is not None else ""
+        if row.get("episode_reward_dataset_target") is not None:
+            extra += f"  (dataset target: return {row['episode_reward_dataset_target']:.2f})"
         self.echo(f"eval  update {row['update']:>8}  return {row['episode_reward']:8.2f}"
                   f" ± {row['episode_reward_std']:.2f}{extra}")
 
@@ -60,16 +70,18 @@ class OfflineLogger:
 
 class OfflineTrainer:
     def __init__(self, cfg: OfflineConfig, seed: int, action_repeat: int, eval_env: Env, learner: Learner,
-                 buffer: ReplayBuffer, logger: OfflineLogger, save_checkpoint: Callable[[dict], None],
+                 buffer: BatchSource, logger: OfflineLogger, save_checkpoint: Callable[[dict], None],
                  reference: tuple[float | None, str], dataset_digest: str,
-                 progress: Callable[[int, float | None], None] | None = None):
+                 progress: Callable[[int, float | None], None] | None = None,
+                 dataset_best_return: float | None = None):
         self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
         self.eval_env, self.learner, self.buffer, self.logger = eval_env, learner, buffer, logger
         self._save, self.progress = save_checkpoint, progress
         self.reference_return, self.reference_kind = reference
         self.dataset_digest = dataset_digest
         self.has_success = eval_env.spec.has_success
-        self.batch_size = learner.cfg.batch_size
+        self.dataset_best_return = dataset_best_return  # a ReturnConditioned learner's second target
+        self.batch_size = int(getattr(learner, "batch_size", learner.cfg.batch_size))  # DT: agent.dt.batch_size
         self.update = 0
         self.clock = WallClock()
         self.last_eval: float | None = None
@@ -85,7 +97,8 @@ class OfflineTrainer:
         state = self.learner.state_dict()
         return {"offline": {"update": self.update, "total_time": self.total_time(), "dataset": self.dataset_digest,
                             "sums": dict(self._sums), "n": self._n, "window_seconds": self._window_seconds},
-                "agent": state["modules"], "optimizers": state["optimizers"], "rng": rng_state(),
+                "agent": state["modules"], "optimizers": state["optimizers"],
+                "learner": {k: v for k, v in state.items() if k not in LEARNER_STATE}, "rng": rng_state(),
                 "replay_rng": self.buffer.rng.bit_generator.state, "csv": self.logger.offsets(),
                 "last_eval": self.last_eval}
 
@@ -97,20 +110,45 @@ class OfflineTrainer:
         self.update = int(off["update"])
         self._sums, self._n = dict(off["sums"]), int(off["n"])
         self._window_seconds = float(off["window_seconds"])
-        self.learner.load_state_dict({"modules": state["agent"], "optimizers": state["optimizers"]})
+        self.learner.load_state_dict({**state.get("learner", {}), "modules": state["agent"],
+                                      "optimizers": state["optimizers"]})
         set_rng_state(state["rng"])
         self.buffer.rng.bit_generator.state = state["replay_rng"]
         self.last_eval = state.get("last_eval")
         self.clock.resume(float(off["total_time"]))
 
     # ----------------------------------------------------------------- evaluation and logging
+    def eval_targets(self) -> list[tuple[float, str]]:
+        """A ReturnConditioned learner's (target return, where it comes from): the best online return first
+        (the eval.csv's main columns; the dataset's best when no online reference is known), then the
+        dataset's best episode return."""
+        if self.dataset_best_return is None:
+            raise ValueError("a return-conditioned learner needs dataset_best_return")
+        online = (self.reference_return, self.reference_kind) if self.reference_return is not None else None
+        dataset = (self.dataset_best_return, "dataset")
+        return [online or dataset, dataset]
+
+    def _rollouts(self) -> EvalResult:
+        return run_eval_episodes(self.eval_env, self.learner, self.cfg.eval_episodes, self.seed, self.update,
+                                 self.update)
+
     def evaluate(self) -> None:
-        result = run_eval_episodes(self.eval_env, self.learner, self.cfg.eval_episodes, self.seed, self.update,
-                                   self.update)
+        extra: dict[str, Any] = {}
+        if isinstance(self.learner, ReturnConditioned):
+            (target, kind), (dataset_target, _) = self.eval_targets()
+            self.learner.set_target_return(dataset_target)
+            other = self._rollouts().returns
+            other_mean = float(np.mean(other)) if other else math.nan
+            extra = {"target_return": target, "target_reference": kind, "dataset_target_return": dataset_target,
+                     "episode_reward_dataset_target": other_mean,
+                     "episode_reward_std_dataset_target": float(np.std(other)) if other else math.nan,
+                     "normalized_score_dataset_target": normalized_score(other_mean, self.reference_return)}
+            self.learner.set_target_return(target)
+        result = self._rollouts()
         returns = result.returns
         mean = float(np.mean(returns)) if returns else math.nan
         self.last_eval = mean
-        self.logger.log_eval({
+        self.logger.log_eval({**extra,
             "update": self.update, "episode_reward": mean,
             "episode_reward_std": float(np.std(returns)) if returns else math.nan,
             "episode_length": float(np.mean(result.lengths)) * self.action_repeat if returns else math.nan,
@@ -139,7 +177,7 @@ class OfflineTrainer:
             if self.update >= cfg.updates:
                 break
             started = time.time()
-            batch = self.buffer.sample(self.batch_size, **self.learner.sample_options)
+            batch: Any = self.buffer.sample(self.batch_size, **self.learner.sample_options)
             metrics = self.learner.update(batch, self.update)
             self.update += 1
             for k, v in metrics.items():

@@ -45,7 +45,19 @@ TRAIN_REQUIRED = ("frame", "fps")  # a readable train.csv has at least these
 OFFLINE_EVAL_COLUMNS = ["update", "episode_reward", "episode_reward_std", "episode_length", "success",
                         "eval_episodes", "normalized_score", "reference_return", "score_reference", "total_time"]
 OFFLINE_TRAIN_COLUMNS = ["update", "updates_per_s", "total_time"]  # followed by the learner's metric names
+# A return-conditioned learner (Decision Transformer; learners.base.ReturnConditioned) is evaluated twice on the
+# same episode seeds: at the best online return (the columns above: target_return, target_reference 'source' or
+# 'paper' as score_reference, or 'dataset' when neither is known) and at the dataset's best episode return
+# (dataset_target_return and the *_dataset_target columns; normalised by the same reference_return).
+RETURN_TARGET_EVAL_COLUMNS = ["target_return", "target_reference", "dataset_target_return",
+                              "episode_reward_dataset_target", "episode_reward_std_dataset_target",
+                              "normalized_score_dataset_target"]
 OFFLINE_WALLCLOCK_COLUMNS = ("total_time", "updates_per_s")
+
+
+def offline_eval_columns(return_conditioned: bool = False) -> list[str]:
+    """The header of an offline run's eval.csv (a return-conditioned learner adds its target columns)."""
+    return OFFLINE_EVAL_COLUMNS + (RETURN_TARGET_EVAL_COLUMNS if return_conditioned else [])
 
 
 def train_columns(metric_names: Sequence[str]) -> list[str]:

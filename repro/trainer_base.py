@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from repro.envs.base import Env
-from repro.learners.base import Learner
+from repro.learners.base import EpisodicActor, Learner
 
 
 def episode_seed(seed: int, kind: int, index: int, sub: int = 0) -> int:
@@ -27,17 +27,23 @@ class EvalResult:
 
 def run_eval_episodes(env: Env, learner: Learner, episodes: int, seed: int, index: int, step: int,
                       record: bool = False) -> EvalResult:
-    """``episodes`` evaluation episodes with the policy mean; resets seeded by (seed, index, episode)."""
+    """``episodes`` evaluation episodes with the policy mean; resets seeded by (seed, index, episode).
+    An ``EpisodicActor`` (e.g. the Decision Transformer) is told each episode's start and every step."""
     out = EvalResult()
+    episodic = learner if isinstance(learner, EpisodicActor) else None
     learner.train(False)
     for ep in range(episodes):
         ts = env.reset(seed=episode_seed(seed, 1, index, ep))
+        if episodic is not None:
+            episodic.begin_episode()
         total, length, success = 0.0, 0, 0.0
         if record and ep == 0:
             out.frames.append(ts.observation[-3:].transpose(1, 2, 0))
         while not ts.last:
             action = learner.act(ts.observation, step, eval_mode=True)
             ts = env.step(action)
+            if episodic is not None:
+                episodic.observe(action, ts.reward)
             total += ts.reward
             length += 1
             success = max(success, float(ts.info.get("success", 0.0)))

@@ -8,6 +8,7 @@ containers (``{"modules": {...}, "optimizers": {...}}``) so checkpoints load wit
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -51,6 +52,46 @@ class OnlineLearner(Learner, Protocol):
     """What the online loop needs on top: the exploration std at a step (a train.csv column)."""
 
     def stddev(self, step: int) -> float:
+        ...
+
+
+class Sampler(Protocol):
+    """Batches for a learner that does not sample single transitions (``SequenceLearner.make_sampler``).
+    ``rng`` is its only state: the offline loop checkpoints ``rng.bit_generator.state`` (exact resume)."""
+
+    rng: np.random.Generator
+
+    def sample(self, batch_size: int) -> Mapping[str, Any]:
+        ...
+
+
+@runtime_checkable
+class SequenceLearner(Protocol):
+    """An offline learner trained on windows of whole episodes (Decision Transformer): the offline loop
+    builds its batches from the dataset's episodes with ``make_sampler`` instead of loading a replay."""
+
+    def make_sampler(self, episodes: Sequence[Mapping[str, np.ndarray]], seed: int) -> Sampler:
+        ...
+
+
+@runtime_checkable
+class EpisodicActor(Protocol):
+    """A learner whose acting depends on the episode so far: evaluation calls ``begin_episode()`` before
+    each episode's first ``act`` and ``observe(action, reward)`` after every environment step."""
+
+    def begin_episode(self) -> None:
+        ...
+
+    def observe(self, action: np.ndarray, reward: float) -> None:
+        ...
+
+
+@runtime_checkable
+class ReturnConditioned(EpisodicActor, Protocol):
+    """A learner evaluated at a target return (Decision Transformer); the offline loop evaluates it at the
+    best online return and at the dataset's best return (eval.csv: runformat.RETURN_TARGET_EVAL_COLUMNS)."""
+
+    def set_target_return(self, value: float) -> None:
         ...
 
 

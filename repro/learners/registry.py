@@ -9,6 +9,7 @@ import torch
 from repro.agent.agent import Agent
 from repro.learners.base import Learner
 from repro.learners.bc import BCLearner
+from repro.learners.dt import DTLearner
 from repro.learners.offline_ac import CQL, IQL, TD3BC
 from repro.schema import AgentConfig
 
@@ -20,12 +21,18 @@ LEARNERS: dict[str, LearnerFactory] = {
     "td3bc": TD3BC,  # TD3+BC on the DrQ-v2 backbone (offline; agent=td3bc | td3bc_taco)
     "cql": CQL,  # CQL on the DrQ-v2 backbone (offline; agent=cql | cql_taco)
     "iql": IQL,  # IQL on the DrQ-v2 backbone (offline)
+    "dt": DTLearner,  # Decision Transformer on pixels (offline; samples episode windows, return-conditioned)
 }
 ONLINE_LEARNERS = frozenset({"actor_critic"})  # every other learner trains from offline.dataset
 
 
 def is_offline(name: str) -> bool:
     return name not in ONLINE_LEARNERS
+
+
+def samples_episodes(name: str) -> bool:
+    """Whether learner ``name`` trains on episode windows (``make_sampler``) instead of a transition replay."""
+    return hasattr(LEARNERS[name], "make_sampler")
 
 
 def build_learner(cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,

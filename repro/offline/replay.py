@@ -2,7 +2,8 @@
 
 Frames are stored once (uint8, single frames, like the online ring), so the buffer's memory is the raw
 frame bytes plus a few bytes per transition; stacks, n-step returns and K-step action sequences are then
-sampled exactly as online, never across episodes.
+sampled exactly as online, never across episodes. A learner trained on episode windows (Decision
+Transformer) gets the checked episodes themselves instead (``load_offline_episodes``), never both.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import torch
 from repro.offline.dataset import DatasetError, Manifest, iter_episodes, load_manifest, resolve_dataset
 from repro.replay import ReplayBuffer
 
-__all__ = ["DatasetError", "OfflineData", "load_offline_data", "resolve_dataset"]
+__all__ = ["DatasetError", "OfflineData", "load_offline_data", "load_offline_episodes", "resolve_dataset"]
 
 
 @dataclass
@@ -27,8 +28,14 @@ class OfflineData:
     directory: Path
     manifest: Manifest
     digest: str  # sha256 of manifest.json (a checkpoint refuses to resume on another dataset)
-    buffer: ReplayBuffer
+    buffer: ReplayBuffer | None  # None when loaded as episodes
     raw_frame_bytes: int  # bytes of the dataset's frames as stored in the episode files (uncompressed)
+    episodes: list[dict[str, np.ndarray]] | None = None  # load_offline_episodes: the checked episodes, in order
+
+    @property
+    def best_return(self) -> float:
+        """The dataset's best episode return (the manifest's per-episode returns)."""
+        return float(self.manifest.returns.max())
 
 
 def manifest_digest(directory: str | Path) -> str:
@@ -104,3 +111,30 @@ def load_offline_data(directory: str | Path, *, task: str, action_dim: int, fram
     if buffer.num_valid() == 0:
         raise DatasetError(f"{directory}: no episode has {buffer.horizon} steps after a frame (agent.K, agent.nstep)")
     return OfflineData(directory, manifest, manifest_digest(directory), buffer, raw)
+
+
+def load_offline_episodes(directory: str | Path, *, task: str, action_dim: int, frame_shape: tuple[int, int, int],
+                          max_length: int | None = None) -> OfflineData:
+    """Check the dataset against the run as ``load_offline_data`` does and keep its episodes (frames held once,
+    no replay); ``max_length``: the most steps an episode may have (DT: its timestep embedding's size)."""
+    directory = Path(directory)
+    manifest = load_manifest(directory)
+    check_compatible(manifest, directory, task, action_dim, frame_shape)
+    lengths = [int(e.transitions) for e in manifest.episodes]
+    if max_length is not None and max(lengths) > max_length:
+        raise DatasetError(f"{directory}: an episode has {max(lengths)} steps, more than the learner's "
+                           f"{max_length} (agent.dt.max_timestep)")
+    episodes: list[dict[str, np.ndarray]] = []
+    try:
+        for index, data in enumerate(iter_episodes(directory)):
+            if index >= len(lengths):
+                break
+            episodes.append(_checked(dict(data), index, lengths[index], frame_shape, action_dim, directory))
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+        if isinstance(exc, DatasetError):
+            raise
+        raise DatasetError(f"{directory}: unreadable episode file ({str(exc).splitlines()[0]})") from None
+    if len(episodes) != len(lengths):
+        raise DatasetError(f"{directory}: manifest lists {len(lengths)} episodes, {len(episodes)} files read")
+    raw = sum(ep["frames"].nbytes for ep in episodes)
+    return OfflineData(directory, manifest, manifest_digest(directory), None, raw, episodes)
