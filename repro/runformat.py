@@ -47,6 +47,9 @@ OFFLINE_EVAL_COLUMNS = ["update", "episode_reward", "episode_reward_std", "episo
                         "eval_episodes", "normalized_score", "reference_return", "score_reference", "total_time"]
 OFFLINE_TRAIN_COLUMNS = ["update", "updates_per_s", "total_time"]  # followed by the learner's metric names
 OFFLINE_WALLCLOCK_COLUMNS = ("total_time", "updates_per_s")
+OFFLINE_EVAL_REQUIRED = ("update", "episode_reward")  # a readable offline eval.csv has at least these
+OFFLINE_EVAL_TEXT = ("score_reference",)  # the offline eval.csv's one text column (normalized_score may be empty)
+OFFLINE_TRAIN_REQUIRED = ("update", "updates_per_s")  # a readable offline train.csv has these
 
 
 def train_columns(metric_names: Sequence[str]) -> list[str]:
