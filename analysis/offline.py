@@ -17,11 +17,12 @@ import pandas as pd
 from analysis import select
 from analysis.compare import build_cells
 from analysis.paper import PaperData
-from analysis.stats import POI_REPS, CellStats, grand_mean_ci, probability_of_improvement, score_matrix
+from analysis.stats import CellStats, grand_mean_ci, poi_interval, score_matrix
 from analysis.tables import Cell
 
 # (method with TACO, its base method): the paper's paired comparison of Table 3.
 TACO_PAIRS = (("TD3+BC+TACO", "TD3+BC"), ("CQL+TACO", "CQL"))
+POI_MAX_REPS = 5_000  # bootstrap repetitions of a probability of improvement, at most (about 0.3 ms each)
 ALL_PAIRS = "all 12"  # the dataset column of the rows over every task/dataset pair
 POI_COLUMNS = ["task", "dataset", "method", "baseline", "n_method", "n_baseline", "mean_method", "mean_baseline",
                "poi", "ci_low", "ci_high", "note"]
@@ -107,9 +108,10 @@ def pair_matrix(df: pd.DataFrame, method: str, pair_ids: Sequence[str], value: s
 def taco_poi(df: pd.DataFrame, paper: PaperData, reps: int, seed: int) -> pd.DataFrame:
     """Paired ±TACO comparison: per task, dataset and pair (TD3+BC+TACO vs TD3+BC, CQL+TACO vs CQL),
     rliable's probability of improvement P(+TACO > base) over the finished runs' normalised scores with its
-    95% stratified-bootstrap CI, then the same over all 12 pairs (rliable's multi-task form). A comparison
-    needs >= 2 finished runs on each side; repetitions are capped at analysis.stats.POI_REPS."""
-    reps = min(reps, POI_REPS)
+    95% stratified-bootstrap CI (analysis.stats.poi_interval), then the same over all 12 pairs (rliable's
+    multi-task form). A comparison needs >= 2 finished runs on each side; repetitions are capped at
+    :data:`POI_MAX_REPS`."""
+    reps = min(reps, POI_MAX_REPS)
     pairs = paper.offline[["task", "dataset"]].drop_duplicates()
     pair_ids = [f"{t}/{d}" for t, d in zip(pairs["task"], pairs["dataset"])]
     ok = df[df["reached"].astype(bool) & df["normalized"].notna()] if not df.empty else df
@@ -144,7 +146,7 @@ def _poi_row(task: str, dataset: str, method: str, base: str, x: np.ndarray, y: 
     poi = lo = hi = math.nan
     note = ""
     if min(n_x, n_y) >= 2:
-        poi, lo, hi = probability_of_improvement(x, y, reps=reps, seed=seed)
+        poi, lo, hi = poi_interval(x, y, reps=reps, seed=seed)
     elif n_x or n_y:
         note = "needs >= 2 finished runs of each method"
     return {"task": task, "dataset": dataset, "method": method, "baseline": base, "n_method": n_x,

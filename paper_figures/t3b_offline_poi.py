@@ -7,8 +7,7 @@ import pandas as pd
 
 from analysis.context import Context
 from analysis.identity import task_display
-from analysis.offline import offline_runs, taco_poi
-from analysis.stats import POI_REPS
+from analysis.offline import POI_MAX_REPS, offline_runs, taco_poi
 from analysis.tables import EMPTY, fmt_ci, fmt_num, write_table
 from paper_figures.registry import ArtifactResult, register
 
@@ -27,7 +26,7 @@ def render(ctx: Context) -> ArtifactResult:
         "95% CI": [fmt_ci(lo, hi, 2) for lo, hi in zip(raw["ci_low"], raw["ci_high"])],
         "Note": raw["note"],
     })
-    reps = min(ctx.reps, POI_REPS)
+    reps = min(ctx.reps, POI_MAX_REPS)
     caption = ("Paired ±TACO comparison of the offline runs: rliable's probability of improvement P(X+TACO > X) "
                "of the normalised scores at each run's own budget, per task and dataset and over all 12 pairs "
                "(rliable's average over tasks), with its 95% stratified-bootstrap CI.")
