@@ -19,7 +19,7 @@ from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims
 from repro_app.analysis_cli import register
 from analysis.context import Context
 from analysis.load import load_results
-from analysis.scores import best_online_returns, final_scores, learning_curves, normalize_offline
+from analysis.scores import final_scores, learning_curves
 from analysis.speed import hardware_label, speed_measurements
 from analysis.stats import (
     aggregate_estimates,
@@ -116,18 +116,14 @@ def test_metaworld_score_is_success_percent(tmp_path):
     assert s.iloc[0]["metric"] == "success" and s.iloc[0]["score"] == pytest.approx(80.0)
 
 
-def test_offline_normalisation_uses_best_online_taco_return(tmp_path):
+def test_offline_score_is_the_normalised_score_the_run_recorded(tmp_path):
     write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=400.0)
-    write_run(tmp_path, experiment="horizon", algo="taco", task="hopper_hop", seed=0, final=900.0)
-    write_run(tmp_path, experiment="offline", algo="cql", task="hopper_hop", seed=0, final=100.0,
-              dataset="medium_replay", objectives={"taco": 1.0})
-    res = load_results(tmp_path)
-    norm = best_online_returns(res)
-    assert norm == {"hopper_hop": 400.0}  # main preferred over other experiments
-    off = normalize_offline(final_scores(res, FRAMES), norm)
+    write_run(tmp_path, experiment="offline", algo="cql_taco", task="hopper_hop", seed=0, final=100.0,
+              dataset="medium_replay", reference=250.0)
+    off = final_scores(load_results(tmp_path), FRAMES).dropna(subset=["dataset"])
     row = off.iloc[0]
     assert (row["method"], row["dataset"]) == ("CQL+TACO", "medium-replay")
-    assert row["normalized"] == pytest.approx(25.0)
+    assert row["normalized"] == pytest.approx(40.0) and row["score_reference"] == "source"  # not the online run's
 
 
 # ---------------------------------------------------------------- statistics vs rliable
@@ -328,14 +324,14 @@ def test_offline_claims_use_each_runs_own_budget(tmp_path):
                 for algo in ("td3bc", "cql"):
                     for s in range(3):
                         for taco, final in ((False, 300.0), (True, 330.0)):
-                            write_run(root, experiment="offline", algo=algo, task=task, dataset=ds, seed=s,
-                                      variant=f"{ds}{'_taco' if taco else ''}", objectives={"taco": 1.0} if taco else {},
-                                      final=final + s, frames=1000, eval_every=500, done=done)
+                            write_run(root, experiment="offline", algo=f"{algo}_taco" if taco else algo, task=task,
+                                      dataset=ds, seed=s, final=final + s, updates=1000, eval_every_updates=500,
+                                      done=done)
 
     grid(tmp_path / "unfinished", done=False)
     v = _verdicts(_ctx(tmp_path / "unfinished"))["offline_gain"]
     assert v.verdict == NO_DATA and "has finished its configured offline.updates" in v.evidence
-    grid(tmp_path / "finished", done=True)  # 1000 'frames' is no obstacle: the budget is the run's own
+    grid(tmp_path / "finished", done=True)  # 1000 updates is no obstacle: the budget is the run's own
     v = _verdicts(_ctx(tmp_path / "finished"))["offline_gain"]
     assert v.verdict == SUPPORTED, v.evidence
 
