@@ -258,7 +258,8 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 def _provenance(meta: dict[str, Any]) -> dict[str, Any]:
     """Flatten the provenance fields of meta.json that the report shows."""
-    git = meta.get("git") if isinstance(meta.get("git"), dict) else {}
+    git_field = meta.get("git")
+    git: dict[str, Any] = git_field if isinstance(git_field, dict) else {}
     versions = meta.get("versions") or meta.get("package_versions") or {}
     return {
         "git_sha": meta.get("git_sha") or git.get("sha"),

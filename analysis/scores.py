@@ -128,7 +128,7 @@ def learning_curves(results: Results, grid: np.ndarray | None = None, step: int 
     if grid is None:
         grid = common_grid(online, step=step)
     parts = []
-    for run_id, rows in online.groupby("run_id", sort=False):
+    for _, rows in online.groupby("run_id", sort=False):
         rows = rows.sort_values("frame")
         metric = metric_of(rows["suite"].iloc[0])
         vals = _values(rows, metric).to_numpy(dtype=float)
