@@ -14,7 +14,6 @@ reach is added, labelled as such and never counted as supported or refuted.
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
@@ -24,9 +23,9 @@ import pandas as pd
 from analysis import select
 from analysis.claim_budget import ClaimBudget, claim_runs, frames_text, load_budgets, reach, seed_counts
 from analysis.context import Context
+from analysis.offline import offline_runs
 from analysis.paper import DMC9, METAWORLD6, OFFLINE_TASKS
 from analysis.robustness import seed_spread, solved_counts
-from analysis.scores import best_online_returns, final_scores, normalize_offline
 from analysis.speed import speed_measurements
 from analysis.stats import grand_mean_ci, ratio_of_means, score_matrix
 from analysis.tables import write_table
@@ -335,21 +334,19 @@ def _vs_repr(ctx: Context) -> tuple[str, str]:
 
 
 def offline_scores(ctx: Context) -> pd.DataFrame:
-    """Per-run scores for offline claims, at each run's own budget (its configured ``offline.updates``):
-    the last evaluation, ``reached`` when the run finished (status done). In an indicative reading every
-    run with an evaluation counts, finished or not."""
-    df = final_scores(ctx.results, budget=sys.maxsize)
+    """Per-run scores for offline claims, at each run's own budget (its configured ``offline.updates``,
+    analysis.scores.final_scores): ``reached`` when the run finished it. In an indicative reading every run
+    with an evaluation counts at its latest evaluation, finished or not."""
+    df = ctx.scores
     if df.empty:
         return df
     offline = df["dataset"].notna()
-    reached = df["score"].notna() if ctx.below_budget else df["status"] == "done"
+    reached = df["score"].notna() if ctx.below_budget else df["reached"].astype(bool)
     return df.assign(reached=(reached & offline).to_numpy(dtype=bool))
 
 
 def _offline_table(ctx: Context, value: str = "score") -> tuple[dict, pd.DataFrame]:
-    df = labelled(select.offline(offline_scores(ctx), ctx.experiment_map))
-    if not df.empty:
-        df = normalize_offline(df, best_online_returns(ctx.results))
+    df = offline_runs(offline_scores(ctx), ctx.experiment_map)
     return means(df, ["task", "dataset", "method"], value), df
 
 

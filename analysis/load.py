@@ -30,6 +30,10 @@ from repro.runformat import (
     EVAL_REQUIRED,
     IDENTITY_KEYS,
     META,
+    OFFLINE_EVAL_COLUMNS,
+    OFFLINE_EVAL_REQUIRED,
+    OFFLINE_EVAL_TEXT,
+    OFFLINE_TRAIN_REQUIRED,
     REPLAY,
     RESOLVED,
     RESOLVED_CONFIG_KEYS,
@@ -64,8 +68,12 @@ IDENTITY = (
     "train_frames",
     "dataset",
     "cql_alpha",
+    "offline_updates",
     "status",
 )
+# The eval table's columns: an online run fills EVAL_COLUMNS, an offline run (a dataset) OFFLINE_EVAL_COLUMNS;
+# each leaves the other's columns empty (an offline run has no frame, an online one no update).
+EVAL_TABLE_COLUMNS = (*EVAL_COLUMNS, *(c for c in OFFLINE_EVAL_COLUMNS if c not in EVAL_COLUMNS))
 RESOLVED_FROM_FILE, RESOLVED_FROM_CONFIG = RESOLVED, CONFIG  # the runs table's ``resolved_from`` values
 _SKIP_DIRS = {REPLAY, "__pycache__", ".git"}
 
@@ -89,9 +97,11 @@ class Results:
     Attributes:
         root: the results root.
         runs: one row per valid run: identity columns, status, ``resolved_from`` (``resolved.json``, or
-            ``config.yaml`` for a run that predates it), number of eval rows, last eval frame, median
-            training FPS, provenance (git sha, device, host, cpu, versions).
-        eval: one row per evaluation: identity columns + the eval.csv columns.
+            ``config.yaml`` for a run that predates it), number of eval rows, last eval frame (online) or
+            update (offline: ``last_update``, its budget ``offline_updates`` from its config), median
+            training FPS (online) or updates per second (offline), provenance (git sha, device, host, cpu,
+            versions).
+        eval: one row per evaluation: identity columns + the eval.csv columns (EVAL_TABLE_COLUMNS).
         problems: every file that was skipped or is suspicious.
         benches: parsed ``{root}/bench/*.json`` files, each with its ``path``.
     """
@@ -132,6 +142,7 @@ def identity_from_config(cfg: dict[str, Any]) -> dict[str, Any]:
         "seed": _int_or_none(ident["seed"]),
         "distracting_dims": _int_or_none(ident["distracting_dims"]) or 0,
         "train_frames": _int_or_none(ident["train_frames"]),
+        "offline_updates": None,
     }
 
 
@@ -160,11 +171,19 @@ def resolved_columns(values: dict[str, Any], algo: Any) -> dict[str, Any]:
         "latent_action_dim": _int_or_none(values.get("latent_action_dim")),
         "action_encoder": None if encoder is None else bool(encoder),
         "objectives": "+".join(objectives),
-        "method": method_label(algo, objectives) if algo is not None else None,
+        "method": _method(values, algo, objectives),
         "action_repeat": _int_or_none(values.get("action_repeat")),
         "dataset": normalize_dataset(values.get("dataset")),
         "cql_alpha": _float_or_none(values.get("cql_alpha")),
     }
+
+
+def _method(values: dict[str, Any], algo: Any, objectives: tuple[str, ...]) -> str | None:
+    """The paper's label: an offline run's from its learner (``td3bc_taco`` trains learner td3bc with TACO's
+    objectives: ``TD3+BC+TACO``), an online run's from its algorithm name."""
+    if values.get("dataset") is not None and values.get("learner"):
+        return method_label(values["learner"], objectives)
+    return method_label(algo, objectives) if algo is not None else None
 
 
 def _int_or_none(value: Any) -> int | None:
@@ -183,12 +202,14 @@ def _float_or_none(value: Any) -> float | None:
         return None
 
 
-def read_csv_strict(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
+def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
+                    text_columns: tuple[str, ...] = ()) -> pd.DataFrame:
     """Read a run CSV, raising ValueError with a reason if it is malformed or truncated.
 
     Checks: non-empty header with the ``required`` columns, every row with the header's field count,
     a final newline (a missing one means the last row was cut), numeric required columns, and strictly
-    increasing ``frame``.
+    increasing ``order`` (``frame``; an offline run's ``update``). Columns other than ``text_columns`` are
+    numbers (an unparsable value becomes NaN).
     """
     text = path.read_text(encoding="utf-8", errors="strict")
     if not text.strip():
@@ -211,10 +232,10 @@ def read_csv_strict(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
             raise ValueError(f"non-numeric or empty {col!r} at line {bad}")
         df[col] = converted
     for col in df.columns:
-        if col not in required and df[col].dtype == object:
+        if col not in required and col not in text_columns and df[col].dtype == object:
             df[col] = pd.to_numeric(df[col], errors="coerce")
-    if len(df) > 1 and not df["frame"].is_monotonic_increasing or df["frame"].duplicated().any():
-        raise ValueError("frame is not strictly increasing (duplicated or reordered rows)")
+    if len(df) > 1 and not df[order].is_monotonic_increasing or df[order].duplicated().any():
+        raise ValueError(f"{order} is not strictly increasing (duplicated or reordered rows)")
     return df
 
 
@@ -238,7 +259,7 @@ def _read_json(path: Path) -> dict[str, Any]:
 def _provenance(meta: dict[str, Any]) -> dict[str, Any]:
     """Flatten the provenance fields of meta.json that the report shows."""
     git_field = meta.get("git")
-    git = git_field if isinstance(git_field, dict) else {}
+    git: dict[str, Any] = git_field if isinstance(git_field, dict) else {}
     versions = meta.get("versions") or meta.get("package_versions") or {}
     return {
         "git_sha": meta.get("git_sha") or git.get("sha"),
@@ -314,6 +335,9 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
     if problem is not None:
         problems.append(problem)
     ident.update(resolved_columns(values, ident["algo"]))
+    offline = ident["dataset"] is not None or _get(cfg, RESOLVED_CONFIG_KEYS["dataset"]) is not None
+    if offline:  # the run's own budget (analysis/claim_budgets.csv: offline claims judge each run at it)
+        ident["offline_updates"] = _int_or_none(_get(cfg, "offline.updates"))
     ident["run_id"] = rel
     ident["status"] = run_state(run_dir)
 
@@ -330,31 +354,47 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
         problems.append(Problem(str(meta_path), "missing meta.json (no provenance)", "warning"))
     row.update(_provenance(meta))
 
-    eval_df: pd.DataFrame | None = None
-    eval_path = run_dir / EVAL
-    if not eval_path.exists():
-        problems.append(Problem(str(eval_path), "missing eval.csv; run has no scores", "warning"))
-    else:
-        try:
-            eval_df = read_csv_strict(eval_path, EVAL_REQUIRED)
-        except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
-            problems.append(Problem(str(eval_path), f"malformed eval.csv ({exc}); skipped"))
+    eval_df = _read_eval(run_dir / EVAL, offline, problems)
     if eval_df is not None:
-        for col in EVAL_COLUMNS:
-            if col not in eval_df.columns:
-                eval_df[col] = math.nan
-        eval_df = eval_df[list(EVAL_COLUMNS)].assign(run_id=rel)
+        eval_df = eval_df.assign(run_id=rel)
     row["eval_rows"] = 0 if eval_df is None else len(eval_df)
-    row["last_frame"] = math.nan if eval_df is None or eval_df.empty else float(eval_df["frame"].max())
+    row["last_frame"] = row["last_update"] = math.nan
+    if eval_df is not None and not eval_df.empty:
+        row["last_update" if offline else "last_frame"] = float(eval_df["update" if offline else "frame"].max())
 
     train_path = run_dir / TRAIN
-    row["fps"] = math.nan
+    row["fps"] = row["updates_per_s"] = math.nan
     if train_path.exists():
         try:
-            row["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED))
+            if offline:
+                train = read_csv_strict(train_path, OFFLINE_TRAIN_REQUIRED, order="update")
+                rates = pd.to_numeric(train["updates_per_s"], errors="coerce").dropna()
+                row["updates_per_s"] = float(rates.median()) if len(rates) else math.nan
+            else:
+                row["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED))
         except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
-            problems.append(Problem(str(train_path), f"malformed train.csv ({exc}); FPS not used"))
+            problems.append(Problem(str(train_path), f"malformed train.csv ({exc}); its speed not used"))
     return row, eval_df, problems
+
+
+def _read_eval(path: Path, offline: bool, problems: list[Problem]) -> pd.DataFrame | None:
+    """A run's eval.csv on the eval table's columns (EVAL_TABLE_COLUMNS; columns a learner adds beyond its
+    format are left out), or None (a problem recorded) if it is missing or malformed."""
+    if not path.exists():
+        problems.append(Problem(str(path), "missing eval.csv; run has no scores", "warning"))
+        return None
+    try:
+        if offline:
+            df = read_csv_strict(path, OFFLINE_EVAL_REQUIRED, order="update", text_columns=OFFLINE_EVAL_TEXT)
+        else:
+            df = read_csv_strict(path, EVAL_REQUIRED)
+    except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
+        problems.append(Problem(str(path), f"malformed eval.csv ({exc}); skipped"))
+        return None
+    for col in EVAL_TABLE_COLUMNS:
+        if col not in df.columns:
+            df[col] = math.nan
+    return df[list(EVAL_TABLE_COLUMNS)]
 
 
 def load_benches(root: Path) -> tuple[list[dict[str, Any]], list[Problem]]:
@@ -390,15 +430,15 @@ def load_results(root: Path | str) -> Results:
     problems.extend(bench_problems)
     runs = pd.DataFrame(rows)
     if runs.empty:
-        runs = pd.DataFrame(columns=[*IDENTITY, "resolved_from", "eval_rows", "last_frame", "fps"])
+        runs = pd.DataFrame(columns=[*IDENTITY, "resolved_from", "eval_rows", "last_frame", "last_update", "fps",
+                                     "updates_per_s"])
     else:
-        dup = runs.duplicated(["experiment", "algo", "variant", "task", "seed"], keep=False)
+        dup = runs.duplicated(["experiment", "algo", "variant", "task", "dataset", "seed"], keep=False)
         for run_id in runs.loc[dup, "run_id"]:
-            problems.append(
-                Problem(str(root / run_id), "same experiment/algo/variant/task/seed as another run", "warning")
-            )
+            problems.append(Problem(str(root / run_id), "same experiment/algo/variant/task/dataset/seed as another run",
+                                    "warning"))
     if evals and not runs.empty:
         eval_all = pd.concat(evals, ignore_index=True).merge(runs[list(IDENTITY)], on="run_id", how="left")
     else:
-        eval_all = pd.DataFrame(columns=[*IDENTITY, *EVAL_COLUMNS])
+        eval_all = pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS])
     return Results(root=root, runs=runs, eval=eval_all, problems=problems, benches=benches)

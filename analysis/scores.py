@@ -1,12 +1,15 @@
-"""Per-run scores at a frame budget, learning curves on a common grid, offline normalisation.
+"""Per-run scores at a frame budget (offline runs: at their own budget), learning curves on a common grid.
 
 The metric is the DMC episode return (``episode_reward``) and, for Meta-world, the success rate in
-percent (``success`` x 100), as the paper's Meta-world figure shows success rates.
+percent (``success`` x 100), as the paper's Meta-world figure shows success rates. An offline run's
+normalised score is the one it recorded (eval.csv ``normalized_score``: 100 x return / the reference return
+named in ``score_reference``), never recomputed here.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -29,20 +32,31 @@ def _values(rows: pd.DataFrame, metric: str) -> pd.Series:
 def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame:
     """One row per run: identity columns + ``score`` at the budget.
 
-    ``score`` is the evaluation at the largest frame <= ``budget``; ``frame`` is that frame.
+    Online runs: ``score`` is the evaluation at the largest frame <= ``budget``; ``frame`` is that frame.
     ``reached`` is true if the run has an evaluation at or past the budget, or is done with
     ``train.frames >= budget``; runs that did not reach it keep their score (at an earlier frame) but
     are flagged, and the tables count them separately.
+
+    Offline runs (a dataset) are scored at their own budget, whatever ``budget`` says: the evaluation at the
+    largest update <= the run's ``offline.updates`` (``update``), its return as ``score`` and the normalised
+    score the run recorded (``normalized``, eval.csv's ``normalized_score``, with its ``score_reference``);
+    ``reached`` when the run is done and evaluated at its ``offline.updates``. Online rows have no
+    ``normalized``; offline rows no ``frame``.
     """
-    cols = [*IDENTITY, "metric", "score", "frame", "reached", "last_frame"]
+    cols = [*IDENTITY, "metric", "score", "frame", "reached", "last_frame", "normalized", "score_reference",
+            "update", "last_update"]
     if results.runs.empty:
         return pd.DataFrame(columns=cols)
     out = []
     grouped = dict(tuple(results.eval.groupby("run_id"))) if not results.eval.empty else {}
     for run in results.runs.itertuples(index=False):
         row = {k: getattr(run, k) for k in IDENTITY}
-        metric = metric_of(run.suite)
         rows = grouped.get(run.run_id)
+        if not pd.isna(run.dataset):
+            row.update(_offline_score(run, rows))
+            out.append(row)
+            continue
+        metric = metric_of(run.suite)
         score, frame, last = math.nan, math.nan, math.nan
         if rows is not None and not rows.empty:
             last = float(rows["frame"].max())
@@ -56,9 +70,32 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
         reached = (not math.isnan(last) and last >= budget) or (
             run.status == "done" and not pd.isna(train_frames) and train_frames >= budget
         )
-        row.update(metric=metric, score=score, frame=frame, reached=bool(reached), last_frame=last)
+        row.update(metric=metric, score=score, frame=frame, reached=bool(reached), last_frame=last,
+                   normalized=math.nan, score_reference=None, update=math.nan, last_update=math.nan)
         out.append(row)
     return pd.DataFrame(out, columns=cols)
+
+
+def _offline_score(run: Any, rows: pd.DataFrame | None) -> dict[str, Any]:
+    """The score columns of one offline run at its own budget (see :func:`final_scores`)."""
+    out: dict[str, Any] = {"metric": "episode_reward", "score": math.nan, "frame": math.nan, "reached": False,
+                           "last_frame": math.nan, "normalized": math.nan, "score_reference": None,
+                           "update": math.nan, "last_update": math.nan}
+    if rows is None or rows.empty:
+        return out
+    budget = run.offline_updates
+    last = float(rows["update"].max())
+    within = rows if pd.isna(budget) else rows[rows["update"] <= budget]
+    out["last_update"] = last
+    if within.empty:
+        return out
+    pick = within.loc[within["update"].idxmax()]
+    reference = pick["score_reference"]
+    out.update(score=float(pick["episode_reward"]), update=float(pick["update"]),
+               normalized=float(pd.to_numeric(pd.Series([pick["normalized_score"]]), errors="coerce").iloc[0]),
+               score_reference=None if pd.isna(reference) else str(reference),
+               reached=bool(run.status == "done" and not pd.isna(budget) and last >= budget))
+    return out
 
 
 def common_grid(eval_df: pd.DataFrame, step: int | None = None, max_frame: float | None = None) -> np.ndarray:
@@ -81,15 +118,17 @@ def learning_curves(results: Results, grid: np.ndarray | None = None, step: int 
 
     Each run is linearly interpolated between its evaluations; grid points beyond a run's last
     evaluation are left out (no extrapolation), so later points average over fewer seeds, and the
-    number of seeds per point is kept by the callers.
+    number of seeds per point is kept by the callers. Offline runs (evaluated at updates, not frames) have
+    no curve here.
     """
     cols = [*IDENTITY, "frame", "value"]
-    if results.eval.empty:
+    online = results.eval[results.eval["frame"].notna()] if not results.eval.empty else results.eval
+    if online.empty:
         return pd.DataFrame(columns=cols)
     if grid is None:
-        grid = common_grid(results.eval, step=step)
+        grid = common_grid(online, step=step)
     parts = []
-    for _run_id, rows in results.eval.groupby("run_id", sort=False):
+    for _, rows in online.groupby("run_id", sort=False):
         rows = rows.sort_values("frame")
         metric = metric_of(rows["suite"].iloc[0])
         vals = _values(rows, metric).to_numpy(dtype=float)
@@ -106,39 +145,3 @@ def learning_curves(results: Results, grid: np.ndarray | None = None, step: int 
     if not parts:
         return pd.DataFrame(columns=cols)
     return pd.concat(parts, ignore_index=True)[cols]
-
-
-def best_online_returns(
-    results: Results, method: str = "TACO", prefer: tuple[str, ...] = ("main",)
-) -> dict[str, float]:
-    """Per task, the best evaluation return reached during online training of ``method``.
-
-    This is the paper's offline normaliser ("dividing the offline RL reward by the best reward we get
-    during online TACO training"): the maximum over all evaluations of the online runs of that method on
-    the task, from the ``prefer`` experiments (the main comparison) when they have runs on the task,
-    else from any experiment (offline runs, which carry a dataset, are never used).
-    """
-    ev = results.eval
-    if ev.empty:
-        return {}
-    online = ev[(ev["method"] == method) & ev["dataset"].isna()]
-    out: dict[str, float] = {}
-    for task, rows in online.groupby("task"):
-        preferred = rows[rows["experiment"].isin(prefer)]
-        best = (preferred if not preferred.empty else rows)["episode_reward"].max()
-        if not math.isnan(best):
-            out[str(task)] = float(best)
-    return out
-
-
-def normalize_offline(
-    scores: pd.DataFrame, normalizers: dict[str, float]
-) -> pd.DataFrame:
-    """Offline rows of ``scores`` with ``normalized`` = 100 x score / best online TACO return of the task.
-
-    Rows whose task has no normaliser get NaN (and the table says which normaliser is missing).
-    """
-    off = scores[scores["dataset"].notna()].copy()
-    off["normalizer"] = off["task"].map(normalizers)
-    off["normalized"] = 100.0 * off["score"] / off["normalizer"]
-    return off

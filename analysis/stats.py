@@ -190,6 +190,32 @@ def probability_of_improvement(
     return float(points["poi"][0]), float(cis["poi"][0][0]), float(cis["poi"][1][0])
 
 
+def pairwise_poi(x: np.ndarray, y: np.ndarray) -> float:
+    """rliable's probability of improvement P(X > Y) (``rliable.metrics.probability_of_improvement``: per task
+    the Mann-Whitney U of X over Y divided by m x n, ties counting a half; averaged over tasks), computed by
+    counting pairs in NumPy instead of one scipy call per task."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    diff = x[:, None, :] - y[None, :, :]  # (m, n, tasks)
+    per_task = ((diff > 0).sum(axis=(0, 1)) + 0.5 * (diff == 0).sum(axis=(0, 1))) / (x.shape[0] * y.shape[0])
+    return float(per_task.mean())
+
+
+def _pairwise_poi(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.array([pairwise_poi(x, y)])
+
+
+def poi_interval(
+    x: np.ndarray, y: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
+) -> tuple[float, float, float]:
+    """:func:`probability_of_improvement` with :func:`pairwise_poi` as the statistic (the same value, fast
+    enough for rliable's default repetitions): (value, ci_low, ci_high) by rliable's stratified bootstrap."""
+    with seeded(seed) as rs:
+        points, cis = rly.get_interval_estimates(
+            {"poi": [x, y]}, _pairwise_poi, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
+        )
+    return float(points["poi"][0]), float(cis["poi"][0][0]), float(cis["poi"][1][0])
+
+
 def ratio_of_means(
     x: np.ndarray, y: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
 ) -> tuple[float, float, float]:

@@ -1,4 +1,4 @@
-"""The registry of paper artifacts (tables T1-T6, figures F1, F3-F13), keyed by id.
+"""The registry of paper artifacts (tables T1-T6, figures F1, F3-F13, and T3b derived from T3), keyed by id.
 
 Each artifact module registers itself with :func:`register`; :mod:`paper_figures.catalog` imports them
 all and looks artifacts up, so this module imports none of them.

@@ -53,6 +53,9 @@ RETURN_TARGET_EVAL_COLUMNS = ["target_return", "target_reference", "dataset_targ
                               "episode_reward_dataset_target", "episode_reward_std_dataset_target",
                               "normalized_score_dataset_target"]
 OFFLINE_WALLCLOCK_COLUMNS = ("total_time", "updates_per_s")
+OFFLINE_EVAL_REQUIRED = ("update", "episode_reward")  # a readable offline eval.csv has at least these
+OFFLINE_EVAL_TEXT = ("score_reference",)  # the offline eval.csv's one text column (normalized_score may be empty)
+OFFLINE_TRAIN_REQUIRED = ("update", "updates_per_s")  # a readable offline train.csv has these
 
 
 def offline_eval_columns(return_conditioned: bool = False) -> list[str]:

@@ -23,6 +23,7 @@ from repro.agent.networks import default_latent_action_dim
 from repro.config import compose, group_options, typed, validate
 from repro.envs import get_task
 from repro.logger import format_row, header_line
+from repro.offline.reference import PAPER_TACO_RETURN, normalized_score, score_reference
 
 METRICS = (*CRITIC_METRICS, *ACTOR_METRICS)  # the online learner's base update metrics (train.csv)
 FRAMES = 100_000  # the synthetic frame budget
@@ -30,7 +31,9 @@ EVAL_EVERY = 20_000
 DMC9 = ["quadruped_run", "hopper_hop", "walker_run", "quadruped_walk", "cheetah_run", "finger_turn_hard",
         "acrobot_swingup", "reacher_hard", "reach_duplo"]
 METAWORLD6 = ["hammer", "assembly", "disassemble", "stick-pull", "pick-place-wall", "hand-insert"]
-OFFLINE_ALGOS = ("td3bc", "cql", "iql", "bc", "dt")  # learners named by agent.learner (agent group drqv2)
+OFFLINE_LEARNERS = ("td3bc", "cql", "iql", "bc", "dt")  # agent.learner of the offline agents
+UPDATES = 10_000  # the synthetic offline.updates budget
+EVAL_EVERY_UPDATES = 2_000
 
 
 _DICT_KEYS = ("agent.objectives",)  # dict values, passed through the cache below as JSON text
@@ -45,7 +48,7 @@ def _composed(agent: str, task: str) -> DictConfig:
 def _validated(algo: str, task: str, overrides: tuple[tuple[str, Any], ...]) -> DictConfig:
     """The composed config of ``algo`` on ``task`` with dotted ``overrides`` applied in struct mode (a key the
     schema lacks raises) and validated like any training config."""
-    agent = algo if algo in group_options("agent") else "drqv2"
+    agent = algo if algo in group_options("agent") else "drqv2"  # online variants (alix, ...) on drqv2
     cfg = copy.deepcopy(_composed(agent, task))
     for key, value in (("agent.name", algo), *overrides):
         OmegaConf.update(cfg, key, json.loads(value) if key in _DICT_KEYS else value, merge=False)
@@ -98,6 +101,9 @@ def write_run(
     done: bool = True,
     dataset: str | None = None,
     cql_alpha: float | None = None,
+    updates: int = UPDATES,
+    eval_every_updates: int = EVAL_EVERY_UPDATES,
+    reference: float | None = None,
     fps: float = 50.0,
     device: str = "cpu",
     success: bool = False,
@@ -108,23 +114,38 @@ def write_run(
     """Write one run directory and return it. Arguments left None keep the composed config's value; the
     config goes through the training schema, and resolved.json through the code training uses
     (``resolved=False`` leaves it out, like a run written before runs recorded it; ``resolved_values`` are
-    written instead, e.g. those of a real Agent)."""
-    offline = algo in OFFLINE_ALGOS
+    written instead, e.g. those of a real Agent).
+
+    An offline agent (conf/agent/td3bc.yaml, cql_taco.yaml, ...; needs ``dataset``) writes the offline format
+    instead: ``updates`` and ``eval_every_updates`` are its offline.updates and offline.eval_every_updates, its
+    evaluation return ramps from 0 to ``final`` over the updates, normalised by ``reference`` (default: the
+    return repro.offline.reference falls back to, the paper's TACO return of the task), and ``done`` writes
+    DONE as the offline trainer does; ``cql_alpha`` None leaves CQL's alpha to the config (Table 6)."""
     cfg = run_config(
         algo, task, seed, root, experiment=experiment, variant=variant, **{
             "agent.K": K, "agent.batch_size": batch_size, "agent.latent_action_dim": latent_action_dim,
             "agent.action_encoder": action_encoder, "agent.objectives": objectives,
             "env.action_repeat": action_repeat, "env.distracting_dims": distracting_dims, "train.frames": frames,
-            "agent.learner": algo if offline else None, "offline.dataset": dataset, "agent.cql.alpha": cql_alpha})
+            "offline.dataset": dataset, "agent.cql.alpha": cql_alpha, **({
+                "offline.updates": updates, "offline.eval_every_updates": eval_every_updates}
+                if dataset is not None else {})})
+    offline = str(cfg.agent.learner) in OFFLINE_LEARNERS
     run = path or rundir.run_dir(cfg)
     run.mkdir(parents=True, exist_ok=True)
     rundir.write_config(run, cfg)
     if resolved:
-        learner_fields = {"dataset": dataset, "cql_alpha": cql_alpha} if offline else {}
+        # what an offline learner adds (repro/learners/offline_ac.py ``resolved``): the alpha its config resolved
+        learner_fields = {"cql_alpha": float(cfg.agent.cql.alpha)} if str(cfg.agent.learner) == "cql" else {}
         rundir.write_resolved(run, resolved_values or resolved_for(cfg, learner_fields))
     meta = {"git_sha": "abc1234", "git_dirty": False, "versions": {"torch": "2.13.0"}, "host": "testhost",
             "device": device, "cpu": "Test CPU", "python": "3.11", "resumes": []}
     (run / runformat.META).write_text(json.dumps(meta))
+    if offline:
+        ref = (reference, "source") if reference is not None else score_reference(task, None)
+        _write_offline_logs(run, final, updates, eval_every_updates, ref, fps)
+        if done:
+            rundir.write_done(run, {"update": updates, "dataset": str(dataset)})
+        return run
     repeat = int(cfg.env.action_repeat)
     lines = [header_line(runformat.EVAL_COLUMNS)]
     for i, frame in enumerate(range(0, frames + 1, eval_every)):
@@ -148,6 +169,27 @@ def write_run(
     if done:
         rundir.write_done(run, {"frame": frames})
     return run
+
+
+def _write_offline_logs(run: Path, final: float, updates: int, eval_every: int, reference: tuple[float | None, str],
+                        rate: float) -> None:
+    """eval.csv and train.csv in the offline format (repro/runformat.py OFFLINE_*_COLUMNS), as the offline
+    trainer writes them: an evaluation at update 0, every ``eval_every`` updates and at ``updates``."""
+    points = sorted({*range(0, updates + 1, eval_every), updates})
+    lines = [header_line(runformat.OFFLINE_EVAL_COLUMNS)]
+    for i, update in enumerate(points):
+        value = final * update / updates
+        lines.append(format_row(runformat.OFFLINE_EVAL_COLUMNS, {
+            "update": update, "episode_reward": value, "episode_reward_std": 0.0, "episode_length": 1000,
+            "success": None, "eval_episodes": 10, "normalized_score": normalized_score(value, reference[0]),
+            "reference_return": reference[0], "score_reference": reference[1], "total_time": float(i)}))
+    (run / runformat.EVAL).write_text("".join(lines))
+    columns = [*runformat.OFFLINE_TRAIN_COLUMNS, *METRICS]
+    train = [header_line(columns)]
+    for i, update in enumerate(points[1:], start=1):
+        train.append(format_row(columns, {"update": update, "updates_per_s": rate, "total_time": float(i),
+                                          **{m: 0.5 for m in METRICS}}))
+    (run / runformat.TRAIN).write_text("".join(train))
 
 
 def write_encoder_checkpoint(run: Path, true_dim: int = 6, distracting: int = 20, latent: int = 8) -> None:
@@ -197,26 +239,9 @@ def full_coverage_root(root: Path, seeds: int = 2) -> Path:
             _seeds(root, seeds, experiment="action_repeat", algo="taco", task="hopper_hop", K=k, action_repeat=ar,
                    variant=f"ar{ar}_K{k}", final=400 if best[ar] == k else 300)
     for b, (ft, fd) in {256: (400, 300), 512: (450, 305), 1024: (500, 300)}.items():
-        _seeds(
-            root,
-            seeds,
-            experiment="batch_size",
-            algo="taco",
-            task="quadruped_run",
-            batch_size=b,
-            variant=f"bs{b}",
-            final=ft,
-        )
-        _seeds(
-            root,
-            seeds,
-            experiment="batch_size",
-            algo="drqv2",
-            task="quadruped_run",
-            batch_size=b,
-            variant=f"bs{b}",
-            final=fd,
-        )
+        for algo, final in (("taco", ft), ("drqv2", fd)):
+            _seeds(root, seeds, experiment="batch_size", algo=algo, task="quadruped_run", batch_size=b,
+                   variant=f"bs{b}", final=final)
     for name, f in (("no_taco", 300), ("no_curl", 400), ("no_reward", 410)):
         obj = {"taco": 1.0, "curl": 1.0, "reward": 1.0}
         obj[name[3:]] = 0.0
@@ -232,16 +257,13 @@ def full_coverage_root(root: Path, seeds: int = 2) -> Path:
         write_run(root, experiment="manipulator", algo="taco", task="manipulator_bring_ball", seed=s,
                   final=700 if s == 0 else 200)
         write_run(root, experiment="manipulator", algo="drqv2", task="manipulator_bring_ball", seed=s, final=100)
-    offline = {"td3bc": 0.6, "cql": 0.62, "iql": 0.3, "bc": 0.5, "dt": 0.45}
+    offline = {"td3bc": 0.6, "td3bc_taco": 0.65, "cql": 0.62, "cql_taco": 0.67, "iql": 0.3, "bc": 0.5, "dt": 0.45}
     for task in ["hopper_hop", "cheetah_run", "walker_run", "quadruped_run"]:
-        for ds in ("medium", "medium_replay", "full_replay"):
+        for ds in ("medium", "medium-replay", "full-replay"):
             for algo, f in offline.items():
-                top = 300 * 1.4
-                _seeds(root, seeds, experiment="offline", algo=algo, task=task, dataset=ds, variant=ds,
-                       objectives={}, final=f * top, cql_alpha=0.5 if algo == "cql" else None)
-                if algo in ("td3bc", "cql"):
-                    _seeds(root, seeds, experiment="offline", algo=algo, task=task, dataset=ds, variant=f"{ds}_taco",
-                           objectives={"taco": 1.0}, final=(f + 0.05) * top, cql_alpha=0.5 if algo == "cql" else None)
+                if algo in group_options("agent"):  # dt once conf/agent/dt.yaml exists
+                    _seeds(root, seeds, spread=0.1, experiment="offline", algo=algo, task=task, dataset=ds,
+                           final=f * PAPER_TACO_RETURN[task])
     tsne = write_run(root, experiment="tsne", algo="taco", task="cheetah_run", seed=0, distracting_dims=20, final=500,
                      latent_action_dim=8)
     write_encoder_checkpoint(tsne)

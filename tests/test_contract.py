@@ -61,7 +61,7 @@ def test_real_run_loads_with_every_field_it_used(trained):
         "K": k_used, "batch_size": rc.agent.batch_size, "nstep": rc.agent.nstep, "latent_action_dim": latent,
         "action_encoder": True, "objectives": "+".join(objectives), "action_repeat": 4,
         "distracting_dims": rc.env.distracting_dims, "train_frames": 200, "dataset": None, "cql_alpha": None,
-        "status": runformat.STATE_DONE,
+        "offline_updates": None, "status": runformat.STATE_DONE,
     }
     assert set(expected) == set(IDENTITY)  # every identity column the loader produces is checked here
     got = {k: (None if not isinstance(row[k], str) and pd.isna(row[k]) else row[k]) for k in IDENTITY}

@@ -22,7 +22,7 @@ from repro_app.analysis_cli import register
 from repro_app.report import build_report
 
 REPS = 200
-EXPECTED = ["T1", "T2", "T3", "T4", "T5", "T6", "F1", "F3", "F4", "F5", "F6", "F7a", "F7b", "F8", "F9", "F10",
+EXPECTED = ["T1", "T2", "T3", "T3b", "T4", "T5", "T6", "F1", "F3", "F4", "F5", "F6", "F7a", "F7b", "F8", "F9", "F10",
             "F11", "F12", "F13"]
 
 
