@@ -27,6 +27,7 @@ from repro.schema import AgentConfig
 OFFLINE_AGENTS = ("bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "dt")  # agent files (repro/conf/agent)
 REFERENCE = "drqv2"  # the online update every ratio is taken against
 FRAME_SHAPE = (3, 84, 84)
+DATASET_KIND = "medium"  # offline.dataset of the timed offline learners (not read: the batches are synthetic)
 STEP = 10**6  # update step passed to learners (past every schedule's warm-up, as repro.bench does online)
 
 
@@ -84,12 +85,13 @@ def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapp
                  repeats: int, warmup: int, device: str, own_batch: int | None = None) -> dict[str, Any]:
     """Median seconds of one update of ``agent`` (built from its agent file through the registry) at
     ``batch_size``, or, for a learner with its own batch size (DT), at that one (``own_batch`` replaces it)."""
-    base = typed(compose([f"agent={agent}", f"task={task}"]))
-    own = own_batch_size(base.agent)
+    overrides = [f"agent={agent}", f"task={task}", f"agent.batch_size={batch_size}"]
+    if agent in OFFLINE_AGENTS:  # a dataset kind resolves what depends on it (CQL's Table 6 alpha)
+        overrides.append(f"offline.dataset={DATASET_KIND}")
+    rc = typed(compose(overrides))
+    own = own_batch_size(rc.agent)  # DT samples its own number of windows whatever agent.batch_size says
     if own is not None and own_batch is not None:
         own = own_batch
-    overrides = [f"agent={agent}", f"task={task}"] + ([] if own else [f"agent.batch_size={batch_size}"])
-    rc = typed(compose(overrides))
     size = own or batch_size
     action_dim = get_task(task).action_dim
     frame_stack = rc.env.frame_stack
