@@ -1,10 +1,14 @@
 """`repro bench`: time one agent update per algorithm and batch size, and the replay memory overhead.
 
 Only ratios between measurements made in this one run are printed (speed-up path vs plain, one batch
-size vs another, one algorithm vs another at the same batch): a ratio against a figure measured on
-another machine or in another process says nothing. To compare with the upstream code, time both side
-by side on one machine (docs/performance.md). Results are saved as JSON under ``{results_root}/bench/``
-for the speed tables (T4, T5).
+size vs another, one algorithm vs another at the same batch, an offline learner vs DrQ-v2): a ratio
+against a figure measured on another machine or in another process says nothing. To compare with the
+upstream code, time both side by side on one machine (docs/performance.md). Results are saved as JSON
+under ``{results_root}/bench/`` for the speed tables (T4, T5).
+
+``--offline`` times each offline learner against the online DrQ-v2 update (repro/bench_offline.py);
+``--offline-data`` a dataset's load time, memory and sampling speed against the online buffer
+(repro/bench_data.py).
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from typing import Optional
 import torch
 import typer
 
+from repro.bench_data import run_data_bench
+from repro.bench_offline import OFFLINE_AGENTS, run_offline_bench
 from repro.fsutil import atomic_write_text
 
 
@@ -142,27 +148,72 @@ def run_bench(configs: list[tuple[str, int]], repeats: int, device: str, out_dir
     return report
 
 
+def _write_report(out_dir: Path, name: str, report: dict, echo=print) -> Path:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / name
+    atomic_write_text(path, json.dumps(report, indent=2) + "\n")
+    echo(f"wrote {path}")
+    return path
+
+
+def _fail(message: str) -> typer.Exit:
+    typer.echo(f"error: {message}", err=True)
+    return typer.Exit(2)
+
+
 def register(app: typer.Typer) -> None:
     @app.command()
-    def bench(batch: Optional[list[int]] = typer.Option(None, "--batch", help="Batch sizes (default 256 1024)."),
+    def bench(batch: Optional[list[int]] = typer.Option(
+                  None, "--batch", help="Batch sizes (default 256 1024; --offline and --offline-data: 256)."),
               algo: Optional[list[str]] = typer.Option(None, "--algo", help="taco and/or drqv2 (default both)."),
-              repeats: int = typer.Option(2, min=1, help="Timed updates per setting (median reported)."),
+              repeats: int = typer.Option(2, "--repeats", "--iters", min=1,
+                                          help="Timed updates per setting (median reported)."),
               warmup: int = typer.Option(1, min=0, help="Untimed warm-up updates before the timed ones."),
               device: str = typer.Option("cpu", help="cpu or cuda."),
               amp: bool = typer.Option(False, "--amp", help="Also time agent.amp=true (ratio to plain)."),
               compile_: bool = typer.Option(False, "--compile", help="Also time agent.compile=true (ratio to plain)."),
+              offline: bool = typer.Option(False, "--offline", help="Instead: one update of each offline learner "
+                                           "as a ratio to the DrQ-v2 update, measured side by side."),
+              learner: Optional[list[str]] = typer.Option(
+                  None, "--learner", help=f"With --offline: these agent files only ({', '.join(OFFLINE_AGENTS)})."),
+              dt_batch: Optional[int] = typer.Option(
+                  None, "--dt-batch", help="With --offline: batch of learners with their own (default: DT's 64)."),
+              offline_data: bool = typer.Option(False, "--offline-data", help="Instead: load time, memory and "
+                                                "batches/s of a synthetic dataset against the online buffer."),
+              transitions: int = typer.Option(100_000, "--transitions", help="With --offline-data: dataset size."),
+              episode_length: int = typer.Option(500, "--episode-length",
+                                                 help="With --offline-data: transitions per episode."),
+              sample_batches: int = typer.Option(50, "--sample-batches",
+                                                 help="With --offline-data: batches sampled from each buffer."),
               results_root: Path = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).")):
-        """Time one update of TACO and DrQ-v2 at batch 256 and 1024; print same-run ratios and replay memory."""
+        """Time one update of TACO and DrQ-v2 at batch 256 and 1024; print same-run ratios and replay memory.
+        With --offline: each offline learner against DrQ-v2; with --offline-data: dataset load and sampling."""
         if device.startswith("cuda") and not torch.cuda.is_available():
-            typer.echo("error: --device cuda but no CUDA device is available", err=True)
-            raise typer.Exit(2)
+            raise _fail("--device cuda but no CUDA device is available")
         for a in algo or []:
             if a not in ("taco", "drqv2"):
-                typer.echo(f"error: unknown algo '{a}' (taco, drqv2)", err=True)
-                raise typer.Exit(2)
+                raise _fail(f"unknown algo '{a}' (taco, drqv2)")
+        if any(b < 1 for b in batch or []):
+            raise _fail("--batch must be >= 1")
+        for name in learner or []:
+            if name not in OFFLINE_AGENTS:
+                raise _fail(f"unknown offline learner '{name}' ({', '.join(OFFLINE_AGENTS)})")
+        if dt_batch is not None and dt_batch < 1:
+            raise _fail("--dt-batch must be >= 1")
+        if transitions < 1 or sample_batches < 1 or episode_length < 3:
+            raise _fail("--transitions and --sample-batches must be >= 1, --episode-length >= 3")
+        out_dir, host, dev = results_root / "bench", socket.gethostname(), device.split(":")[0]
+        meta = {"hardware": hardware(device), "device": device, "host": host, "torch": torch.__version__,
+                "python": platform.python_version(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+        if offline:
+            report = run_offline_bench((batch or [256])[0], repeats, warmup, device, learner or OFFLINE_AGENTS,
+                                       echo=typer.echo, own_batch=dt_batch)
+            _write_report(out_dir, f"bench-offline-{host}-{dev}.json", {**meta, **report}, typer.echo)
+        if offline_data:
+            data = run_data_bench(transitions, (batch or [256])[0], sample_batches, episode_length, echo=typer.echo)
+            _write_report(out_dir, f"bench-offline-data-{host}.json", {**meta, **data}, typer.echo)
+        if offline or offline_data:
+            return
         configs = [(a, b) for a in (algo or ["taco", "drqv2"]) for b in (batch or [256, 1024])]
         speedups = tuple(name for name, on in (("amp", amp), ("compile", compile_)) if on)
-        if any(b < 1 for b in batch or []):
-            typer.echo("error: --batch must be >= 1", err=True)
-            raise typer.Exit(2)
-        run_bench(configs, repeats, device, results_root / "bench", echo=typer.echo, speedups=speedups, warmup=warmup)
+        run_bench(configs, repeats, device, out_dir, echo=typer.echo, speedups=speedups, warmup=warmup)

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import json
+import re
 
+import numpy as np
 import pytest
 import typer
 from typer.testing import CliRunner
 
 from repro.bench import register, same_run_ratios
+from repro.bench_data import episode_lengths, synthetic_episode
+from repro.bench_offline import OFFLINE_AGENTS, available, run_offline_bench
 
 
 def _app() -> typer.Typer:
@@ -53,6 +57,92 @@ def test_bench_prints_same_run_ratios_and_no_constant(tmp_path):
 @pytest.mark.parametrize("args, needle", [(["--batch", "0"], "--batch must be >= 1"),
                                           (["--algo", "sac"], "unknown algo 'sac'")])
 def test_bench_bad_input_is_one_line(tmp_path, args, needle):
+    result = CliRunner().invoke(_app(), ["bench", *args, "--results", str(tmp_path)])
+    assert result.exit_code == 2
+    lines = [ln for ln in result.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and needle in lines[0] and "Traceback" not in result.output
+
+
+# ------------------------------------------------------------------------------------- offline learners
+
+OFFLINE_LINE = re.compile(r"^(\w+) B(\d+)( \(its own batch size\))? / drqv2 B(\d+) update time: ([\d.]+)x "
+                          r"\(measured in this run\)$")
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_offline_bench_prints_each_learners_ratio_to_drqv2_from_this_run(tmp_path):
+    args = ["bench", "--offline", "--batch", "2", "--iters", "1", "--warmup", "0", "--dt-batch", "1",
+            "--results", str(tmp_path)]
+    result = CliRunner().invoke(_app(), args)
+    assert result.exit_code == 0, result.output
+    out = result.output.splitlines()
+    report = json.loads(next((tmp_path / "bench").glob("bench-offline-*.json")).read_text())
+    ref = report["results"][0]
+    assert ref["agent"] == "drqv2" and ref["batch_size"] == 2 and ref["repeats"] == 1 and ref["warmup"] == 0
+    timed = {r["agent"]: r for r in report["results"][1:]}
+    expected = [a for a in OFFLINE_AGENTS if available(a) is None]
+    assert list(timed) == expected and {"bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql"} <= set(timed)
+    lines = {m.group(1): m for m in map(OFFLINE_LINE.match, out) if m}
+    assert set(lines) == set(expected)
+    for agent, row in timed.items():
+        m = lines[agent]
+        assert int(m.group(2)) == row["batch_size"] == (1 if agent == "dt" else 2) and int(m.group(4)) == 2
+        assert bool(m.group(3)) == (agent == "dt")
+        ratio = row["update_seconds"] / ref["update_seconds"]  # recomputed from this run's two timings
+        assert float(m.group(5)) == pytest.approx(ratio, abs=0.006)
+        assert report["ratios"][f"{agent}_b{row['batch_size']}_over_drqv2_b2"] == round(ratio, 3)
+    for agent in set(OFFLINE_AGENTS) - set(expected):
+        assert f"{agent}: skipped (" in result.output
+    assert "upstream" not in result.output.lower() and "paper" not in result.output.lower()
+
+
+def test_an_unregistered_learner_is_skipped_with_its_reason(monkeypatch):
+    from repro.bench_offline import LEARNERS
+
+    monkeypatch.delitem(LEARNERS, "iql")
+    assert "unknown agent.learner 'iql'" in available("iql") and "\n" not in available("iql")
+    assert available("td3bc") is None
+    assert "no agent file" in available("nonexistent_agent")
+    said: list[str] = []
+    report = run_offline_bench(2, 1, 0, "cpu", agents=["iql"], echo=said.append)
+    assert report["skipped"] == {"iql": available("iql")} and len(report["results"]) == 1
+    assert said[-1] == f"iql: skipped ({available('iql')})"
+
+
+# ------------------------------------------------------------------------------------------ offline data
+
+def test_offline_data_bench_loads_a_dataset_and_compares_sampling_with_the_online_buffer(tmp_path):
+    args = ["bench", "--offline-data", "--transitions", "2000", "--episode-length", "250", "--batch", "32",
+            "--sample-batches", "5", "--results", str(tmp_path)]
+    result = CliRunner().invoke(_app(), args)
+    assert result.exit_code == 0, result.output
+    out = result.output
+    report = json.loads(next((tmp_path / "bench").glob("bench-offline-data-*.json")).read_text())
+    assert report["transitions"] == 2000 and report["episodes"] == 8
+    assert report["raw_frame_bytes"] == (2000 + 8) * 3 * 84 * 84  # frames (T+1) of every episode, uint8
+    assert report["replay_bytes"] == report["online_replay_bytes"]  # the same buffer layout, filled two ways
+    ratios = report["ratios"]
+    assert ratios["replay_bytes_over_raw_frames"] == report["replay_bytes"] / report["raw_frame_bytes"] <= 1.10
+    assert ratios["offline_over_online_batches_per_s"] == (report["offline_batches_per_s"]
+                                                          / report["online_batches_per_s"])
+    assert ratios["load_over_online_fill_time"] == report["load_seconds"] / report["online_fill_seconds"]
+    assert f"replay bytes / raw frame bytes: {ratios['replay_bytes_over_raw_frames']:.4f}" in out
+    assert f"offline / online: {ratios['offline_over_online_batches_per_s']:.2f}x (measured in this run" in out
+    assert "load_offline_data:" in out and "batches/s" in out
+
+
+def test_synthetic_episodes_split_the_transitions_and_follow_the_dataset_contract():
+    assert episode_lengths(2000, 500) == [500] * 4 and episode_lengths(1100, 500) == [500, 500, 100]
+    ep = synthetic_episode(3, 7)
+    assert ep["frames"].shape == (8, 3, 84, 84) and ep["frames"].dtype.name == "uint8"
+    assert ep["actions"].shape == (7, 6) and ep["rewards"].shape == ep["discounts"].shape == (7,)
+    assert not np.array_equal(ep["frames"][0], ep["frames"][1])  # the square moves
+
+
+@pytest.mark.parametrize("args, needle", [(["--offline", "--learner", "sac"], "unknown offline learner 'sac'"),
+                                          (["--offline-data", "--transitions", "0"], "--transitions"),
+                                          (["--offline", "--dt-batch", "0"], "--dt-batch must be >= 1")])
+def test_offline_bench_bad_input_is_one_line(tmp_path, args, needle):
     result = CliRunner().invoke(_app(), ["bench", *args, "--results", str(tmp_path)])
     assert result.exit_code == 2
     lines = [ln for ln in result.output.splitlines() if ln.strip()]

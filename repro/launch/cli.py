@@ -20,7 +20,7 @@ from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 # The same flags as `repro status`, `figures` and `report`.
 RESULTS_FLAGS = ("--results-root", "--results", "-r")
 STATE_STYLE = {"done": "green", "partial": "yellow", "absent": "dim", "mismatch": "red", "running": "cyan",
-               "queued": "blue", "failed": "red", "pending": "dim"}
+               "queued": "blue", "failed": "red", "pending": "dim", "waiting": "magenta"}
 
 
 class Launcher(str, Enum):
@@ -56,12 +56,19 @@ def print_plan(planned: list[PlannedRun], spec: SweepSpec, root: Path, force: bo
                   f"not run: {escape(reason)}", highlight=False)
     for p in planned:
         state = p.state + (" (--force: move aside)" if p.state == "mismatch" and force else "")
-        style = STATE_STYLE.get(p.state, "")
-        con.print(f"[{style}]{state:<9}[/] {escape(_rel(p.run_dir, root))}  {escape(_shown_overrides(p))}",
+        if p.waiting:
+            state = "waiting"
+        style = STATE_STYLE.get(state, "")
+        why = f"  ({escape(p.waiting)})" if p.waiting else ""
+        con.print(f"[{style}]{state:<9}[/] {escape(_rel(p.run_dir, root))}  {escape(_shown_overrides(p))}{why}",
                   highlight=False)
-    by_state = {s: sum(1 for p in planned if p.state == s) for s in ("done", "partial", "absent", "mismatch")}
+    by_state = {s: sum(1 for p in planned if p.state == s and not p.waiting)
+                for s in ("done", "partial", "absent", "mismatch")}
+    by_state["waiting"] = sum(1 for p in planned if p.waiting)
+    datasets = len({p.run.dataset for p in planned if p.run.dataset})
     dims = (f"{len({p.run.task for p in planned})} task(s) x {len({p.run.agent for p in planned})} agent(s) x "
-            f"{len({p.run.variant for p in planned})} variant(s) x {len({p.run.seed for p in planned})} seed(s)")
+            f"{len({p.run.variant for p in planned})} variant(s) x "
+            + (f"{datasets} dataset(s) x " if datasets else "") + f"{len({p.run.seed for p in planned})} seed(s)")
     summary = ", ".join(f"{n} {s}" for s, n in by_state.items() if n)
     skipped = f" {len(excluded)} cell(s) n/a (not run)." if excluded else ""
     con.print(f"{len(planned)} runs of sweep '{spec.name}' ({dims}): {summary}.{skipped} Results root: {root}",
@@ -152,7 +159,8 @@ def register(app: typer.Typer) -> None:
             if any(p.state == "mismatch" for p in planned) and not force:
                 raise SweepError(_mismatch_error(planned, root))
             sdir = state_dir(root, spec.name)
-            grid = {p.key: {"run_dir": str(p.run_dir), "overrides": list(p.overrides)} for p in planned}
+            grid = {p.key: {"run_dir": str(p.run_dir), "overrides": list(p.overrides),
+                            **({"dataset": p.need.to_json()} if p.need else {})} for p in planned}
             say = _console().print
             if launcher == Launcher.slurm:
                 from repro.launch.slurm import cluster_config_path, load_cluster_config, submit
@@ -235,6 +243,8 @@ def _print_report(report, launcher: Launcher, sweep: str) -> None:
               f"{len(report.failed)} failed"]
     if report.mismatch:
         parts.append(f"{len(report.mismatch)} refused (config mismatch; --force)")
+    if report.waiting:
+        parts.append(f"{len(report.waiting)} waiting for their dataset (not started)")
     con.print(f"sweep '{sweep}': " + ", ".join(parts), highlight=False)
     if report.job_ids:
         con.print(f"SLURM job ids: {', '.join(report.job_ids)}; follow with `repro status {sweep}`",

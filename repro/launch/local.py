@@ -17,6 +17,7 @@ from repro.launch import lock
 from repro.launch.runner import Claim, claim, train_command
 from repro.launch.spec import PlannedRun
 from repro.launch.state import RunRecord, log_path, write_record
+from repro.launch.waiting import waiting_lines
 
 POLL_S = 0.2
 TERM_GRACE_S = 10.0
@@ -37,8 +38,24 @@ class LaunchReport:
     locked: list[tuple[str, str]] = field(default_factory=list)  # (key, owner) held by another launcher
     mismatch: list[str] = field(default_factory=list)
     moved: list[tuple[str, str]] = field(default_factory=list)  # (key, new location)
+    waiting: list[tuple[str, str]] = field(default_factory=list)  # (key, reason): dataset not complete yet
     job_ids: list[str] = field(default_factory=list)
     interrupted: bool = False
+
+    def to_launch(self, planned: Sequence[PlannedRun], say: Callable[[str], None]) -> list[PlannedRun]:
+        """The runs a launcher should claim: neither done nor waiting for their dataset. Done runs and
+        waiting runs are recorded here; one line per missing dataset says how many runs it holds back."""
+        out = []
+        for p in planned:
+            if p.state == "done":
+                self.done.append(p.key)
+            elif p.waiting:
+                self.waiting.append((p.key, p.waiting))
+            else:
+                out.append(p)
+        for line in waiting_lines(self.waiting):
+            say(f"[yellow]skip[/] {escape(line)}")
+        return out
 
     def add_claim(self, c: Claim) -> None:
         if c.status == "done":
@@ -149,8 +166,7 @@ def run_local(planned: Sequence[PlannedRun], sweep: str, sdir: Path, max_paralle
     """
     report = LaunchReport()
     env = child_env(max_parallel)
-    queue = [p for p in planned if p.state != "done"]
-    report.done.extend(p.key for p in planned if p.state == "done")
+    queue = report.to_launch(planned, say)
     active: dict[str, _Active] = {}
 
     def on_term(signum: int, frame: object) -> None:

@@ -175,16 +175,14 @@ class TrainJob(submitit.helpers.Checkpointable):
 
 def submit(planned: Sequence[PlannedRun], sweep: str, sdir: Path, cluster: ClusterConfig, force: bool,
            say: Callable[[str], None]) -> LaunchReport:
-    """Claim every not-done run and submit the claimed ones as job arrays; returns once queued."""
+    """Claim every run that is neither done nor waiting for its dataset and submit the claimed ones as job
+    arrays; returns once queued."""
     if shutil.which("sbatch") is None:
         raise SweepError("sbatch not found: run on a SLURM login node (or `scripts/slurm_local.sh up` and "
                          "export SLURM_CONF for the local test cluster).")
     report = LaunchReport()
-    report.done.extend(p.key for p in planned if p.state == "done")
     claims = []
-    for p in planned:
-        if p.state == "done":
-            continue
+    for p in report.to_launch(planned, say):  # done runs and runs waiting for their dataset are not submitted
         c = claim(p, "slurm", sweep, force)
         report.add_claim(c)
         if c.status == "locked":

@@ -1,4 +1,4 @@
-"""``repro status``: where every run of a sweep stands (done / running / queued / failed / pending)."""
+"""``repro status``: where every run of a sweep stands (done / running / queued / failed / pending / waiting)."""
 
 from __future__ import annotations
 
@@ -12,9 +12,10 @@ from pathlib import Path
 from repro.launch import lock
 from repro.launch.slurm_query import FAILED, QUEUED, job_states
 from repro.launch.state import read_record, read_state
+from repro.launch.waiting import DatasetNeed, missing_reason
 from repro.runformat import EVAL, STATE_DONE, STATE_PARTIAL, TRAIN, run_state
 
-STATUSES = ("done", "running", "queued", "failed", "pending")
+STATUSES = ("done", "running", "queued", "failed", "pending", "waiting")
 
 
 @dataclass
@@ -25,7 +26,7 @@ class RunStatus:
     frame: int | None
     eval_return: float | None
     job_id: str | None
-    detail: str  # failed: log path; running: where; pending: partial or not started
+    detail: str  # failed: the error; running: where; pending: partial or not started; waiting: the dataset
     log: str | None = None  # failed runs: the file holding the error (local log or SLURM stderr)
 
 
@@ -64,7 +65,9 @@ def progress(run_dir: Path) -> tuple[int | None, float | None]:
 
 
 def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
-               slurm_states: dict[str, str] | None) -> RunStatus:
+               slurm_states: dict[str, str] | None, waiting: str | None = None) -> RunStatus:
+    """The run's status; ``waiting`` (why its dataset is not usable yet) makes a run that is neither done
+    nor held ``waiting``, even one whose earlier attempt failed."""
     frame, ret = progress(run_dir)
     state = run_state(run_dir)
     record = read_record(sdir, key)
@@ -86,6 +89,8 @@ def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
             shown = "" if sstate in ("PENDING", "RUNNING") else f"SLURM {sstate}"
             return make(status, ", ".join(x for x in (shown, "partial" if state == STATE_PARTIAL else "") if x))
         return make("running", f"pid {owner.child_pid or owner.pid} on {owner.host}")
+    if waiting:
+        return make("waiting", waiting)
     if record is not None:
         sstate = (slurm_states or {}).get(record.job_id or "", "")
         if record.status == "failed" or sstate in FAILED:
@@ -116,7 +121,27 @@ def collect(runs: dict[str, Path], results_root: Path, sdir: Path) -> list[RunSt
         if owner and owner.job_id:
             jobs.append(owner.job_id)
     states = job_states(jobs) if jobs else {}
-    return [run_status(k, d, results_root, sdir, states) for k, d in runs.items()]
+    reasons = waiting_reasons(sdir, runs)
+    return [run_status(k, d, results_root, sdir, states, reasons.get(k)) for k, d in runs.items()]
+
+
+def waiting_reasons(sdir: Path, runs: dict[str, Path]) -> dict[str, str]:
+    """Run key -> why its dataset is not usable yet, for the offline runs of ``runs`` (datasets recorded
+    in state.json at launch), checking each dataset once, now."""
+    grid = read_state(sdir).get("runs", {})
+    checked: dict[DatasetNeed, str | None] = {}
+    out: dict[str, str] = {}
+    for key in runs:
+        entry = grid.get(key)
+        need = DatasetNeed.from_json(entry.get("dataset")) if isinstance(entry, dict) else None
+        if need is None:
+            continue
+        if need not in checked:
+            checked[need] = missing_reason(need)
+        reason = checked[need]
+        if reason:
+            out[key] = reason
+    return out
 
 
 def counts(statuses: Sequence[RunStatus]) -> dict[str, int]:

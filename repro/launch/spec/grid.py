@@ -30,10 +30,17 @@ class Run:
     task: str
     seed: int
     overrides: tuple[str, ...]
+    dataset: str | None = None  # offline.dataset of an offline run (a run directory component)
 
     @property
-    def cell(self) -> tuple[str, str, str]:
-        return (self.agent, self.variant, self.task)
+    def cell(self) -> tuple[str, str, str, str | None]:
+        return (self.agent, self.variant, self.task, self.dataset)
+
+
+def _dataset_of(overrides: tuple[str, ...]) -> str | None:
+    """The ``offline.dataset`` a run's overrides set (part of an offline run's directory), or None."""
+    values = [override_value(o).strip("'\"") for o in overrides if override_key(o) == "offline.dataset"]
+    return (values[-1] or None) if values else None
 
 
 def excluded(spec: SweepSpec, sel: Selection | None = None) -> list[tuple[str, str, str, str]]:
@@ -72,7 +79,7 @@ def expand(spec: SweepSpec, sel: Selection = Selection()) -> list[Run]:
     budget = () if uses_profile else spec.budget_overrides()
     extra = (f"train.frames={sel.frames}",) if sel.frames else ()
     runs: list[Run] = []
-    seen: dict[tuple[str, str, str, int], str] = {}
+    seen: dict[tuple[str, str, str, str | None, int], str] = {}
     for vname, vovers in spec.variants.items():
         named = {override_key(o): override_value(o) for o in vovers}
         agents = (named["agent"],) if "agent" in named else spec.agents
@@ -85,10 +92,11 @@ def expand(spec: SweepSpec, sel: Selection = Selection()) -> list[Run]:
                     identity = (f"experiment={spec.experiment}", f"agent={agent}", f"task={task}",
                                 f"seed={seed}", f"variant={variant}")
                     overrides = merge_overrides(identity, budget, spec.common, vovers, sel.sets, extra)
-                    where = (agent, variant, task, seed)
+                    dataset = _dataset_of(overrides)
+                    where = (agent, variant, task, dataset, seed)
                     if where in seen:
                         raise SweepError(f"{spec.path}: variants '{seen[where]}' and '{vname}' give the same "
                                          f"run directory ({agent}/{variant}).")
                     seen[where] = vname
-                    runs.append(Run(agent, variant, task, seed, overrides))
+                    runs.append(Run(agent, variant, task, seed, overrides, dataset))
     return runs

@@ -13,6 +13,7 @@ from repro.config import ConfigError, compose, identity
 from repro.launch.spec.errors import SweepError
 from repro.launch.spec.grid import Run
 from repro.launch.spec.overrides import hydra_quote, merge_overrides
+from repro.launch.waiting import DatasetNeed, dataset_need, missing_reason
 from repro.rundir import config_diff, run_dir, run_state
 
 
@@ -26,6 +27,8 @@ class PlannedRun:
     results_root: Path
     state: str  # done | partial | absent | mismatch
     diff: list[str] = field(default_factory=list)
+    need: DatasetNeed | None = None  # the dataset an offline run reads
+    waiting: str | None = None  # why a not-done run cannot start yet (its dataset is not complete), or None
 
     @property
     def key(self) -> str:
@@ -60,7 +63,7 @@ def compose_runs(runs: Sequence[Run]) -> list[DictConfig]:
     Composing is slow (~0.3 s), so runs that differ only by seed share one composition when a check
     on the first cell shows the seed feeds nothing else in the config."""
     configs: list[DictConfig] = []
-    by_cell: dict[tuple[str, str, str], tuple[Run, DictConfig]] = {}
+    by_cell: dict[tuple[str, str, str, str | None], tuple[Run, DictConfig]] = {}
     seed_is_plain: bool | None = None
     for run in runs:
         cached = by_cell.get(run.cell)
@@ -81,18 +84,24 @@ def compose_runs(runs: Sequence[Run]) -> list[DictConfig]:
 
 
 def plan(runs: Sequence[Run]) -> list[PlannedRun]:
-    """Compose every run, pin an absolute results root, and read each run directory's state."""
+    """Compose every run, pin an absolute results root, and read each run directory's state and whether
+    an offline run's dataset is complete (``waiting`` says why not)."""
     planned: list[PlannedRun] = []
+    reasons: dict[DatasetNeed, str | None] = {}
     for run, cfg in zip(runs, compose_runs(runs)):
         root = Path(str(cfg.runtime.results_root)).expanduser().absolute()
         if str(root) != str(cfg.runtime.results_root):
             cfg.runtime.results_root = str(root)
         overrides = merge_overrides(run.overrides, [f"runtime.results_root={hydra_quote(str(root))}"])
-        run = Run(run.agent, run.variant, run.task, run.seed, overrides)
+        run = Run(run.agent, run.variant, run.task, run.seed, overrides, run.dataset)
         path = run_dir(cfg)
         state = run_state(path)
         diff = config_diff(path, cfg) if state != "absent" else []
-        planned.append(PlannedRun(run, cfg, path, root, "mismatch" if diff else state, diff))
+        need = dataset_need(cfg)
+        if need is not None and need not in reasons:
+            reasons[need] = missing_reason(need)
+        waiting = reasons[need] if need is not None and state != "done" else None
+        planned.append(PlannedRun(run, cfg, path, root, "mismatch" if diff else state, diff, need, waiting))
     return planned
 
 
