@@ -110,6 +110,7 @@ def run_data_bench(transitions: int = 100_000, batch_size: int = 256, iters: int
         load_s = time.perf_counter() - t0
         rss_growth = max(0, peak_rss_bytes() - rss_before)
         raw = data.raw_frame_bytes
+        assert data.buffer is not None  # load_offline_data always builds the replay (only DT's loader does not)
         offline_bytes = data.buffer.nbytes()
         echo(f"load_offline_data: {load_s:.2f} s; replay bytes / raw frame bytes: {offline_bytes / raw:.4f} "
              f"(target <= 1.10); peak memory growth during the load / raw frame bytes: {rss_growth / raw:.3f}")
