@@ -19,6 +19,7 @@ VALID_CHOICES = {
     "agent.reward_target": ("nstep", "ksum"),
     "replay.device": ("cpu", "cuda", "auto"),
     "runtime.device": ("cpu", "cuda", "auto"),
+    "train.video_every": ("all", "last"),
 }
 
 
@@ -141,6 +142,8 @@ def validate(raw: DictConfig) -> DictConfig:
             raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
     if cfg.env.distracting_dims < 0 or cfg.train.eval_episodes < 0:
         raise ConfigError("env.distracting_dims and train.eval_episodes must be >= 0.")
+    if cfg.train.video_size < 16 or cfg.train.video_size % 2:
+        raise ConfigError(f"train.video_size must be an even number >= 16 (got {cfg.train.video_size}).")
     from repro.agent.objectives import OBJECTIVES
 
     for name in cfg.agent.objectives:

@@ -20,30 +20,40 @@ import numpy as np
 from repro.envs.base import Env
 from repro.learners.base import Learner
 from repro.logger import CsvLog
-from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_TRAIN_COLUMNS
+from repro.runformat import EVAL, OFFLINE_EVAL_COLUMNS, OFFLINE_TRAIN_COLUMNS, TRAIN
 from repro.offline.reference import normalized_score
 from repro.offline.replay import DatasetError
 from repro.replay import ReplayBuffer
 from repro.schema import OfflineConfig
+from repro.tblog import TensorBoardMirror
 from repro.trainer_base import WallClock, rng_state, run_eval_episodes, set_rng_state
+from repro.video import EvalVideos
 
 
 class OfflineLogger:
-    """eval.csv and train.csv of an offline run (columns: repro/runformat.py)."""
+    """eval.csv and train.csv of an offline run (columns: repro/runformat.py); with ``tensorboard`` also
+    TensorBoard scalars at step = update (repro/tblog.py), rebuilt from the (truncated) CSVs on every start."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
-                 offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print):
+                 offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print,
+                 tensorboard: bool = False):
         offsets = offsets or {}
-        self.eval = CsvLog(Path(run_dir) / "eval.csv", OFFLINE_EVAL_COLUMNS, offsets.get("eval"))
-        self.train = CsvLog(Path(run_dir) / "train.csv", OFFLINE_TRAIN_COLUMNS + list(metric_names),
+        self.eval = CsvLog(Path(run_dir) / EVAL, OFFLINE_EVAL_COLUMNS, offsets.get("eval"))
+        self.train = CsvLog(Path(run_dir) / TRAIN, OFFLINE_TRAIN_COLUMNS + list(metric_names),
                             offsets.get("train"))
         self.echo = echo
+        self.tb: TensorBoardMirror | None = None
+        if tensorboard:
+            self.tb = TensorBoardMirror(run_dir, step_column="update")
+            self.tb.rebuild({"eval": self.eval.path, "train": self.train.path})
 
     def offsets(self) -> dict[str, int]:
         return {"eval": self.eval.offset(), "train": self.train.offset()}
 
     def log_eval(self, row: dict[str, Any]) -> None:
         self.eval.write(row)
+        if self.tb is not None:
+            self.tb.add_row("eval", row)
         score = row.get("normalized_score")
         extra = f"  score {score:.1f} ({row['score_reference']})" if score is not None else ""
         self.echo(f"eval  update {row['update']:>8}  return {row['episode_reward']:8.2f}"
@@ -51,22 +61,28 @@ class OfflineLogger:
 
     def log_train(self, row: dict[str, Any]) -> None:
         self.train.write(row)
+        if self.tb is not None:
+            self.tb.add_row("train", row)
 
     def close(self) -> None:
         self.eval.close()
         self.train.close()
+        if self.tb is not None:
+            self.tb.close()
 
 
 class OfflineTrainer:
     def __init__(self, cfg: OfflineConfig, seed: int, action_repeat: int, eval_env: Env, learner: Learner,
                  buffer: ReplayBuffer, logger: OfflineLogger, save_checkpoint: Callable[[dict], None],
                  reference: tuple[float | None, str], dataset_digest: str,
-                 progress: Callable[[int, float | None], None] | None = None):
+                 progress: Callable[[int, float | None], None] | None = None,
+                 videos: EvalVideos | None = None):
         self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
         self.eval_env, self.learner, self.buffer, self.logger = eval_env, learner, buffer, logger
         self._save, self.progress = save_checkpoint, progress
         self.reference_return, self.reference_kind = reference
         self.dataset_digest = dataset_digest
+        self.videos = videos  # train.save_video: an MP4 of the first evaluation episode, named by update
         self.has_success = eval_env.spec.has_success
         self.batch_size = learner.cfg.batch_size
         self.update = 0
@@ -104,8 +120,11 @@ class OfflineTrainer:
 
     # ----------------------------------------------------------------- evaluation and logging
     def evaluate(self) -> None:
+        video = self.videos is not None and self.videos.wanted(self.update >= self.cfg.updates)
         result = run_eval_episodes(self.eval_env, self.learner, self.cfg.eval_episodes, self.seed, self.update,
-                                   self.update)
+                                   self.update, video_size=self.videos.size if video and self.videos else None)
+        if result.video and self.videos is not None:
+            self.videos.save(self.update, result.video)
         returns = result.returns
         mean = float(np.mean(returns)) if returns else math.nan
         self.last_eval = mean

@@ -12,8 +12,9 @@ import csv
 import math
 import os
 import shutil
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 TB_DIR = "tb"
 
