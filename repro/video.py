@@ -12,7 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-VIDEO_DIR = "videos"
+from repro.runformat import VIDEOS as VIDEO_DIR
+
+__all__ = ["VIDEO_DIR", "VIDEO_EVERY", "EvalVideos", "count_frames", "video_name", "write_mp4"]
+
 VIDEO_EVERY = ("all", "last")
 
 
