@@ -91,6 +91,21 @@ def test_mirror_equals_csv_and_a_resume_rebuilds_it_without_repeated_steps(tmp_p
     assert len(list((tmp_path / TB_DIR).iterdir())) == 1
 
 
+def test_offline_mirror_steps_are_updates(tmp_path: Path):
+    from repro.offline_trainer import OfflineLogger
+
+    log = OfflineLogger(tmp_path, ["actor_loss"], echo=lambda s: None, tensorboard=True)
+    for update in (0, 1000):
+        log.log_eval({"update": update, "episode_reward": update / 10, "episode_reward_std": 0.0,
+                      "episode_length": 100.0, "success": None, "eval_episodes": 1, "normalized_score": None,
+                      "reference_return": None, "score_reference": "none", "total_time": 1.0})
+    log.log_train({"update": 1000, "updates_per_s": 5.0, "total_time": 1.0, "actor_loss": -0.5})
+    log.close()
+    tb = read_scalars(tmp_path)
+    assert tb["eval/episode_reward"] == [(0, 0.0), (1000, 100.0)] and tb["train/actor_loss"] == [(1000, -0.5)]
+    assert "eval/score_reference" not in tb and "eval/normalized_score" not in tb  # text and empty cells
+
+
 def test_mirror_is_off_by_default(tmp_path: Path):
     log = RunLogger(tmp_path, METRICS, echo=lambda s: None)
     log.log_eval(_eval_row(0))
