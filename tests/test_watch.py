@@ -202,8 +202,16 @@ def test_sigkill_and_resume_leave_no_repeated_step_in_event_files(tmp_path: Path
     cmd = [sys.executable, "-m", "repro", "train", *TINY, *WATCH, f"runtime.results_root={tmp_path}", "--no-progress"]
     # Killed after the evaluation at frame 200, which comes after the checkpoint of episode 2: the resume
     # truncates that row and writes it again, so a mirror that only appended would hold frame 200 twice.
-    _kill_when(cmd, lambda: _rows(run / EVAL) >= 2 and (run / rundir.CHECKPOINT).exists())
-    assert not (run / DONE).exists()
+    seen: list[float] = []
+
+    def ready() -> bool:  # 1 s after the row appears, so that its event is written too (episode 3 takes longer)
+        if not seen and _rows(run / EVAL) >= 2 and (run / rundir.CHECKPOINT).exists():
+            seen.append(time.time())
+        return bool(seen) and time.time() - seen[0] > 1.0
+
+    _kill_when(cmd, ready)
+    assert not (run / DONE).exists() and _rows(run / TRAIN) == 2
+    assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200]  # the point the resume rewrites
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     assert "resumed" in out.stdout
