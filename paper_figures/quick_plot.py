@@ -3,6 +3,7 @@ with a 95% bootstrap CI band (rliable, fixed random state), written as PNG and P
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -11,8 +12,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 
 from analysis.identity import task_display  # noqa: E402
+from analysis.io import atomic_savefig  # noqa: E402
 from paper_figures.common import curve_panel, palette, panel_grid, setup_style  # noqa: E402
 
 PLOT_REPS = 2_000  # bootstrap repetitions per plotted point (a quick look, not a paper table)
@@ -45,17 +48,24 @@ def plot_curves(curves: pd.DataFrame, metric: str, out: Path, x: str = "frame", 
         ax.set_title(task_display(task))
         ax.set_xlabel("frames" if x == "frame" else x)
         ax.set_ylabel(metric)
-    handles, names = axes[0].get_legend_handles_labels()
-    if handles:
-        fig.legend(handles, names, loc="lower center", ncol=min(4, len(names)), frameon=False,
-                   bbox_to_anchor=(0.5, -0.02))
-    fig.text(0.5, 1.0, f"{metric}: mean over seeds; band: 95% bootstrap CI of the mean (rliable, {reps:,} "
-             f"repetitions, random state {seed}); n = seeds; grouped by {', '.join(by)}",
-             ha="center", va="bottom", fontsize=8)
+    # One legend for all panels (the first panel may lack a group): label and its seed count(s) over tasks.
+    seeds = curves.groupby(["label", "task"])["seed"].nunique()
+    handles = [Line2D([], [], color=colors[lab], lw=1.6) for lab in labels]
+    names = []
+    for lab in labels:
+        n = sorted(set(seeds.loc[lab].tolist()))
+        names.append(f"{lab} (n={n[0]})" if len(n) == 1 else f"{lab} (n={n[0]}-{n[-1]})")
+    fig.legend(handles, names, loc="lower center", ncol=min(4, len(names)), frameon=False,
+               bbox_to_anchor=(0.5, -0.02))
+    caption = (f"{metric}: mean over seeds; band: 95% bootstrap CI of the mean (rliable, {reps:,} "
+               f"repetitions, random state {seed}); n = seeds; grouped by {', '.join(by)}")
+    fig.text(0.5, 1.0, textwrap.fill(caption, 60 * min(3, len(tasks))), ha="center", va="bottom", fontsize=8)
     fig.tight_layout(rect=(0, 0.06, 1, 0.98))
     out = Path(out).with_suffix(".png")
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=150, bbox_inches="tight")
-    fig.savefig(out.with_suffix(".pdf"), bbox_inches="tight")
-    plt.close(fig)
+    try:
+        atomic_savefig(fig, out, dpi=150, bbox_inches="tight")
+        atomic_savefig(fig, out.with_suffix(".pdf"), bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return [out, out.with_suffix(".pdf")]

@@ -32,6 +32,7 @@ from repro.offline_trainer import BatchSource, OfflineLogger, OfflineTrainer
 from repro.replay import ReplayBuffer
 from repro.schema import RunConfig
 from repro.trainer import Trainer
+from repro.video import VIDEO_DIR, EvalVideos
 
 
 def resolve_device(name: str) -> str:
@@ -102,11 +103,13 @@ def _train_online(rc: RunConfig, path: Path, device: str, resuming: bool, echo: 
         if state is None:
             episodes.prune(set())
         recorder = Recorder.open(path, rc.agent, spec.obs_shape, spec.action_dim, state) if rc.runtime.record else None
-        logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo)
+        logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo,
+                           tensorboard=rc.runtime.tensorboard)
         bar = _progress(rc, progress)
         trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
                           lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
-                          save_frames=lambda frames: _save_frames(path / "frames.npz", frames), recorder=recorder)
+                          save_frames=lambda frames: _save_frames(path / "frames.npz", frames), recorder=recorder,
+                          videos=eval_videos(rc, path, "frame"))
         if state is not None:
             trainer.restore(state)
             episodes.prune({rec[0] for rec in state["buffer"]["episodes"]})
@@ -123,6 +126,13 @@ def _train_online(rc: RunConfig, path: Path, device: str, resuming: bool, echo: 
     finally:
         env.close()
         eval_env.close()
+
+
+def eval_videos(rc: RunConfig, path: Path, unit: str) -> EvalVideos | None:
+    """train.save_video: where (``{run}/videos``), how large and how often the loop writes evaluation videos."""
+    if not rc.train.save_video:
+        return None
+    return EvalVideos(path / VIDEO_DIR, rc.train.video_size, rc.train.video_every, unit=unit)
 
 
 def _load_dataset(rc: RunConfig) -> OfflineData:
@@ -161,13 +171,14 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, re
         rundir.write_resolved(path, values)
         state = load_checkpoint(ckpt_file) if resuming else None
         logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo,
-                               return_conditioned=isinstance(learner, ReturnConditioned))
+                               return_conditioned=isinstance(learner, ReturnConditioned),
+                               tensorboard=rc.runtime.tensorboard)
         bar = _progress(rc, progress, total=rc.offline.updates, unit="updates/s")
         trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner,
                                  _batch_source(learner, data, rc.seed), logger, lambda s: save_checkpoint(ckpt_file, s),
                                  reference=score_reference(rc.task.name, data.manifest.source),
                                  dataset_digest=data.digest, progress=bar.update if bar else None,
-                                 dataset_best_return=data.best_return)
+                                 dataset_best_return=data.best_return, videos=eval_videos(rc, path, "update"))
         if state is not None:
             trainer.restore(state)
             echo(f"resumed {path} at update {trainer.update}")

@@ -21,6 +21,7 @@ VALID_CHOICES = {
     "agent.reward_target": ("nstep", "ksum"),
     "replay.device": ("cpu", "cuda", "auto"),
     "runtime.device": ("cpu", "cuda", "auto"),
+    "train.video_every": ("all", "last"),
 }
 
 
@@ -143,6 +144,8 @@ def validate(raw: DictConfig) -> DictConfig:
             raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
     if cfg.env.distracting_dims < 0 or cfg.train.eval_episodes < 0:
         raise ConfigError("env.distracting_dims and train.eval_episodes must be >= 0.")
+    if cfg.train.video_size < 16 or cfg.train.video_size % 2:
+        raise ConfigError(f"train.video_size must be an even number >= 16 (got {cfg.train.video_size}).")
     from repro.agent.objectives import OBJECTIVES
 
     for name in cfg.agent.objectives:
@@ -197,9 +200,24 @@ def typed(cfg: DictConfig) -> RunConfig:
     return OmegaConf.to_object(cfg)  # type: ignore[return-value]
 
 
+# Keys outside ``runtime`` that change no logged number (what is watched, not what is trained): a run resumed
+# with another value is the same run.
+NON_IDENTITY_KEYS = ("train.save_video", "train.video_every", "train.video_size")
+
+
+def drop_non_identity(data: dict) -> dict:
+    """``data`` (a config as plain containers) without ``runtime`` and :data:`NON_IDENTITY_KEYS`, in place."""
+    data.pop("runtime", None)
+    for key in NON_IDENTITY_KEYS:
+        section, _, leaf = key.partition(".")
+        node = data.get(section)
+        if isinstance(node, dict):
+            node.pop(leaf, None)
+    return data
+
+
 def identity(cfg: DictConfig) -> dict:
-    """The part of the config that defines a run (everything but ``runtime``)."""
+    """The part of the config that defines a run (everything but ``runtime`` and the video switches)."""
     data = OmegaConf.to_container(cfg, resolve=True)
     assert isinstance(data, dict)
-    data.pop("runtime", None)
-    return data
+    return drop_non_identity(data)

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from repro.runformat import EVAL, EVAL_COLUMNS, TRAIN, TRAIN_COLUMNS, WALLCLOCK_COLUMNS, train_columns
+from repro.tblog import TensorBoardMirror
 
 __all__ = ["CsvLog", "RunLogger", "format_row", "header_line", "EVAL_COLUMNS", "TRAIN_COLUMNS", "WALLCLOCK_COLUMNS"]
 
@@ -73,28 +74,40 @@ class CsvLog:
 
 
 class RunLogger:
-    """The run's ``eval.csv`` and ``train.csv`` (columns from repro.runformat) plus console output."""
+    """The run's ``eval.csv`` and ``train.csv`` (columns from repro.runformat) plus console output; with
+    ``tensorboard`` (runtime.tensorboard) also TensorBoard scalars at step = frame (repro/tblog.py), rebuilt
+    from the CSVs once they are truncated to the checkpoint, so a resumed run never holds a point twice."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
-                 offsets: dict[str, int] | None = None, echo=print):
+                 offsets: dict[str, int] | None = None, echo=print, tensorboard: bool = False):
         run_dir = Path(run_dir)
         offsets = offsets or {}
         self.eval = CsvLog(run_dir / EVAL, EVAL_COLUMNS, offsets.get("eval"))
         self.train = CsvLog(run_dir / TRAIN, train_columns(metric_names), offsets.get("train"))
         self.echo = echo
+        self.tb: TensorBoardMirror | None = None
+        if tensorboard:
+            self.tb = TensorBoardMirror(run_dir, step_column="frame")
+            self.tb.rebuild({"eval": self.eval.path, "train": self.train.path})
 
     def offsets(self) -> dict[str, int]:
         return {"eval": self.eval.offset(), "train": self.train.offset()}
 
     def log_eval(self, row: dict[str, Any]) -> None:
         self.eval.write(row)
+        if self.tb is not None:
+            self.tb.add_row("eval", row)
         success = "" if row.get("success") is None else f"  success {row['success']:.2f}"
         self.echo(f"eval  frame {row['frame']:>9}  return {row['episode_reward']:8.2f}"
                   f" ± {row['episode_reward_std']:.2f}{success}")
 
     def log_train(self, row: dict[str, Any]) -> None:
         self.train.write(row)
+        if self.tb is not None:
+            self.tb.add_row("train", row)
 
     def close(self) -> None:
         self.eval.close()
         self.train.close()
+        if self.tb is not None:
+            self.tb.close()

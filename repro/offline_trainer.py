@@ -28,31 +28,40 @@ from repro.logger import CsvLog
 from repro.offline.reference import normalized_score
 from repro.offline.replay import DatasetError
 from repro.replay import ReplayBuffer
-from repro.runformat import OFFLINE_TRAIN_COLUMNS, offline_eval_columns
+from repro.runformat import EVAL, OFFLINE_TRAIN_COLUMNS, TRAIN, offline_eval_columns
 from repro.schema import OfflineConfig
+from repro.tblog import TensorBoardMirror
 from repro.trainer_base import EvalResult, WallClock, rng_state, run_eval_episodes, set_rng_state
+from repro.video import EvalVideos
 
 BatchSource = Union[ReplayBuffer, Sampler]  # where update batches come from (both have ``rng`` and ``sample``)
 LEARNER_STATE = ("modules", "optimizers")  # learner state_dict keys stored as "agent" / "optimizers"
 
 
 class OfflineLogger:
-    """eval.csv and train.csv of an offline run (columns: repro/runformat.py)."""
+    """eval.csv and train.csv of an offline run (columns: repro/runformat.py); with ``tensorboard`` also
+    TensorBoard scalars at step = update (repro/tblog.py), rebuilt from the (truncated) CSVs on every start."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
                  offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print,
-                 return_conditioned: bool = False):
+                 return_conditioned: bool = False, tensorboard: bool = False):
         offsets = offsets or {}
-        self.eval = CsvLog(Path(run_dir) / "eval.csv", offline_eval_columns(return_conditioned), offsets.get("eval"))
-        self.train = CsvLog(Path(run_dir) / "train.csv", OFFLINE_TRAIN_COLUMNS + list(metric_names),
+        self.eval = CsvLog(Path(run_dir) / EVAL, offline_eval_columns(return_conditioned), offsets.get("eval"))
+        self.train = CsvLog(Path(run_dir) / TRAIN, OFFLINE_TRAIN_COLUMNS + list(metric_names),
                             offsets.get("train"))
         self.echo = echo
+        self.tb: TensorBoardMirror | None = None
+        if tensorboard:
+            self.tb = TensorBoardMirror(run_dir, step_column="update")
+            self.tb.rebuild({"eval": self.eval.path, "train": self.train.path})
 
     def offsets(self) -> dict[str, int]:
         return {"eval": self.eval.offset(), "train": self.train.offset()}
 
     def log_eval(self, row: dict[str, Any]) -> None:
         self.eval.write(row)
+        if self.tb is not None:
+            self.tb.add_row("eval", row)
         score = row.get("normalized_score")
         extra = f"  score {score:.1f} ({row['score_reference']})" if score is not None else ""
         if row.get("episode_reward_dataset_target") is not None:
@@ -62,10 +71,14 @@ class OfflineLogger:
 
     def log_train(self, row: dict[str, Any]) -> None:
         self.train.write(row)
+        if self.tb is not None:
+            self.tb.add_row("train", row)
 
     def close(self) -> None:
         self.eval.close()
         self.train.close()
+        if self.tb is not None:
+            self.tb.close()
 
 
 class OfflineTrainer:
@@ -73,12 +86,13 @@ class OfflineTrainer:
                  buffer: BatchSource, logger: OfflineLogger, save_checkpoint: Callable[[dict], None],
                  reference: tuple[float | None, str], dataset_digest: str,
                  progress: Callable[[int, float | None], None] | None = None,
-                 dataset_best_return: float | None = None):
+                 dataset_best_return: float | None = None, videos: EvalVideos | None = None):
         self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
         self.eval_env, self.learner, self.buffer, self.logger = eval_env, learner, buffer, logger
         self._save, self.progress = save_checkpoint, progress
         self.reference_return, self.reference_kind = reference
         self.dataset_digest = dataset_digest
+        self.videos = videos  # train.save_video: an MP4 of the first evaluation episode, named by update
         self.has_success = eval_env.spec.has_success
         self.dataset_best_return = dataset_best_return  # a ReturnConditioned learner's second target
         self.batch_size = int(getattr(learner, "batch_size", learner.cfg.batch_size))  # DT: agent.dt.batch_size
@@ -128,9 +142,9 @@ class OfflineTrainer:
         dataset = (self.dataset_best_return, "dataset")
         return [online or dataset, dataset]
 
-    def _rollouts(self) -> EvalResult:
+    def _rollouts(self, video_size: int | None = None) -> EvalResult:
         return run_eval_episodes(self.eval_env, self.learner, self.cfg.eval_episodes, self.seed, self.update,
-                                 self.update)
+                                 self.update, video_size=video_size)
 
     def evaluate(self) -> None:
         extra: dict[str, Any] = {}
@@ -144,7 +158,10 @@ class OfflineTrainer:
                      "episode_reward_std_dataset_target": float(np.std(other)) if other else math.nan,
                      "normalized_score_dataset_target": normalized_score(other_mean, self.reference_return)}
             self.learner.set_target_return(target)
-        result = self._rollouts()
+        video = self.videos is not None and self.videos.wanted(self.update >= self.cfg.updates)
+        result = self._rollouts(video_size=self.videos.size if video and self.videos else None)
+        if result.video and self.videos is not None:
+            self.videos.save(self.update, result.video)
         returns = result.returns
         mean = float(np.mean(returns)) if returns else math.nan
         self.last_eval = mean

@@ -17,7 +17,7 @@ from typing import Any
 import yaml
 from omegaconf import DictConfig, OmegaConf
 
-from repro.config import identity
+from repro.config import drop_non_identity, identity
 from repro.fsutil import atomic_write_text
 from repro.learners.registry import is_offline
 from repro.runformat import CHECKPOINT, CONFIG, DONE, META, RESOLVED, resolved_json, run_path, run_state
@@ -45,9 +45,7 @@ def saved_identity(path: str | Path) -> dict | None:
     file = Path(path) / CONFIG
     if not file.exists():
         return None
-    data = yaml.safe_load(file.read_text()) or {}
-    data.pop("runtime", None)
-    return data
+    return drop_non_identity(yaml.safe_load(file.read_text()) or {})
 
 
 def config_diff(path: str | Path, cfg: DictConfig) -> list[str]:

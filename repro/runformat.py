@@ -26,7 +26,9 @@ CHECKPOINT = "checkpoint.pt"  # state for resume (atomic replace)
 DONE = "DONE"  # written last: the run reached its budget
 FRAMES = "frames.npz"  # the final evaluation's first episode (trajectory figures)
 REPLAY = "replay"  # folder of replay episodes, so that a resume does not rewrite the buffer
-FILES = (CONFIG, META, RESOLVED, EVAL, TRAIN, CHECKPOINT, DONE, FRAMES, REPLAY)
+TB = "tb"  # runtime.tensorboard: TensorBoard event files mirroring eval.csv and train.csv (repro/tblog.py)
+VIDEOS = "videos"  # train.save_video: frame_XXXXXXXXX.mp4 (offline: update_...) per evaluation (repro/video.py)
+FILES = (CONFIG, META, RESOLVED, EVAL, TRAIN, CHECKPOINT, DONE, FRAMES, REPLAY, TB, VIDEOS)
 
 # ---------------------------------------------------------------- CSV columns
 EVAL_COLUMNS = ("frame", "step", "episode", "episode_reward", "episode_reward_std", "episode_length", "success",

@@ -90,6 +90,9 @@ class TrainConfig:
     eval_episodes: int = 10
     checkpoint_every_episodes: int = 1
     save_frames: bool = True
+    save_video: bool = False
+    video_every: str = "all"
+    video_size: int = 256
 
 
 @dataclass
@@ -117,6 +120,7 @@ class RuntimeConfig:
     progress: Any = "auto"
     threads: Optional[int] = None
     record: bool = False
+    tensorboard: bool = False
 
 
 @dataclass

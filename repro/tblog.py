@@ -16,7 +16,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-TB_DIR = "tb"
+from repro.runformat import TB as TB_DIR
+
+__all__ = ["TB_DIR", "TensorBoardMirror", "read_scalars"]
 
 
 def _number(value: Any) -> float | None:

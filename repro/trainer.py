@@ -20,6 +20,7 @@ from repro.offline.record import Recorder
 from repro.replay import ReplayBuffer
 from repro.schema import TrainConfig
 from repro.trainer_base import episode_seed, rng_state, run_eval_episodes, set_rng_state
+from repro.video import EvalVideos
 
 __all__ = ["Counters", "Trainer", "episode_seed"]
 
@@ -35,13 +36,15 @@ class Trainer:
     def __init__(self, cfg: TrainConfig, seed: int, action_repeat: int, env: Env, eval_env: Env, agent: OnlineLearner,
                  buffer: ReplayBuffer, logger: RunLogger, episodes: EpisodeStore,
                  save_checkpoint: Callable[[dict], None], progress=None,
-                 save_frames: Callable[[np.ndarray], None] | None = None, recorder: Recorder | None = None):
+                 save_frames: Callable[[np.ndarray], None] | None = None, recorder: Recorder | None = None,
+                 videos: EvalVideos | None = None):
         self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
         self.env, self.eval_env, self.agent, self.buffer = env, eval_env, agent, buffer
         self.logger, self.episodes, self._save = logger, episodes, save_checkpoint
         self.progress = progress
         self.save_frames = save_frames
         self.recorder = recorder  # runtime.record: keeps every episode and a policy snapshot per evaluation
+        self.videos = videos  # train.save_video: an MP4 of the first evaluation episode
         self.counters = Counters()
         self.batch_size = agent.cfg.batch_size
         self.has_success = env.spec.has_success
@@ -82,17 +85,22 @@ class Trainer:
     def evaluate(self, final: bool = False) -> None:
         started = time.time()
         try:
-            self._evaluate(record=final and self.cfg.save_frames)
+            self._evaluate(record=final and self.cfg.save_frames,
+                           video=self.videos is not None and self.videos.wanted(final))
             if self.recorder is not None:
                 assert self.last_eval is not None  # set by _evaluate
                 self.recorder.snapshot(self.agent, self.counters.step, self.frame, self.last_eval)
         finally:
             self._eval_seconds += time.time() - started
 
-    def _evaluate(self, record: bool = False) -> None:
-        """Evaluate with the policy mean; ``record`` saves the first episode's frames (frames.npz, for F13)."""
+    def _evaluate(self, record: bool = False, video: bool = False) -> None:
+        """Evaluate with the policy mean; ``record`` saves the first episode's frames (frames.npz, for F13),
+        ``video`` its evaluation video."""
         result = run_eval_episodes(self.eval_env, self.agent, self.cfg.eval_episodes, self.seed,
-                                   self.counters.step, self.counters.step, record=record)
+                                   self.counters.step, self.counters.step, record=record,
+                                   video_size=self.videos.size if video and self.videos is not None else None)
+        if result.video and self.videos is not None:
+            self.videos.save(self.frame, result.video)
         returns, successes, frames = result.returns, result.successes, result.frames
         lengths = [n * self.action_repeat for n in result.lengths]  # in frames, as upstream
         if frames and self.save_frames is not None:

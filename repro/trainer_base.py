@@ -23,12 +23,17 @@ class EvalResult:
     lengths: list[int] = field(default_factory=list)  # agent steps per episode
     successes: list[float] = field(default_factory=list)  # 1.0 if success was reached at any step
     frames: list[np.ndarray] = field(default_factory=list)  # first episode's frames (H, W, 3) when recorded
+    video: list[np.ndarray] = field(default_factory=list)  # first episode's render_view frames when asked
 
 
 def run_eval_episodes(env: Env, learner: Learner, episodes: int, seed: int, index: int, step: int,
-                      record: bool = False) -> EvalResult:
+                      record: bool = False, video_size: int | None = None) -> EvalResult:
     """``episodes`` evaluation episodes with the policy mean; resets seeded by (seed, index, episode).
-    An ``EpisodicActor`` (e.g. the Decision Transformer) is told each episode's start and every step."""
+
+    ``video_size``: also render the first episode with ``env.render_view`` (after the reset and after every
+    step: length + 1 frames) for an evaluation video; rendering draws no random number and leaves the
+    observations as they are. An ``EpisodicActor`` (e.g. the Decision Transformer) is told each episode's
+    start and every step."""
     out = EvalResult()
     episodic = learner if isinstance(learner, EpisodicActor) else None
     learner.train(False)
@@ -39,6 +44,8 @@ def run_eval_episodes(env: Env, learner: Learner, episodes: int, seed: int, inde
         total, length, success = 0.0, 0, 0.0
         if record and ep == 0:
             out.frames.append(ts.observation[-3:].transpose(1, 2, 0))
+        if video_size is not None and ep == 0:
+            out.video.append(env.render_view(video_size))
         while not ts.last:
             action = learner.act(ts.observation, step, eval_mode=True)
             ts = env.step(action)
@@ -49,6 +56,8 @@ def run_eval_episodes(env: Env, learner: Learner, episodes: int, seed: int, inde
             success = max(success, float(ts.info.get("success", 0.0)))
             if record and ep == 0:
                 out.frames.append(ts.observation[-3:].transpose(1, 2, 0))
+            if video_size is not None and ep == 0:
+                out.video.append(env.render_view(video_size))
         out.returns.append(total)
         out.lengths.append(length)
         out.successes.append(success)

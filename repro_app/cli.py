@@ -13,7 +13,7 @@ from repro import bench
 from repro.launch import cli as launch_cli
 from repro.offline import make_cli
 from repro.offline.cli import dataset_app
-from repro_app import analysis_cli, reproduce
+from repro_app import analysis_cli, reproduce, watch_cli
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -105,7 +105,7 @@ def _console():
     return Console(width=max(120, shutil.get_terminal_size((120, 24)).columns))
 
 
-for _commands in (launch_cli, analysis_cli, bench, reproduce):
+for _commands in (launch_cli, analysis_cli, bench, reproduce, watch_cli):
     _commands.register(app)
 make_cli.register(dataset_app)  # `repro dataset make` (training layer: it rolls out policies)
 app.add_typer(dataset_app, name="dataset")

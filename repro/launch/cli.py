@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 from collections.abc import Sequence
 from enum import Enum
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
 from rich.console import Console
@@ -17,10 +18,17 @@ from rich.table import Table
 from repro.launch import spec as specs
 from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 
+if TYPE_CHECKING:
+    from repro.launch.status import RunStatus
+
 # The same flags as `repro status`, `figures` and `report`.
 RESULTS_FLAGS = ("--results-root", "--results", "-r")
 STATE_STYLE = {"done": "green", "partial": "yellow", "absent": "dim", "mismatch": "red", "running": "cyan",
                "queued": "blue", "failed": "red", "pending": "dim", "waiting": "magenta"}
+WATCH_SECONDS = 10.0  # `repro status --watch` without N
+# `repro status --watch` stops once every run is in one of these (a waiting run needs its dataset made and the
+# sweep launched again: watching cannot change it)
+FINISHED = ("done", "failed", "waiting")
 
 
 class Launcher(str, Enum):
@@ -188,9 +196,16 @@ def register(app: typer.Typer) -> None:
         results_root: Optional[Path] = typer.Option(
             None, *RESULTS_FLAGS,
             help="Results root the sweeps ran under (default: the config's runtime.results_root)."),
+        watch_: bool = typer.Option(False, "--watch", "-w",
+                                    help="Refresh until every run is done or failed (Ctrl-C stops)."),
+        every: float = typer.Option(WATCH_SECONDS, "--every", metavar="N", help="Seconds between --watch refreshes."),
     ) -> None:
         """Per sweep: done / running / queued / failed / pending per run, last frame and eval return."""
         from repro.launch.state import state_dir
+
+        if every <= 0:
+            raise _fail(f"--every takes a positive number of seconds (got {every:g})")
+        watch = every if watch_ else None
 
         try:
             root = (results_root or _default_results_root()).expanduser().absolute()
@@ -209,10 +224,18 @@ def register(app: typer.Typer) -> None:
                     raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, sorted(known)))
                 _console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
                 return
-            for n in names:
-                _print_status(n, root, state_dir(root, n))
+            while True:
+                if watch is not None:
+                    _console().print(f"[dim]{time.strftime('%H:%M:%S')}  refreshing every {watch:g}s "
+                                     "(Ctrl-C to stop)[/]", highlight=False)
+                statuses = [s for n in names for s in _print_status(n, root, state_dir(root, n))]
+                if watch is None or all(s.status in FINISHED for s in statuses):
+                    return
+                time.sleep(watch)
         except SweepError as exc:
             raise _fail(str(exc)) from None
+        except KeyboardInterrupt:
+            raise typer.Exit(130) from None
 
 
 def _with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) -> tuple[str, ...]:
@@ -253,7 +276,8 @@ def _print_report(report, launcher: Launcher, sweep: str) -> None:
         con.print(f"[red]failed[/] {escape(key)}: log {escape(log)}", highlight=False)
 
 
-def _print_status(name: str, root: Path, sdir: Path) -> None:
+def _print_status(name: str, root: Path, sdir: Path) -> list[RunStatus]:
+    """Print the status table of sweep ``name``; returns its RunStatus list."""
     from repro.launch.status import collect, counts, sweep_runs
 
     statuses = collect(sweep_runs(sdir), root, sdir)
@@ -271,6 +295,7 @@ def _print_status(name: str, root: Path, sdir: Path) -> None:
     for s in statuses:
         if s.status == "failed" and s.log:
             con.print(f"[red]failed[/] {escape(_rel(s.run_dir, root))}: {escape(s.log)}", highlight=False)
+    return statuses
 
 
 def main() -> None:

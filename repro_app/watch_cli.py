@@ -1,0 +1,82 @@
+"""``repro tensorboard`` and ``repro plot``: look at runs while they train (docs/watching.md).
+
+Bad input (no runs, unknown metric or --by column, a missing folder) prints one line and exits 2.
+"""
+
+from __future__ import annotations
+
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from repro.tblog import TB_DIR
+
+
+def _fail(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code=2)
+
+
+def tensorboard_command(root: Path, port: Optional[int] = None) -> list[str]:
+    """``tensorboard --logdir ROOT`` (TensorBoard finds every run's ``tb`` folder below ROOT)."""
+    exe = shutil.which("tensorboard") or str(Path(sys.executable).with_name("tensorboard"))
+    cmd = [exe if Path(exe).exists() else "tensorboard", "--logdir", str(root)]
+    return cmd + (["--port", str(port)] if port is not None else [])
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``tensorboard`` and ``plot`` to ``app``."""
+
+    @app.command("tensorboard")
+    def tensorboard_cmd(
+        root: Path = typer.Argument(..., help="A results root (a whole sweep) or one run directory."),
+        run: bool = typer.Option(False, "--run", help="Start TensorBoard instead of printing the command."),
+        port: Optional[int] = typer.Option(None, "--port", min=1, max=65535, help="TensorBoard's port."),
+    ) -> None:
+        """Print (or --run) the command that opens every run under ROOT in TensorBoard (runtime.tensorboard=true)."""
+        if not root.is_dir():
+            _fail(f"{root} does not exist or is not a directory")
+        n = sum(1 for _ in root.rglob(f"{TB_DIR}/events.out.tfevents.*"))
+        cmd = tensorboard_command(root, port)
+        if not run:
+            typer.echo(shlex.join(cmd))
+            typer.echo(f"# {n} run(s) with event files under {root}"
+                       + ("" if n else " (train with runtime.tensorboard=true)"), err=True)
+            return
+        if n == 0:
+            _fail(f"no event files under {root} (train with runtime.tensorboard=true)")
+        raise typer.Exit(subprocess.call(cmd))
+
+    @app.command("plot")
+    def plot_cmd(
+        paths: list[Path] = typer.Argument(..., help="Results roots and/or run directories."),
+        metric: str = typer.Option("episode_reward", "--metric", "-m",
+                                   help="An eval.csv column, or else a train.csv column (e.g. critic_loss)."),
+        by: str = typer.Option("agent,variant", "--by",
+                               help="Identity columns that name a curve (e.g. agent,variant or method,K)."),
+        out: Path = typer.Option(Path("plot.png"), "--out", "-o", help="PNG to write; the PDF goes beside it."),
+        reps: int = typer.Option(2000, "--reps", min=1, help="Bootstrap repetitions of the CI band."),
+        seed: int = typer.Option(0, "--seed", help="Random state of the bootstrap."),
+    ) -> None:
+        """Learning curves of any runs: one panel per task, mean over seeds with a 95% bootstrap CI band."""
+        from analysis.quick import PlotInputError, by_columns, load_runs, repeated_seeds, tidy_curves
+        from paper_figures.quick_plot import plot_curves
+
+        try:
+            cols = by_columns(by)
+            runs, evals, problems = load_runs(paths)
+            curves = tidy_curves(runs, evals, metric, cols)
+        except PlotInputError as exc:
+            _fail(str(exc))
+        for problem in problems:
+            typer.echo(f"  {problem}", err=True)
+        for cell in repeated_seeds(curves):
+            typer.echo(f"  warning: {cell}: several runs share a seed (averaged); add experiment to --by", err=True)
+        written = plot_curves(curves, metric, out, by=cols, reps=reps, seed=seed)
+        typer.echo(f"{curves['run_id'].nunique()} run(s), {curves['task'].nunique()} task(s): "
+                   f"wrote {', '.join(str(p) for p in written)}")

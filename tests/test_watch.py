@@ -1,0 +1,329 @@
+"""Watching runs (issue 12): TensorBoard mirror of the CSVs, evaluation videos, `repro plot`, `repro status --watch`."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from analysis_fixtures import FRAMES, write_run
+from repro import api, rundir
+from repro.launch.state import record_launch, state_dir
+from repro.logger import RunLogger
+from repro.runformat import DONE, EVAL, TRAIN, WALLCLOCK_COLUMNS
+from repro.tblog import TB_DIR, read_scalars
+from repro.video import count_frames, write_mp4
+from repro_app.cli import app
+from test_train_e2e import TINY, _kill_when, _rows, deterministic
+
+METRICS = ["critic_loss"]
+WATCH = ["runtime.tensorboard=true", "train.save_video=true", "train.video_size=64"]
+REL = Path("default/taco/base/cheetah_run/seed_3")
+
+
+def cli(*args: str) -> tuple[int, str, str]:
+    res = CliRunner().invoke(app, list(args))
+    if res.exception and not isinstance(res.exception, SystemExit):
+        raise res.exception
+    return res.exit_code, res.stdout, res.stderr
+
+
+def csv_series(run: Path) -> dict[str, list[tuple[int, float]]]:
+    """What the event files must hold: every non-empty numeric CSV cell as ``{file}/{column}`` at its frame."""
+    out: dict[str, list[tuple[int, float]]] = {}
+    for prefix, name in (("eval", EVAL), ("train", TRAIN)):
+        with open(run / name, newline="") as f:
+            for row in csv.DictReader(f):
+                for key, value in row.items():
+                    if key != "frame" and value != "":
+                        out.setdefault(f"{prefix}/{key}", []).append((int(row["frame"]), float(value)))
+    return out
+
+
+def assert_mirrors_csv(run: Path) -> None:
+    tb, expected = read_scalars(run), csv_series(run)
+    assert set(tb) == set(expected)
+    for tag, points in expected.items():
+        steps = [s for s, _ in tb[tag]]
+        assert len(steps) == len(set(steps)), f"{tag}: a step twice {steps}"
+        assert steps == [s for s, _ in points], tag
+        np.testing.assert_allclose([v for _, v in tb[tag]], [v for _, v in points], rtol=1e-6, err_msg=tag)
+
+
+def _train_row(frame: int, loss: float | None) -> dict:
+    return {"frame": frame, "step": frame // 2, "episode": frame // 100, "episode_reward": frame / 7,
+            "episode_length": 100, "success": None, "buffer_size": frame, "stddev": 0.5, "fps": 10.0,
+            "total_time": 1.0, "critic_loss": loss}
+
+
+def _eval_row(frame: int) -> dict:
+    return {"frame": frame, "step": frame // 2, "episode": frame // 100, "episode_reward": frame / 3,
+            "episode_reward_std": 0.0, "episode_length": 100.0, "success": None, "eval_episodes": 1,
+            "total_time": 2.0}
+
+
+# ----------------------------------------------------------------------------- TensorBoard mirror
+def test_mirror_equals_csv_and_a_resume_rebuilds_it_without_repeated_steps(tmp_path: Path):
+    log = RunLogger(tmp_path, METRICS, echo=lambda s: None, tensorboard=True)
+    log.log_eval(_eval_row(0))
+    log.log_train(_train_row(100, None))
+    checkpoint = log.offsets()  # what a checkpoint stores
+    log.log_train(_train_row(200, 0.25))  # written after the checkpoint, then the process dies
+    log.log_eval(_eval_row(200))
+    log.close()
+    assert read_scalars(tmp_path)["train/episode_reward"][-1][0] == 200
+    resumed = RunLogger(tmp_path, METRICS, offsets=checkpoint, echo=lambda s: None, tensorboard=True)
+    assert_mirrors_csv(tmp_path)  # truncated CSVs -> event files without the rows after the checkpoint
+    assert [s for s, _ in read_scalars(tmp_path)["train/episode_reward"]] == [100]
+    resumed.log_train(_train_row(200, 0.5))  # the resumed run writes the same frames again
+    resumed.log_eval(_eval_row(200))
+    resumed.close()
+    assert_mirrors_csv(tmp_path)
+    assert read_scalars(tmp_path)["train/critic_loss"] == [(200, 0.5)]  # empty cells are no points
+    assert len(list((tmp_path / TB_DIR).iterdir())) == 1
+
+
+def test_offline_mirror_steps_are_updates(tmp_path: Path):
+    from repro.offline_trainer import OfflineLogger
+
+    log = OfflineLogger(tmp_path, ["actor_loss"], echo=lambda s: None, tensorboard=True)
+    for update in (0, 1000):
+        log.log_eval({"update": update, "episode_reward": update / 10, "episode_reward_std": 0.0,
+                      "episode_length": 100.0, "success": None, "eval_episodes": 1, "normalized_score": None,
+                      "reference_return": None, "score_reference": "none", "total_time": 1.0})
+    log.log_train({"update": 1000, "updates_per_s": 5.0, "total_time": 1.0, "actor_loss": -0.5})
+    log.close()
+    tb = read_scalars(tmp_path)
+    assert tb["eval/episode_reward"] == [(0, 0.0), (1000, 100.0)] and tb["train/actor_loss"] == [(1000, -0.5)]
+    assert "eval/score_reference" not in tb and "eval/normalized_score" not in tb  # text and empty cells
+
+
+def test_mirror_is_off_by_default(tmp_path: Path):
+    log = RunLogger(tmp_path, METRICS, echo=lambda s: None)
+    log.log_eval(_eval_row(0))
+    log.close()
+    assert not (tmp_path / TB_DIR).exists()
+
+
+# ----------------------------------------------------------------------------- videos
+def test_video_decodes_to_the_frames_written(tmp_path: Path):
+    frames = np.random.default_rng(0).integers(0, 255, size=(23, 32, 48, 3), dtype=np.uint8)
+    path = write_mp4(tmp_path / "v.mp4", frames)
+    assert count_frames(path) == 23
+    assert [p.name for p in tmp_path.iterdir()] == ["v.mp4"]  # no temporary file left
+    with pytest.raises(ValueError, match="even"):
+        write_mp4(tmp_path / "odd.mp4", frames[:, :31])
+
+
+def test_video_options_are_checked():
+    code, _, err = cli("train", "--dry-run", "train.video_every=sometimes")
+    assert code == 2 and "train.video_every" in err
+    code, _, err = cli("train", "--dry-run", "train.video_size=255")
+    assert code == 2 and "train.video_size" in err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("task", ["cheetah_run", "hammer"])
+def test_render_view_leaves_observations_unchanged(task: str):
+    from repro.envs import make_env
+
+    def rollout(view: bool) -> tuple[np.ndarray, list[np.ndarray]]:
+        env = make_env(task, seed=1, action_repeat=2, frame_stack=3, image_size=84)
+        try:
+            obs, views = [env.reset(seed=5).observation], []
+            actions = np.random.default_rng(0).uniform(-1, 1, (4, env.spec.action_dim)).astype(np.float32)
+            for a in actions:
+                if view:
+                    views.append(env.render_view(64))
+                obs.append(env.step(a).observation)
+            return np.stack(obs), views
+        finally:
+            env.close()
+
+    plain, _ = rollout(False)
+    viewed, views = rollout(True)
+    np.testing.assert_array_equal(plain, viewed)
+    assert views[0].shape == (64, 64, 3) and views[0].dtype == np.uint8 and views[0].std() > 0
+
+
+@pytest.fixture(scope="module")
+def tiny_pair(tmp_path_factory) -> tuple[Path, Path]:
+    """The same tiny run without and with TensorBoard + videos (200 frames: evaluations at frames 0 and 200)."""
+    short = [*TINY, "train.frames=200"]
+    plain = api.train([*short, f"runtime.results_root={tmp_path_factory.mktemp('plain')}"], echo=lambda s: None)
+    watched = api.train([*short, *WATCH, f"runtime.results_root={tmp_path_factory.mktemp('watched')}"],
+                        echo=lambda s: None)
+    return plain, watched
+
+
+@pytest.mark.slow
+def test_video_and_tensorboard_change_no_logged_number(tiny_pair: tuple[Path, Path]):
+    plain, watched = tiny_pair
+    for name in (EVAL, TRAIN):
+        pd.testing.assert_frame_equal(deterministic(watched / name), deterministic(plain / name))
+    assert set(WALLCLOCK_COLUMNS) <= set(pd.read_csv(watched / TRAIN).columns)
+    assert not (plain / TB_DIR).exists() and not (plain / "videos").exists()
+
+
+@pytest.mark.slow
+def test_tiny_run_writes_videos_and_event_files(tiny_pair: tuple[Path, Path]):
+    import imageio_ffmpeg
+
+    _, watched = tiny_pair
+    assert_mirrors_csv(watched)
+    ev = pd.read_csv(watched / EVAL)
+    videos = sorted((watched / "videos").iterdir())
+    assert [v.name for v in videos] == [f"frame_{f:09d}.mp4" for f in ev["frame"]]
+    steps = (ev["episode_length"] // 2).astype(int)  # frames -> agent steps (action repeat 2)
+    for video, n in zip(videos, steps):
+        assert count_frames(video) == n + 1  # the reset frame and one per step
+        meta = next(imageio_ffmpeg.read_frames(str(video)))
+        assert tuple(meta["size"]) == (64, 64)
+
+
+@pytest.mark.slow
+def test_video_every_last_writes_the_final_evaluation_only(tmp_path: Path):
+    run = api.train([*TINY, "train.frames=200", "train.save_video=true", "train.video_size=32",
+                     "train.video_every=last", f"runtime.results_root={tmp_path}"], echo=lambda s: None)
+    assert [v.name for v in (run / "videos").iterdir()] == ["frame_000000200.mp4"]
+
+
+@pytest.mark.slow
+def test_sigkill_and_resume_leave_no_repeated_step_in_event_files(tmp_path: Path):
+    run = tmp_path / REL
+    cmd = [sys.executable, "-m", "repro", "train", *TINY, *WATCH, f"runtime.results_root={tmp_path}", "--no-progress"]
+    # Killed after the evaluation at frame 200, which comes after the checkpoint of episode 2: the resume
+    # truncates that row and writes it again, so a mirror that only appended would hold frame 200 twice.
+    seen: list[float] = []
+
+    def ready() -> bool:  # 1 s after the row appears, so that its event is written too (episode 3 takes longer)
+        if not seen and _rows(run / EVAL) >= 2 and (run / rundir.CHECKPOINT).exists():
+            seen.append(time.time())
+        return bool(seen) and time.time() - seen[0] > 1.0
+
+    _kill_when(cmd, ready)
+    assert not (run / DONE).exists() and _rows(run / TRAIN) == 2
+    assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200]  # the point the resume rewrites
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "resumed" in out.stdout
+    assert_mirrors_csv(run)
+    assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200, 400]
+
+
+# ----------------------------------------------------------------------------- repro tensorboard
+def test_tensorboard_command_names_the_root(tmp_path: Path):
+    code, out, _ = cli("tensorboard", str(tmp_path))
+    assert code == 0 and out.strip().endswith(f"--logdir {tmp_path}") and "tensorboard" in out
+    code, _, err = cli("tensorboard", str(tmp_path / "missing"))
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    code, _, err = cli("tensorboard", str(tmp_path), "--run")
+    assert code == 2 and "runtime.tensorboard=true" in err  # nothing to show: refused, TensorBoard not started
+
+
+# ----------------------------------------------------------------------------- repro plot
+@pytest.fixture(scope="module")
+def plot_root(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("plot")
+    for task in ("cheetah_run", "hopper_hop"):
+        for algo, final in (("taco", 600.0), ("drqv2", 300.0)):
+            for seed, offset in enumerate((-30.0, 0.0, 30.0)):
+                write_run(root, experiment="main", algo=algo, task=task, seed=seed, final=final + offset)
+    return root
+
+
+def test_plot_writes_non_blank_png_and_pdf(plot_root: Path, tmp_path: Path):
+    import matplotlib.image
+
+    code, out, _ = cli("plot", str(plot_root), "--out", str(tmp_path / "curves.png"), "--reps", "200")
+    assert code == 0, out
+    assert "12 run(s), 2 task(s)" in out
+    img = matplotlib.image.imread(tmp_path / "curves.png")
+    assert img.ndim == 3 and img.shape[0] > 200 and img[..., :3].std() > 0.05
+    pdf = (tmp_path / "curves.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF") and len(pdf) > 5000
+
+
+def test_plot_curves_are_the_seed_means_of_the_runs(plot_root: Path):
+    from analysis.quick import by_columns, load_runs, tidy_curves
+
+    runs, evals, _ = load_runs([plot_root, plot_root / "main/taco/base/cheetah_run/seed_0"])  # a run twice
+    curves = tidy_curves(runs, evals, "episode_reward", by_columns("agent,variant"))
+    last = curves[curves["frame"] == FRAMES].groupby(["task", "label"])["value"].agg(["mean", "count"])
+    assert last.loc[("cheetah_run", "taco / base")].tolist() == [600.0, 3]
+    assert last.loc[("hopper_hop", "drqv2 / base")].tolist() == [300.0, 3]
+    train = tidy_curves(runs, evals, "critic_loss", by_columns("method"))
+    assert set(train["value"]) == {0.5} and set(train["frame"]) == {2000, 3000}  # empty first-episode cells
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--metric", "no_such_metric"], "unknown metric"),
+    (["--by", "agent,colour"], "unknown --by column 'colour'"),
+    (["--metric", "frame"], "x axis"),
+])
+def test_plot_bad_input_is_one_line(plot_root: Path, tmp_path: Path, args: list[str], message: str):
+    code, _, err = cli("plot", str(plot_root), "--out", str(tmp_path / "x.png"), *args)
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_plot_without_runs_is_one_line(tmp_path: Path):
+    for target in (tmp_path, tmp_path / "missing"):
+        code, _, err = cli("plot", str(target), "--out", str(tmp_path / "x.png"))
+        assert code == 2 and len(err.strip().splitlines()) == 1, err
+
+
+# ----------------------------------------------------------------------------- repro status --watch
+def _launched(root: Path, done: bool) -> Path:
+    run = write_run(root, experiment="w", algo="taco", task="cheetah_run", seed=1, final=1.0, done=done)
+    record_launch(state_dir(root, "w"), "w", root / "w.yaml", "local",
+                  {"w/taco/base/cheetah_run/s1": {"run_dir": str(run), "overrides": []}})
+    return run
+
+
+def test_status_watch_returns_at_once_when_every_run_is_done(tmp_path: Path):
+    _launched(tmp_path, done=True)
+    t0 = time.time()
+    code, out, _ = cli("status", "w", "--results-root", str(tmp_path), "--watch", "--every", "30")
+    assert code == 0 and "1 done" in out and out.count("refreshing") == 1
+    assert time.time() - t0 < 20
+
+
+def test_status_watch_refreshes_until_the_run_finishes(tmp_path: Path):
+    run = _launched(tmp_path, done=False)
+    (run / DONE).unlink(missing_ok=True)
+    timer = threading.Timer(1.5, lambda: rundir.write_done(run, {"frame": FRAMES}))
+    timer.start()
+    try:
+        code, out, _ = cli("status", "w", "--results-root", str(tmp_path), "--watch", "--every", "0.2")
+    finally:
+        timer.cancel()
+    assert code == 0
+    assert out.count("refreshing every 0.2s") >= 3  # pending, pending, ..., done
+    assert "1 pending" in out and out.rstrip().count("1 done") == 1
+
+
+def test_status_watch_bad_interval_is_one_line(tmp_path: Path):
+    _launched(tmp_path, done=True)
+    code, _, err = cli("status", "w", "--results-root", str(tmp_path), "--watch", "--every", "0")
+    assert code == 2 and len(err.strip().splitlines()) == 1
+
+
+def test_video_switches_are_not_run_identity(tmp_path):
+    """Resuming a run with videos switched on is the same run; any trained-on change still is not."""
+    from repro import rundir
+    from repro.config import compose
+
+    base = ["profile=tiny", "task=cheetah_run", f"runtime.results_root={tmp_path}"]
+    rundir.write_config(tmp_path, compose(base))
+    assert rundir.config_diff(tmp_path, compose([*base, "train.save_video=true", "train.video_every=last",
+                                                 "train.video_size=128"])) == []
+    assert rundir.config_diff(tmp_path, compose([*base, "train.eval_episodes=2"])) != []
