@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -73,33 +73,31 @@ class CsvLog:
         self._f.close()
 
 
-class RunLogger:
-    """The run's ``eval.csv`` and ``train.csv`` (columns from repro.runformat) plus console output; with
-    ``tensorboard`` (runtime.tensorboard) also TensorBoard scalars at step = frame (repro/tblog.py), rebuilt
-    from the CSVs once they are truncated to the checkpoint, so a resumed run never holds a point twice."""
+class CsvPairLogger:
+    """A run's ``eval.csv`` and ``train.csv`` (opened at the checkpoint's offsets) and, with ``tensorboard``
+    (runtime.tensorboard), TensorBoard scalars at ``step_column`` (repro/tblog.py), rebuilt from the CSVs once
+    they are truncated to the checkpoint, so a resumed run never holds a point twice. Subclasses say what an
+    evaluation prints."""
 
-    def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
-                 offsets: dict[str, int] | None = None, echo=print, tensorboard: bool = False):
+    def __init__(self, run_dir: str | os.PathLike, eval_columns: Sequence[str], train_cols: Sequence[str],
+                 offsets: dict[str, int] | None, echo: Callable[[str], None], tensorboard: bool, step_column: str):
         run_dir = Path(run_dir)
         offsets = offsets or {}
-        self.eval = CsvLog(run_dir / EVAL, EVAL_COLUMNS, offsets.get("eval"))
-        self.train = CsvLog(run_dir / TRAIN, train_columns(metric_names), offsets.get("train"))
+        self.eval = CsvLog(run_dir / EVAL, eval_columns, offsets.get("eval"))
+        self.train = CsvLog(run_dir / TRAIN, train_cols, offsets.get("train"))
         self.echo = echo
         self.tb: TensorBoardMirror | None = None
         if tensorboard:
-            self.tb = TensorBoardMirror(run_dir, step_column="frame")
+            self.tb = TensorBoardMirror(run_dir, step_column=step_column)
             self.tb.rebuild({"eval": self.eval.path, "train": self.train.path})
 
     def offsets(self) -> dict[str, int]:
         return {"eval": self.eval.offset(), "train": self.train.offset()}
 
-    def log_eval(self, row: dict[str, Any]) -> None:
+    def _write_eval(self, row: dict[str, Any]) -> None:
         self.eval.write(row)
         if self.tb is not None:
             self.tb.add_row("eval", row)
-        success = "" if row.get("success") is None else f"  success {row['success']:.2f}"
-        self.echo(f"eval  frame {row['frame']:>9}  return {row['episode_reward']:8.2f}"
-                  f" ± {row['episode_reward_std']:.2f}{success}")
 
     def log_train(self, row: dict[str, Any]) -> None:
         self.train.write(row)
@@ -111,3 +109,18 @@ class RunLogger:
         self.train.close()
         if self.tb is not None:
             self.tb.close()
+
+
+class RunLogger(CsvPairLogger):
+    """The online run's logs: columns from repro.runformat, TensorBoard step = frame."""
+
+    def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
+                 offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print,
+                 tensorboard: bool = False):
+        super().__init__(run_dir, EVAL_COLUMNS, train_columns(metric_names), offsets, echo, tensorboard, "frame")
+
+    def log_eval(self, row: dict[str, Any]) -> None:
+        self._write_eval(row)
+        success = "" if row.get("success") is None else f"  success {row['success']:.2f}"
+        self.echo(f"eval  frame {row['frame']:>9}  return {row['episode_reward']:8.2f}"
+                  f" ± {row['episode_reward_std']:.2f}{success}")

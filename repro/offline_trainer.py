@@ -17,20 +17,18 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any, Union
 
 import numpy as np
 
 from repro.envs.base import Env
 from repro.learners.base import Learner, ReturnConditioned, Sampler
-from repro.logger import CsvLog
+from repro.logger import CsvPairLogger
 from repro.offline.reference import normalized_score
 from repro.offline.replay import DatasetError
 from repro.replay import ReplayBuffer
-from repro.runformat import EVAL, OFFLINE_TRAIN_COLUMNS, TRAIN, offline_eval_columns
+from repro.runformat import OFFLINE_TRAIN_COLUMNS, offline_eval_columns
 from repro.schema import OfflineConfig
-from repro.tblog import TensorBoardMirror
 from repro.trainer_base import EvalResult, WallClock, rng_state, run_eval_episodes, set_rng_state
 from repro.video import EvalVideos
 
@@ -38,47 +36,23 @@ BatchSource = Union[ReplayBuffer, Sampler]  # where update batches come from (bo
 LEARNER_STATE = ("modules", "optimizers")  # learner state_dict keys stored as "agent" / "optimizers"
 
 
-class OfflineLogger:
-    """eval.csv and train.csv of an offline run (columns: repro/runformat.py); with ``tensorboard`` also
-    TensorBoard scalars at step = update (repro/tblog.py), rebuilt from the (truncated) CSVs on every start."""
+class OfflineLogger(CsvPairLogger):
+    """eval.csv and train.csv of an offline run (columns: repro/runformat.py), TensorBoard step = update."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
                  offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print,
                  return_conditioned: bool = False, tensorboard: bool = False):
-        offsets = offsets or {}
-        self.eval = CsvLog(Path(run_dir) / EVAL, offline_eval_columns(return_conditioned), offsets.get("eval"))
-        self.train = CsvLog(Path(run_dir) / TRAIN, OFFLINE_TRAIN_COLUMNS + list(metric_names),
-                            offsets.get("train"))
-        self.echo = echo
-        self.tb: TensorBoardMirror | None = None
-        if tensorboard:
-            self.tb = TensorBoardMirror(run_dir, step_column="update")
-            self.tb.rebuild({"eval": self.eval.path, "train": self.train.path})
-
-    def offsets(self) -> dict[str, int]:
-        return {"eval": self.eval.offset(), "train": self.train.offset()}
+        super().__init__(run_dir, offline_eval_columns(return_conditioned),
+                         OFFLINE_TRAIN_COLUMNS + list(metric_names), offsets, echo, tensorboard, "update")
 
     def log_eval(self, row: dict[str, Any]) -> None:
-        self.eval.write(row)
-        if self.tb is not None:
-            self.tb.add_row("eval", row)
+        self._write_eval(row)
         score = row.get("normalized_score")
         extra = f"  score {score:.1f} ({row['score_reference']})" if score is not None else ""
         if row.get("episode_reward_dataset_target") is not None:
             extra += f"  (dataset target: return {row['episode_reward_dataset_target']:.2f})"
         self.echo(f"eval  update {row['update']:>8}  return {row['episode_reward']:8.2f}"
                   f" ± {row['episode_reward_std']:.2f}{extra}")
-
-    def log_train(self, row: dict[str, Any]) -> None:
-        self.train.write(row)
-        if self.tb is not None:
-            self.tb.add_row("train", row)
-
-    def close(self) -> None:
-        self.eval.close()
-        self.train.close()
-        if self.tb is not None:
-            self.tb.close()
 
 
 class OfflineTrainer:
