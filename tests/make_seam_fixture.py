@@ -1,6 +1,11 @@
-"""Write tests/data/online_updates.json (run once, from the code before the learner-seam refactor).
+"""Write tests/data/online_updates.json: a few fixed-seed online updates of each agent (see seam_reference.py).
 
-    PYTHONPATH=$PWD python tests/make_seam_fixture.py
+    ATEN_CPU_CAPABILITY=avx2 ONEDNN_MAX_CPU_ISA=AVX2 PYTHONPATH=$PWD python tests/make_seam_fixture.py
+
+The record names the torch version and CPU kernels that wrote it. The packaged one was written with the AVX2
+kernels forced (as above), which reproduce bit for bit the record the code before the learner seam wrote on an
+AVX2 machine (its sha256 digests of every tensor matched); test_seam.py compares any machine with it up to
+seam_reference.RTOL.
 """
 
 from __future__ import annotations

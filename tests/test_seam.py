@@ -1,5 +1,6 @@
-"""The learner seam must not change the online agent: a few fixed-seed updates are bit-identical to the
-record written by the code before the refactor (tests/data/online_updates.json, see make_seam_fixture.py)."""
+"""The learner seam must not change the online agent: a few fixed-seed updates equal the record written by the
+code before the refactor (tests/data/online_updates.json, see make_seam_fixture.py), up to the last-bit noise
+between CPUs (seam_reference.RTOL), and bit for bit when computed twice in one process."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from seam_reference import AGENTS, record  # noqa: E402
+from seam_reference import AGENTS, RTOL, deviation, record, written_by  # noqa: E402
 
 FIXTURE = Path(__file__).parent / "data" / "online_updates.json"
 
@@ -21,18 +22,31 @@ def expected() -> dict:
     return json.loads(FIXTURE.read_text())
 
 
+@pytest.fixture(scope="module")
+def today() -> dict:
+    return {name: json.loads(json.dumps(record(name))) for name in AGENTS}
+
+
+def _where(expected: dict) -> str:
+    return f" (record from {expected['written_by']}, here {written_by()})"
+
+
 @pytest.mark.parametrize("name", AGENTS)
-def test_online_updates_bit_identical_to_pre_refactor_record(name: str, expected: dict):
-    want = expected[name]
-    got = json.loads(json.dumps(record(name)))  # same float repr as the fixture
-    hint = "" if got["torch"] == want["torch"] else f" (fixture from torch {want['torch']}, now {got['torch']})"
-    assert got["parameter_counts"] == want["parameter_counts"]
-    assert got["metric_names"] == want["metric_names"]
-    assert got["metrics"] == want["metrics"], "update metrics differ" + hint
-    assert got["actions"] == want["actions"], "actions differ" + hint
-    assert sorted(got["state"]) == sorted(want["state"]), "state dict keys differ"
-    changed = [k for k in want["state"] if got["state"][k] != want["state"][k]]
-    assert not changed, f"{len(changed)} tensors differ, e.g. {changed[:3]}" + hint
+def test_online_updates_equal_the_pre_refactor_record(name: str, expected: dict, today: dict):
+    worst = deviation(today[name], expected[name])
+    over = {kind: w for kind, w in worst.items() if not w[0] <= 1.0}
+    assert not over, f"beyond tolerance {RTOL}: {over}" + _where(expected)
+
+
+def test_a_one_line_change_to_the_update_exceeds_the_tolerance_by_orders_of_magnitude(expected: dict):
+    """Dropping the target-noise clip (stddev_clip 0.3 -> none) is a one-line change to the update."""
+    worst = deviation(json.loads(json.dumps(record("drqv2", ["agent.stddev_clip=1000000"]))), expected["drqv2"])
+    assert worst["metrics"][0] > 1000 and worst["actions"][0] > 1000, worst
+    assert worst["parameters"][0] > 10 and worst["optimizer"][0] > 10, worst
+
+
+def test_the_record_is_bit_identical_within_one_process(today: dict):
+    assert json.loads(json.dumps(record("taco"))) == today["taco"]
 
 
 def test_fixture_covers_every_module_and_optimizer(expected: dict):
@@ -41,4 +55,4 @@ def test_fixture_covers_every_module_and_optimizer(expected: dict):
                  "modules.action_encoder.", "modules.objective.taco.", "optimizers.aux.", "optimizers.critic."):
         assert any(k.startswith(part) for k in keys), part
     assert len(expected["taco"]["metrics"]) >= 3 and "taco_loss" in expected["taco"]["metrics"][0]
-    # the record is CPU- and torch-version-specific: a failure names both versions (see the hint above)
+    assert {"torch", "cpu_capability"} <= set(expected["written_by"])
