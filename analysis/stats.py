@@ -26,13 +26,13 @@ import pandas as pd
 from rliable import library as rly
 from rliable import metrics
 
+from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
+
 DDOF = 1
-DEFAULT_REPS = 50_000  # rliable's default for get_interval_estimates
 PROFILE_REPS = 2_000  # rliable's default for create_performance_profile
 # rliable's probability of improvement runs scipy's Mann-Whitney U per task per repetition (about 20 ms per
 # repetition for 9 tasks on one CPU core), so its CI uses fewer repetitions.
 POI_REPS = 1_000
-DEFAULT_SEED = 0
 CI_SIZE = 0.95
 SCORE_SCALE = {"episode_reward": 1000.0, "success": 100.0}
 

@@ -10,7 +10,7 @@ from typing import NoReturn, Optional
 
 import typer
 
-from analysis.stats import DEFAULT_REPS, DEFAULT_SEED
+from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
 
 DEFAULT_RESULTS = Path("runs")
 RESULTS_OPT = typer.Option(DEFAULT_RESULTS, "--results", "-r", help="Results root holding the run directories.")
