@@ -1,8 +1,12 @@
 """`repro reproduce`: the main job, a tiny end-to-end reproduction on the defaults.
 
-It trains the `tiny` sweep locally (TACO and DrQ-v2, two DMC tasks, two seeds, real rendering and
-updates), then renders every table and figure, the claim verdicts, the audit and REPORT.md/.html
-from those runs. Re-running it resumes or skips what is already done.
+Three steps, each resumable (a re-run skips what is done):
+1. online: the `tiny` sweep (TACO and DrQ-v2, two DMC tasks, two seeds, real rendering and updates),
+   recorded (runtime.record=true);
+2. offline: a medium and a full-replay dataset made from one recorded run (taco, cheetah_run, seed 1),
+   then the `tiny_offline` sweep (every offline learner on both datasets, a few updates);
+3. report: every table and figure, the claim verdicts, the audit and REPORT.md/.html from those runs
+   (`tiny` read as experiment `main`, `tiny_offline` as `offline`).
 """
 
 from __future__ import annotations
@@ -15,6 +19,44 @@ from typing import Optional
 
 import typer
 
+OFFLINE_SWEEP = "tiny_offline"
+# The recorded online run the datasets come from: {experiment}/{agent}/{variant}/{task}/seed_{seed}.
+SOURCE_RUN = Path("taco/base/cheetah_run/seed_1")
+# Dataset kinds and their size in transitions (whole 50-step episodes of the tiny profile; full-replay
+# takes every recorded episode up to this many).
+DATASETS = {"medium": 100, "full-replay": 200}
+
+
+def _call(cmd: list[str], what: str) -> None:
+    typer.echo(f"  $ repro {' '.join(cmd[3:])}")
+    rc = subprocess.call(cmd)
+    if rc != 0:
+        typer.echo(f"error: {what} failed (exit {rc})", err=True)
+        raise typer.Exit(1)
+
+
+def _offline_leg(results_root: Path, sweep: str, max_parallel: Optional[int]) -> bool:
+    """Make the two datasets from the recorded source run and train the offline sweep on them. False (with one
+    line saying why) when the source run has no recording, e.g. a `tiny` run trained before recording was on."""
+    source = results_root / sweep / SOURCE_RUN
+    if not (source / "record").is_dir():
+        typer.echo(f"  skipped: {source} has no recording (trained without runtime.record=true); remove it and "
+                   "re-run `repro reproduce` to include the offline half")
+        return False
+    repro = [sys.executable, "-m", "repro"]
+    for kind, transitions in DATASETS.items():
+        folder = results_root / "datasets" / "cheetah_run" / kind
+        if (folder / "manifest.json").is_file():
+            typer.echo(f"  {kind}: {folder} exists")
+            continue
+        _call([*repro, "dataset", "make", "--source", str(source), "--kind", kind, "--transitions",
+               str(transitions), "--seed", "1", "--device", "cpu"], f"dataset make --kind {kind}")
+    cmd = [*repro, "sweep", OFFLINE_SWEEP, "--results", str(results_root)]
+    if max_parallel:
+        cmd += ["--max-parallel", str(max_parallel)]
+    _call(cmd, f"the {OFFLINE_SWEEP} sweep (see `repro status {OFFLINE_SWEEP}`)")
+    return True
+
 
 def register(app: typer.Typer) -> None:
     @app.command()
@@ -24,16 +66,19 @@ def register(app: typer.Typer) -> None:
         sweep: str = typer.Option("tiny", help="Sweep to train before reporting."),
         max_parallel: Optional[int] = typer.Option(None, "--max-parallel", help="Runs at once (default: cores / 2)."),
         reps: int = typer.Option(2000, help="Bootstrap repetitions (rliable's default is 50,000)."),
+        offline: bool = typer.Option(True, "--offline/--no-offline",
+                                     help="Also make two tiny datasets and train every offline learner on them."),
         render_envs: bool = typer.Option(
             False, "--render-envs/--no-render-envs", help="Let F13 render random-action frames for tasks without runs."
         ),
     ):
-        """Train the tiny sweep locally, then build every table, figure, claim and the report from it."""
+        """Train the tiny sweeps locally (online, then offline), then build every table, figure, claim and the
+        report from them."""
         t0 = time.time()
         cmd = [sys.executable, "-m", "repro", "sweep", sweep, "--results", str(results_root)]
         if max_parallel:
             cmd += ["--max-parallel", str(max_parallel)]
-        typer.echo(f"[1/2] training: {' '.join(cmd[2:])}")
+        typer.echo(f"[1/3] online training: {' '.join(cmd[2:])}")
         rc = subprocess.call(cmd)
         if rc != 0:
             typer.echo(f"error: the sweep failed (exit {rc}); see `repro status {sweep}`", err=True)
@@ -41,14 +86,22 @@ def register(app: typer.Typer) -> None:
         for csv in sorted(results_root.glob(f"{sweep}/*/*/*/*/eval.csv")):
             typer.echo(f"\n{csv}:\n{csv.read_text().rstrip()}")
 
+        typer.echo(f"\n[2/3] offline: datasets from {sweep}/{SOURCE_RUN}, then the {OFFLINE_SWEEP} sweep")
+        experiment_map = {"main": [sweep]}
+        if not offline:
+            typer.echo("  skipped (--no-offline)")
+        elif _offline_leg(results_root, sweep, max_parallel):
+            experiment_map["offline"] = [OFFLINE_SWEEP]
+
         from analysis.context import Context
         from analysis.load import load_results
         from repro_app.report import build_report
 
-        typer.echo(f"\n[2/2] report from {results_root} (budget: the runs' own frame budget)")
+        typer.echo(f"\n[3/3] report from {results_root} (budget: the online runs' own frame budget)")
         results = load_results(results_root)
-        frames = int(results.runs["train_frames"].max()) if not results.empty else 400
+        online = results.runs[results.runs["offline_updates"].isna()] if not results.empty else results.runs
+        frames = int(online["train_frames"].max()) if len(online) else 400
         ctx = Context(results=results, out_dir=out, budget=frames, reps=reps, tsne_n=200, min_seeds=1,
-                      experiment_map={"main": [sweep]}, render_envs=render_envs)
+                      experiment_map=experiment_map, render_envs=render_envs)
         md, html = build_report(ctx, progress=lambda s: typer.echo(f"  {s}"))
         typer.echo(f"\nreport: {md} and {html} ({time.time() - t0:.0f} s in all)")
