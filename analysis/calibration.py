@@ -135,8 +135,12 @@ def user_drqv2_runs(results: Results) -> tuple[pd.DataFrame, int]:
 
 
 def calibrate(results: Results, published: Results | None = None, reps: int = DEFAULT_REPS,
-              seed: int = DEFAULT_SEED, min_seeds: int = MIN_SEEDS) -> tuple[list[CalibrationRow], list[str]]:
-    """One :class:`CalibrationRow` per task, experiment and variant of the user's DrQ-v2 runs, and notes."""
+              seed: int = DEFAULT_SEED, min_seeds: int = MIN_SEEDS,
+              at: float | None = None) -> tuple[list[CalibrationRow], list[str]]:
+    """One :class:`CalibrationRow` per task, experiment and variant of the user's DrQ-v2 runs, and notes.
+
+    ``at``: read every cell at this frame instead of its own budget (a cell whose runs do not all reach it is
+    read at its own budget, and its note says so)."""
     published = packaged_published() if published is None else published
     if not published.runs.empty and (published.runs["source"] != SOURCE_PUBLISHED).any():
         raise ValueError("the published curves must come from analysis.load.load_published")
@@ -158,12 +162,17 @@ def calibrate(results: Results, published: Results | None = None, reps: int = DE
             continue
         frame = float(last.min())
         note = ""
+        if at is not None and at <= frame:
+            frame = float(at)
+        elif at is not None:
+            note = f"asked for {frames_text(at)}; runs reach {frames_text(frame)}, read there"
         if end is None:
             rows.append(_row(base, frame, np.array([]), np.array([]), NO_CURVE, math.nan, math.nan, math.nan,
                              "the published curves have no such task", reps, seed))
             continue
         if frame > end:
-            note = f"runs reach {frames_text(frame)}; the published curve ends at {frames_text(end)}, read there"
+            note = f"{note}; " if note else ""
+            note += f"runs reach {frames_text(frame)}; the published curve ends at {frames_text(end)}, read there"
             frame = end
         cell_eval = user_eval[user_eval["run_id"].isin(cell["run_id"])]
         user_vals = values_at(Results(results.root, cell, cell_eval), frame)["value"].to_numpy(dtype=float)
@@ -253,6 +262,7 @@ def published_band(published: Results, task: str, upto: float, reps: int, seed: 
 
 def band_caption(reps: int, seed: int) -> str:
     """What a published band on a figure is and where it comes from."""
-    return (f"Grey dashed line and band: DrQ-v2 as published by its authors ({SOURCE_TEXT}; 8-10 seeds per task), "
-            f"not your runs: mean and 95% stratified-bootstrap CI of the mean over their seeds (rliable, {reps:,} "
-            f"repetitions, random state {seed}) at their evaluations, up to the frames of your runs; {INTERP_TEXT}.")
+    return (f"Grey dashed line and band: DrQ-v2 as published by its authors, not your runs (source: {SOURCE_TEXT}; "
+            f"8-10 seeds per task): mean and 95% stratified-bootstrap CI of the mean over their seeds (rliable, "
+            f"{reps:,} repetitions, random state {seed}) at their evaluations, up to the frames of your runs; "
+            f"{INTERP_TEXT}.")

@@ -183,20 +183,22 @@ def register(app: typer.Typer) -> None:
         out: Path = OUT_OPT,
         reps: int = REPS_OPT,
         seed: int = SEED_OPT,
+        at: Optional[int] = typer.Option(None, "--frames", help="Read every cell at this frame (default: each "
+                                         "cell's own budget, the last frame all its runs reach)."),
     ) -> None:
         """Your DrQ-v2 runs against the DrQ-v2 authors' published curves at your runs' own budget (any budget)."""
         from analysis.calibration import ABOUT_TEXT, INTERP_TEXT, calibrate, write_calibration
         from analysis.load import ResultsRootError, load_results
 
-        if reps <= 0:
-            _fail("--reps must be positive")
+        if reps <= 0 or (at is not None and at < 0):
+            _fail("--reps must be positive and --frames >= 0")
         try:
             loaded = load_results(results)
         except ResultsRootError as exc:
             _fail(f"{exc} (pass --results ROOT)")
         for problem in loaded.problems:
             typer.echo(f"  {problem}", err=True)
-        rows, notes = calibrate(loaded, reps=reps, seed=seed)
+        rows, notes = calibrate(loaded, reps=reps, seed=seed, at=at)
         typer.echo(ABOUT_TEXT)
         if not rows:
             typer.echo(f"No DrQ-v2 runs under {results}: nothing to calibrate.")

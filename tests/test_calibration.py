@@ -128,6 +128,12 @@ def test_calibration_at_the_runs_own_budget_and_capped_at_the_curves_end(tmp_pat
     assert rows["short"].reading == CONSISTENT
     assert rows["long"].frame == 60_000 and rows["long"].user_mean == pytest.approx(360.0)
     assert "published curve ends at 60,000 frames" in rows["long"].note
+    # --frames: an earlier frame of the user's choice (the runs ramp linearly: 600 * 10K / 100K = 60 at 10K)
+    rows = {r.experiment: r for r in calibrate(load_results(root), pub, reps=REPS, at=10_000)[0]}
+    assert rows["long"].frame == 10_000 and rows["long"].user_mean == pytest.approx(60.0)
+    assert rows["long"].published_mean == pytest.approx(100.0) and rows["long"].note == ""
+    rows = {r.experiment: r for r in calibrate(load_results(root), pub, reps=REPS, at=50_000)[0]}
+    assert rows["short"].frame == 30_000 and "asked for 50,000 frames; runs reach 30,000 frames" in rows["short"].note
 
 
 def test_calibration_table_is_written_as_csv_markdown_latex(tmp_path):
