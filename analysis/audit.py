@@ -542,7 +542,8 @@ def write_audit(out_dir, findings: list[Finding]):
     notes = [f"Rows 'outside/inside published CI': the paper's DrQ-v2 baseline against {SOURCE_TEXT}, at 1M frames "
              f"(every DMC9 curve has an evaluation there); CIs: stratified bootstrap over the published seeds "
              f"(rliable, {PUBLISHED_REPS:,} repetitions, random state {DEFAULT_SEED}). "
-             + published_summary(findings)] if published_rows(findings) else []
+             + published_summary(findings) + " The CI is the published mean's alone (the paper's own seed spread is "
+             "not part of it)."] if published_rows(findings) else []
     return write_table(out_dir, "audit", raw, caption, disp, notes)
 
 

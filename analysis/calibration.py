@@ -264,5 +264,5 @@ def band_caption(reps: int, seed: int) -> str:
     """What a published band on a figure is and where it comes from."""
     return (f"Grey dashed line and band: DrQ-v2 as published by its authors, not your runs (source: {SOURCE_TEXT}; "
             f"8-10 seeds per task): mean and 95% stratified-bootstrap CI of the mean over their seeds (rliable, "
-            f"{reps:,} repetitions, random state {seed}) at their evaluations, up to the frames of your runs; "
-            f"{INTERP_TEXT}.")
+            f"{reps:,} repetitions, random state {seed}) at their evaluations, up to the frames of your runs (1M "
+            f"frames on an F4 panel without runs); {INTERP_TEXT}.")

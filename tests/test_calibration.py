@@ -309,3 +309,19 @@ def test_cli_calibrate_writes_the_table(tmp_path):
         hand = np.mean([float(r["episode_reward"]) for r in csv.DictReader(fh) if r["frame"] == "100000"])
     assert raw.loc[0, "frame"] == 100_000 and raw.loc[0, "published_mean"] == pytest.approx(hand)
     assert raw.loc[0, "user_mean"] == pytest.approx(160.0)
+
+
+def test_report_has_the_calibration_and_published_audit_sections(tmp_path):
+    from repro_app.report import build_markdown
+
+    pub = load_published(write_published(tmp_path / "pub", "cheetah_run").parent)
+    _drq_runs(tmp_path / "runs", "main", [290.0, 300.0, 310.0])
+    ctx = Context(results=load_results(tmp_path / "runs"), out_dir=tmp_path / "out", reps=REPS)
+    findings = published_baseline(PaperData(), reps=REPS)
+    md = build_markdown(ctx, [], [], findings, calibrate(ctx.results, pub, reps=REPS))
+    cal = md.split("## Baseline calibration", 1)[1].split("\n## ", 1)[0]
+    assert "| Cheetah Run |" not in cal and "| cheetah_run | main/base | 50,000 frames |" in cal
+    assert "| below |" in cal and "not a claim of the paper" in cal
+    audit = md.split("## Audit: the paper's DrQ-v2 baseline against the published curves", 1)[1].split("\n## ", 1)[0]
+    assert "of 9 of the paper's DrQ-v2 cells" in audit and "OUTSIDE published CI" in audit
+    assert "TACO / DrQ-v2 ratio" in audit
