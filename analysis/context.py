@@ -39,6 +39,8 @@ class Context:
             runs' latest scores instead of needing to have reached the claim's budget.
         budget_label: what a run must reach, in words, where ``budget`` is not a frame count (offline
             claims: "its configured offline.updates").
+        published_band: draw the DrQ-v2 authors' published curve (mean and 95% CI band) beside the runs on
+            the learning-curve figures that have it (F4).
         cache: results shared between artifacts and claims (e.g. the t-SNE of F6).
     """
 
@@ -57,7 +59,16 @@ class Context:
     indicative: bool = False
     below_budget: bool = False
     budget_label: str | None = None
+    published_band: bool = True
     cache: dict = field(default_factory=dict)
+
+    @property
+    def published(self) -> Results:
+        """The DrQ-v2 authors' published curves (analysis.load.load_published), a Results of their own: never
+        merged into ``results``."""
+        from analysis.calibration import packaged_published
+
+        return packaged_published()
 
     @cached_property
     def scores(self) -> pd.DataFrame:

@@ -75,6 +75,13 @@ IDENTITY = (
 # each leaves the other's columns empty (an offline run has no frame, an online one no update).
 EVAL_TABLE_COLUMNS = (*EVAL_COLUMNS, *(c for c in OFFLINE_EVAL_COLUMNS if c not in EVAL_COLUMNS))
 RESOLVED_FROM_FILE, RESOLVED_FROM_CONFIG = RESOLVED, CONFIG  # the runs table's ``resolved_from`` values
+# The ``source`` column of the runs and eval tables: the user's runs, or the DrQ-v2 authors' published curves
+# (:func:`load_published`). The two are loaded separately and never concatenated.
+SOURCE_RUNS, SOURCE_PUBLISHED = "runs", "published"
+PUBLISHED_DIR = Path(__file__).resolve().parent / "reference_data" / "drqv2_curves"
+PUBLISHED_EXPERIMENT = "published"
+PUBLISHED_REQUIRED = ("agent", "task", "seed", "frame", "episode_reward")
+PUBLISHED_ACTION_REPEAT = 2  # the DrQ-v2 authors' DMC setting; their ``frame`` counts frames after it
 _SKIP_DIRS = {REPLAY, "__pycache__", ".git"}
 
 
@@ -441,4 +448,78 @@ def load_results(root: Path | str) -> Results:
         eval_all = pd.concat(evals, ignore_index=True).merge(runs[list(IDENTITY)], on="run_id", how="left")
     else:
         eval_all = pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS])
+    runs["source"] = SOURCE_RUNS
+    eval_all["source"] = SOURCE_RUNS
     return Results(root=root, runs=runs, eval=eval_all, problems=problems, benches=benches)
+
+
+def _published_file(path: Path) -> pd.DataFrame:
+    """One ``dmc_{task}.csv`` of the published curves, checked like a run's eval.csv (ValueError with a reason):
+    the required columns, numbers where numbers belong, agent DrQ-v2, the task of the file name, frames
+    strictly increasing within each seed."""
+    text = path.read_text(encoding="utf-8")
+    if not text.endswith("\n"):
+        raise ValueError("truncated: the last line has no newline")
+    df = pd.read_csv(io.StringIO(text), index_col=0)
+    missing = [c for c in PUBLISHED_REQUIRED if c not in df.columns]
+    if missing:
+        raise ValueError(f"missing column(s) {', '.join(missing)}")
+    for col in ("seed", "frame", "episode_reward"):
+        df[col] = pd.to_numeric(df[col], errors="coerce")
+        if df[col].isna().any():
+            raise ValueError(f"non-numeric or empty {col!r}")
+    task = path.stem.removeprefix("dmc_")
+    if set(df["agent"]) != {"DrQ-v2"} or set(df["task"]) != {task}:
+        raise ValueError(f"expected agent DrQ-v2 and task {task} on every row")
+    if not df.groupby("seed")["frame"].apply(lambda f: bool(f.is_monotonic_increasing and f.is_unique)).all():
+        raise ValueError("frame is not strictly increasing within a seed")
+    return df
+
+
+def load_published(root: Path | str = PUBLISHED_DIR) -> Results:
+    """The DrQ-v2 authors' published learning curves (``analysis/reference_data/drqv2_curves``) as a
+    :class:`Results` of their own: one "run" per task and seed, with the identity and eval columns of
+    :func:`load_results` (algo ``drqv2``, method ``DrQ-v2``, experiment ``published``, action repeat 2, status
+    done, ``run_id`` ``published/{task}/seed{n}``) and ``source`` = ``published``, so every function of the
+    analysis that reads a Results (scores, learning curves) reads them unchanged. They are never merged with
+    a user's runs: callers keep the two Results apart. A malformed file is a :class:`Problem` and skipped."""
+    root = Path(root)
+    if not root.is_dir():
+        raise ResultsRootError(f"published curves folder {root} does not exist or is not a directory")
+    rows: list[dict[str, Any]] = []
+    evals: list[pd.DataFrame] = []
+    problems: list[Problem] = []
+    for path in sorted(root.glob("dmc_*.csv")):
+        try:
+            df = _published_file(path)
+        except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
+            problems.append(Problem(str(path), f"malformed published curves ({exc}); skipped"))
+            continue
+        task = path.stem.removeprefix("dmc_")
+        for seed, part in df.groupby("seed", sort=True):
+            run_id = f"{PUBLISHED_EXPERIMENT}/{task}/seed{int(seed)}"
+            ident: dict[str, Any] = {k: None for k in IDENTITY}
+            ident.update(run_id=run_id, experiment=PUBLISHED_EXPERIMENT, variant="base", algo="drqv2",
+                         method="DrQ-v2", task=task, suite="dmc", seed=int(seed), objectives="",
+                         action_repeat=PUBLISHED_ACTION_REPEAT, distracting_dims=0,
+                         train_frames=int(part["frame"].max()), status="done")
+            frames = part["frame"].to_numpy(dtype=float)
+            ev = pd.DataFrame({c: math.nan for c in EVAL_TABLE_COLUMNS}, index=range(len(part)))
+            ev["frame"] = frames
+            ev["step"] = frames // PUBLISHED_ACTION_REPEAT
+            ev["episode"] = range(len(part))
+            ev["episode_reward"] = part["episode_reward"].to_numpy(dtype=float)
+            ev["total_time"] = pd.to_numeric(part["hour"], errors="coerce").to_numpy() * 3600.0 \
+                if "hour" in part.columns else math.nan
+            evals.append(ev.assign(**ident))
+            rows.append({**ident, "resolved_from": str(path.name), "eval_rows": len(part),
+                         "last_frame": float(frames.max()), "last_update": math.nan, "fps": math.nan,
+                         "updates_per_s": math.nan})
+    runs = pd.DataFrame(rows) if rows else pd.DataFrame(columns=[*IDENTITY, "resolved_from", "eval_rows",
+                                                                   "last_frame", "last_update", "fps",
+                                                                   "updates_per_s"])
+    eval_all = (pd.concat(evals, ignore_index=True)[[*IDENTITY, *EVAL_TABLE_COLUMNS]] if evals
+                else pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS]))
+    runs["source"] = SOURCE_PUBLISHED
+    eval_all["source"] = SOURCE_PUBLISHED
+    return Results(root=root, runs=runs, eval=eval_all, problems=problems)

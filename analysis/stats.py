@@ -264,3 +264,43 @@ def grand_mean_ci(matrix: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFA
             {"mean": matrix}, _grand_mean, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
         )
     return float(points["mean"][0]), float(cis["mean"][0][0]), float(cis["mean"][1][0])
+
+
+def difference_of_means(
+    x: Sequence[float] | np.ndarray, y: Sequence[float] | np.ndarray, reps: int = DEFAULT_REPS,
+    seed: int = DEFAULT_SEED,
+) -> tuple[float, float, float]:
+    """mean(x) - mean(y) of two independent samples (values over seeds) with its 95% percentile bootstrap CI:
+    rliable's stratified independent bootstrap resamples each sample over its own seeds (the one-task case)."""
+    a = np.asarray(x, dtype=float).reshape(-1, 1)
+    b = np.asarray(y, dtype=float).reshape(-1, 1)
+
+    def diff(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.array([np.mean(u) - np.mean(v)])
+
+    with seeded(seed) as rs:
+        points, cis = rly.get_interval_estimates(
+            {"diff": [a, b]}, diff, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
+        )
+    return float(points["diff"][0]), float(cis["diff"][0][0]), float(cis["diff"][1][0])
+
+
+def ratio_to_task_means(
+    x: np.ndarray, ys: Sequence[Sequence[float] | np.ndarray], reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
+) -> tuple[float, float, float]:
+    """mean(x) / (mean over tasks of each task's mean of ``ys``) with a 95% stratified-bootstrap CI (rliable).
+
+    ``x`` is a (n_runs x n_tasks) matrix; ``ys`` one array of values over seeds per task, each with its own
+    number of seeds (no seed is dropped to balance them); every array is resampled independently over its
+    own seeds. A one-row ``x`` (e.g. a paper's printed means) is a constant numerator."""
+    num = np.asarray(x, dtype=float)
+    dens = [np.asarray(y, dtype=float).reshape(-1, 1) for y in ys]
+
+    def ratio(a: np.ndarray, *bs: np.ndarray) -> np.ndarray:
+        return np.array([np.mean(a) / np.mean([np.mean(b) for b in bs])])
+
+    with seeded(seed) as rs:
+        points, cis = rly.get_interval_estimates(
+            {"ratio": [num, *dens]}, ratio, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
+        )
+    return float(points["ratio"][0]), float(cis["ratio"][0][0]), float(cis["ratio"][1][0])

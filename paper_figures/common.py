@@ -206,6 +206,23 @@ def curve_panel(
     ax.xaxis.set_major_formatter(FuncFormatter(frames_label))
 
 
+PUBLISHED_STYLE: dict[str, Any] = dict(color="#555555", ls="--", lw=1.3)
+PUBLISHED_BAND_ALPHA = 0.15
+
+
+def published_panel(ax: plt.Axes, band: pd.DataFrame) -> bool:
+    """Draw the published DrQ-v2 mean (grey dashed) and its 95% CI band (analysis.calibration.published_band)
+    on ``ax``; False when there is nothing to draw."""
+    if band.empty:
+        return False
+    n = sorted(set(int(v) for v in band["n"]))
+    n_text = str(n[0]) if len(n) == 1 else f"{n[0]}-{n[-1]}"
+    ax.plot(band["frame"], band["mean"], **PUBLISHED_STYLE, label=f"DrQ-v2 (published, n={n_text})", zorder=2)
+    ax.fill_between(band["frame"], band["ci_low"], band["ci_high"], color=PUBLISHED_STYLE["color"],
+                    alpha=PUBLISHED_BAND_ALPHA, lw=0, zorder=1)
+    return True
+
+
 def frames_label(value: float, _pos: object = None) -> str:
     """Axis label of a frame count: 0, 20k, 1.5M."""
     if abs(value) < 1000:

@@ -8,6 +8,7 @@ import pandas as pd
 from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter
 
+from analysis.calibration import band_caption, published_band
 from analysis.context import Context
 from analysis.identity import task_display
 from paper_figures.common import (
@@ -19,6 +20,7 @@ from paper_figures.common import (
     palette,
     panel_grid,
     placeholder,
+    published_panel,
     save_figure,
 )
 from paper_figures.registry import ArtifactResult
@@ -37,17 +39,23 @@ def render_curves(
     paper_marks: dict[tuple[str, str], float] | None = None,
     ncols: int = 3,
     hline: tuple[float, str] | None = None,
+    published: bool = False,
 ) -> ArtifactResult:
-    """One panel per task; mean + 95% CI band per label (or per-seed lines); paper diamonds at 1M."""
+    """One panel per task; mean + 95% CI band per label (or per-seed lines); paper diamonds at 1M; with
+    ``published`` (and ``ctx.published_band``) the DrQ-v2 authors' published mean and CI band on each task that
+    has one, up to the panel's last run frame (1M frames on a panel without runs)."""
     paper_marks = paper_marks or {}
     extra = sorted(set(curves["label"]) - set(labels)) if not curves.empty else []
     labels = [*labels, *extra]
     colors = palette(labels)
     ncols = min(ncols, len(tasks))
     fig, axes = panel_grid(len(tasks), ncols=ncols, size=(4.0, 3.0) if len(tasks) > 1 else (6.5, 4.2))
-    any_data = False
+    any_data = drew_published = False
     for ax, task in zip(axes, tasks):
         rows = curves[curves["task"] == task] if not curves.empty else curves
+        if published and ctx.published_band:
+            upto = float(rows["frame"].max()) if not rows.empty else 1e6
+            drew_published |= published_panel(ax, published_band(ctx.published, task, upto, ctx.curve_reps, ctx.seed))
         if not rows.empty:
             any_data = True
             curve_panel(ax, rows, labels, colors, ctx.curve_reps, ctx.seed, per_seed=per_seed)
@@ -63,6 +71,7 @@ def render_curves(
             ax.set_xlim(0, 1.1e6)
             handles = [Line2D([], [], **{**PAPER_MARK, "color": colors.get(lab, "black"), "markeredgecolor": "black"},
                               label=f"{lab} (paper, 1M)") for lab in marks]
+            handles += [h for h in ax.get_legend_handles_labels()[0] if isinstance(h, Line2D)]
             ax.legend(handles=handles, fontsize=7, loc="center left")
         ax.xaxis.set_major_formatter(FuncFormatter(frames_label))
         if hline is not None and not rows.empty:
@@ -85,5 +94,6 @@ def render_curves(
              f"{ctx.curve_reps:,} repetitions, random state {ctx.seed}); curves are interpolated on a common "
              "frame grid and not extrapolated past a run's last evaluation")
     marks_text = " Diamonds at 1M frames: the paper's Table 1 values." if paper_marks else ""
-    return ArtifactResult(artifact_id, title, f"{caption} {bands[0].upper() + bands[1:]}.{marks_text}", figures=[png],
-                          has_runs=any_data)
+    pub_text = " " + band_caption(ctx.curve_reps, ctx.seed) if drew_published else ""
+    return ArtifactResult(artifact_id, title, f"{caption} {bands[0].upper() + bands[1:]}.{marks_text}{pub_text}",
+                          figures=[png], has_runs=any_data)

@@ -23,4 +23,4 @@ def render(ctx: Context) -> ArtifactResult:
                 marks[(task, lab)] = v[0]
     caption = "Evaluation return against environment frames on the nine DMC tasks (experiment 'main')."
     return render_curves(ctx, "F4", "DMC learning curves", curves, DMC9, LABELS, caption, "episode return",
-                         paper_marks=marks)
+                         paper_marks=marks, published=True)

@@ -4,7 +4,7 @@ with a 95% bootstrap CI band (rliable, fixed random state), written as PNG and P
 from __future__ import annotations
 
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -14,9 +14,17 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
+from analysis.calibration import band_caption  # noqa: E402
 from analysis.identity import task_display  # noqa: E402
 from analysis.io import atomic_savefig  # noqa: E402
-from paper_figures.common import curve_panel, palette, panel_grid, setup_style  # noqa: E402
+from paper_figures.common import (  # noqa: E402
+    PUBLISHED_STYLE,
+    curve_panel,
+    palette,
+    panel_grid,
+    published_panel,
+    setup_style,
+)
 
 PLOT_REPS = 2_000  # bootstrap repetitions per plotted point (a quick look, not a paper table)
 
@@ -27,10 +35,13 @@ def group_label(row: pd.Series, by: Sequence[str]) -> str:
 
 
 def plot_curves(curves: pd.DataFrame, metric: str, out: Path, x: str = "frame", by: Sequence[str] = ("method",),
-                reps: int = PLOT_REPS, seed: int = 0) -> list[Path]:
+                reps: int = PLOT_REPS, seed: int = 0,
+                published: Mapping[str, pd.DataFrame] | None = None) -> list[Path]:
     """Write ``out`` (.png) and its .pdf sibling from tidy ``curves``: columns task, seed, label, ``x``, value.
 
-    A run with a single evaluation shows as a point; a group with one seed has no CI band."""
+    A run with a single evaluation shows as a point; a group with one seed has no CI band. ``published`` maps a
+    task to the DrQ-v2 authors' published band (analysis.calibration.published_band), drawn grey and dashed
+    on that task's panel."""
     if curves.empty:
         raise ValueError(f"no values of '{metric}' in the selected runs")
     setup_style()
@@ -38,8 +49,12 @@ def plot_curves(curves: pd.DataFrame, metric: str, out: Path, x: str = "frame", 
     labels = sorted(curves["label"].unique())
     colors = palette(labels)
     fig, axes = panel_grid(len(tasks), ncols=min(3, len(tasks)))
+    drew_published: list[str] = []
     for ax, task in zip(axes, tasks):
         rows = curves[curves["task"].astype(str) == task].rename(columns={x: "frame"})
+        band = (published or {}).get(task)
+        if band is not None and published_panel(ax, band):
+            drew_published.append(task)
         curve_panel(ax, rows, labels, colors, reps=reps, seed=seed)
         for lab in labels:  # single evaluations still show up
             one = rows[rows["label"] == lab]
@@ -55,10 +70,15 @@ def plot_curves(curves: pd.DataFrame, metric: str, out: Path, x: str = "frame", 
     for lab in labels:
         n = sorted(set(seeds.loc[lab].tolist()))
         names.append(f"{lab} (n={n[0]})" if len(n) == 1 else f"{lab} (n={n[0]}-{n[-1]})")
+    if drew_published:
+        handles.append(Line2D([], [], **PUBLISHED_STYLE))
+        names.append("DrQ-v2 (published by its authors)")
     fig.legend(handles, names, loc="lower center", ncol=min(4, len(names)), frameon=False,
                bbox_to_anchor=(0.5, -0.02))
     caption = (f"{metric}: mean over seeds; band: 95% bootstrap CI of the mean (rliable, {reps:,} "
                f"repetitions, random state {seed}); n = seeds; grouped by {', '.join(by)}")
+    if drew_published:
+        caption += f". On {', '.join(drew_published)}: " + band_caption(reps, seed)
     fig.text(0.5, 1.0, textwrap.fill(caption, 60 * min(3, len(tasks))), ha="center", va="bottom", fontsize=8)
     fig.tight_layout(rect=(0, 0.06, 1, 0.98))
     out = Path(out).with_suffix(".png")

@@ -1,4 +1,4 @@
-"""``repro figures | claims | audit | report``: commands added to the project's Typer app by :func:`register`.
+"""``repro figures | claims | audit | calibrate | report``: commands added to the Typer app by :func:`register`.
 
 Bad input (unknown artifact id, missing results root, bad option) prints one line and exits non-zero.
 """
@@ -32,6 +32,8 @@ RENDER_OPT = typer.Option(
     True, "--render-envs/--no-render-envs",
     help="F13: render random-action frames with make_env when no run saved frames.",
 )
+PUBLISHED_OPT = typer.Option(True, "--published/--no-published",
+                             help="F4: draw the DrQ-v2 authors' published curve (mean, 95% CI band) beside the runs.")
 
 
 def _fail(message: str) -> NoReturn:
@@ -50,7 +52,8 @@ def _experiment_map(items: Optional[list[str]]) -> dict[str, list[str]]:
 
 
 def make_context(results: Path, out: Path, frames: int, reps: int, seed: int, min_seeds: int = 2,
-                 experiment_map: Optional[list[str]] = None, tsne_n: int = 1000, render_envs: bool = True):
+                 experiment_map: Optional[list[str]] = None, tsne_n: int = 1000, render_envs: bool = True,
+                 published: bool = True):
     """Load the results root into a Context, or fail with one line."""
     from analysis.context import Context
     from analysis.load import ResultsRootError, load_results
@@ -65,7 +68,8 @@ def make_context(results: Path, out: Path, frames: int, reps: int, seed: int, mi
     except ResultsRootError as exc:
         _fail(f"{exc} (pass --results ROOT)")
     return Context(results=loaded, out_dir=out, budget=frames, reps=reps, seed=seed, min_seeds=min_seeds,
-                   experiment_map=_experiment_map(experiment_map), tsne_n=tsne_n, render_envs=render_envs)
+                   experiment_map=_experiment_map(experiment_map), tsne_n=tsne_n, render_envs=render_envs,
+                   published_band=published)
 
 
 def summarize_load(ctx) -> None:
@@ -81,7 +85,7 @@ def summarize_load(ctx) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    """Add ``figures``, ``claims``, ``audit`` and ``report`` to ``app``."""
+    """Add ``figures``, ``claims``, ``audit``, ``calibrate`` and ``report`` to ``app``."""
 
     @app.command("figures")
     def figures_cmd(
@@ -96,6 +100,7 @@ def register(app: typer.Typer) -> None:
         experiment_map: Optional[list[str]] = MAP_OPT,
         tsne_n: int = TSNE_OPT,
         render_envs: bool = RENDER_OPT,
+        published: bool = PUBLISHED_OPT,
     ) -> None:
         """Render the paper's tables (CSV, Markdown, LaTeX) and figures (PNG, PDF) from the runs."""
         from paper_figures.catalog import ordered_ids, resolve
@@ -114,7 +119,7 @@ def register(app: typer.Typer) -> None:
         except UnknownArtifactError as exc:
             _fail(str(exc))
         ctx = make_context(results, out, frames, reps, seed, experiment_map=experiment_map, tsne_n=tsne_n,
-                           render_envs=render_envs)
+                           render_envs=render_envs, published=published)
         summarize_load(ctx)
         done = render_artifacts(ctx, arts, progress=lambda aid: typer.echo(f"  rendering {aid}"))
         for r in done:
@@ -153,17 +158,59 @@ def register(app: typer.Typer) -> None:
         show_all: bool = typer.Option(False, "--all", help="Also list the checks that agree."),
     ) -> None:
         """Recompute the paper's derived numbers from its own tables and list every mismatch."""
-        from analysis.audit import mismatches, run_audit, write_audit
+        from analysis.audit import mismatches, published_rows, published_summary, run_audit, write_audit
 
         findings = run_audit()
         bad = mismatches(findings)
         for f in findings if show_all else bad:
+            if f.kind == "published":
+                continue
             status = "MISMATCH" if f in bad else ("ok" if f.kind == "check" else "info")
             typer.echo(f"{status:<8} [{f.where}] {f.description}: paper {f.printed} | recomputed {f.recomputed}")
+        typer.echo("The paper's DrQ-v2 baseline against the DrQ-v2 authors' published curves (1M frames):")
+        for f in published_rows(findings):
+            status = "inside" if f.match else "OUTSIDE"
+            typer.echo(f"{status:<8} {f.description.split(':')[0]}: paper {f.printed} | {f.recomputed}")
         table = write_audit(out, findings)
         typer.echo(
-            f"{len(bad)} mismatches in {sum(f.kind == 'check' for f in findings)} checks; wrote {table.files[1]}"
+            f"{len(bad)} mismatches in {sum(f.kind == 'check' for f in findings)} checks; "
+            f"{published_summary(findings)} Wrote {table.files[1]}"
         )
+
+    @app.command("calibrate")
+    def calibrate_cmd(
+        results: Path = RESULTS_OPT,
+        out: Path = OUT_OPT,
+        reps: int = REPS_OPT,
+        seed: int = SEED_OPT,
+        at: Optional[int] = typer.Option(None, "--frames", help="Read every cell at this frame (default: each "
+                                         "cell's own budget, the last frame all its runs reach)."),
+    ) -> None:
+        """Your DrQ-v2 runs against the DrQ-v2 authors' published curves at your runs' own budget (any budget)."""
+        from analysis.calibration import ABOUT_TEXT, INTERP_TEXT, calibrate, write_calibration
+        from analysis.load import ResultsRootError, load_results
+
+        if reps <= 0 or (at is not None and at < 0):
+            _fail("--reps must be positive and --frames >= 0")
+        try:
+            loaded = load_results(results)
+        except ResultsRootError as exc:
+            _fail(f"{exc} (pass --results ROOT)")
+        for problem in loaded.problems:
+            typer.echo(f"  {problem}", err=True)
+        rows, notes = calibrate(loaded, reps=reps, seed=seed, at=at)
+        typer.echo(ABOUT_TEXT)
+        if not rows:
+            typer.echo(f"No DrQ-v2 runs under {results}: nothing to calibrate.")
+        for r in rows:
+            typer.echo(f"{r.task:<18} {r.experiment}/{r.variant} at {r.frame:,.0f} frames: yours {r.user_mean:.1f} "
+                       f"(n={r.user_n}) vs published {r.published_mean:.1f} (n={r.published_n}): {r.reading}"
+                       + (f" ({r.note})" if r.note else ""))
+        for note in notes:
+            typer.echo(f"  {note}")
+        table = write_calibration(out, rows, notes, reps, seed)
+        typer.echo(f"Reading: 95% bootstrap CI of the difference of means (yours − published) below 0, above 0, or "
+                   f"across it; {INTERP_TEXT}. Wrote {', '.join(str(p) for p in table.files)}")
 
     @app.command("report")
     def report_cmd(
@@ -177,11 +224,13 @@ def register(app: typer.Typer) -> None:
         tsne_n: int = TSNE_OPT,
         render_envs: bool = RENDER_OPT,
         indicative: bool = INDICATIVE_OPT,
+        published: bool = PUBLISHED_OPT,
     ) -> None:
         """Render everything and write REPORT.md and REPORT.html (tables, figures, claims, audit, provenance)."""
         from repro_app.report import build_report
 
-        ctx = make_context(results, out, frames, reps, seed, min_seeds, experiment_map, tsne_n, render_envs)
+        ctx = make_context(results, out, frames, reps, seed, min_seeds, experiment_map, tsne_n, render_envs,
+                           published)
         ctx.indicative = indicative
         summarize_load(ctx)
         md, html = build_report(ctx, progress=lambda aid: typer.echo(f"  rendering {aid}"))

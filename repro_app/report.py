@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.audit import mismatches, run_audit, write_audit
+from analysis.audit import mismatches, published_frame, published_rows, published_summary, run_audit, write_audit
+from analysis.calibration import CalibrationRow, calibrate, calibration_frames, calibration_notes, write_calibration
 from analysis.claims import claims_frame, evaluate_claims, verdict_counts, write_claims
 from analysis.context import Context
 from analysis.io import atomic_write_text
@@ -64,7 +65,8 @@ def _section(title: str, body: str) -> str:
     return f"\n## {title}\n\n{body.strip()}\n"
 
 
-def build_markdown(ctx: Context, artifacts, verdicts, findings) -> str:
+def build_markdown(ctx: Context, artifacts, verdicts, findings,
+                   calibration: tuple[list[CalibrationRow], list[str]] | None = None) -> str:
     res = ctx.results
     lines = ["# TACO reproduction report", "",
              f"Generated {dt.datetime.now().astimezone().isoformat(timespec='seconds')} from `{res.root}`; "
@@ -104,6 +106,17 @@ def build_markdown(ctx: Context, artifacts, verdicts, findings) -> str:
             audit_md + f"\nAll {len(findings)} checks, including those that agree: [audit.md](audit.md).",
         )
     )
+    if published_rows(findings):
+        lines.append(_section("Audit: the paper's DrQ-v2 baseline against the published curves",
+                              published_summary(findings) + "\n\n" + to_markdown(published_frame(findings))))
+    if calibration is not None:
+        rows, notes = calibration
+        cal = (to_markdown(calibration_frames(rows)[1]) if rows else
+               "No DrQ-v2 runs under the results root: nothing to calibrate (run DrQ-v2 at any budget, e.g. "
+               "100K frames, to see whether it sits where the published curve sits).\n")
+        cal += "".join(f"\n_{n}_\n" for n in calibration_notes(ctx.reps, ctx.seed, notes))
+        lines.append(_section("Baseline calibration: your DrQ-v2 against the DrQ-v2 authors' published curves",
+                              cal + "\nFiles: [csv](calibration.csv), [md](calibration.md), [tex](calibration.tex)"))
     for art in artifacts:
         body = [f"_{art.caption}_", ""] if art.figures else []
         for png in art.figures:
@@ -144,7 +157,9 @@ def build_report(ctx: Context, progress: Callable[[str], None] | None = None) ->
     write_claims(ctx, verdicts)
     findings = run_audit(ctx.paper)
     write_audit(ctx.out_dir, findings)
-    md = build_markdown(ctx, artifacts, verdicts, findings)
+    rows, notes = calibrate(ctx.results, ctx.published, ctx.reps, ctx.seed)
+    write_calibration(ctx.out_dir, rows, notes, ctx.reps, ctx.seed)
+    md = build_markdown(ctx, artifacts, verdicts, findings, (rows, notes))
     md_path = atomic_write_text(ctx.out_dir / "REPORT.md", md)
     html_path = atomic_write_text(ctx.out_dir / "REPORT.html", markdown_to_html(md))
     return md_path, html_path

@@ -62,8 +62,12 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(Path("plot.png"), "--out", "-o", help="PNG to write; the PDF goes beside it."),
         reps: int = typer.Option(2000, "--reps", min=1, help="Bootstrap repetitions of the CI band."),
         seed: int = typer.Option(0, "--seed", help="Random state of the bootstrap."),
+        published: bool = typer.Option(True, "--published/--no-published",
+                                       help="Draw the DrQ-v2 authors' published curve (mean and 95% CI band) on "
+                                            "each task that has one (episode_reward against frames only)."),
     ) -> None:
         """Learning curves of any runs: one panel per task, mean over seeds with a 95% bootstrap CI band."""
+        from analysis.calibration import packaged_published, published_band
         from analysis.quick import PlotInputError, by_columns, load_runs, repeated_seeds, tidy_curves
         from paper_figures.quick_plot import plot_curves
 
@@ -77,6 +81,13 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"  {problem}", err=True)
         for cell in repeated_seeds(curves):
             typer.echo(f"  warning: {cell}: several runs share a seed (averaged); add experiment to --by", err=True)
-        written = plot_curves(curves, metric, out, by=cols, reps=reps, seed=seed)
+        bands = {}
+        if published and metric == "episode_reward":
+            pub = packaged_published()
+            for task, rows in curves.groupby("task"):
+                band = published_band(pub, str(task), float(rows["frame"].max()), reps, seed)
+                if not band.empty:
+                    bands[str(task)] = band
+        written = plot_curves(curves, metric, out, by=cols, reps=reps, seed=seed, published=bands)
         typer.echo(f"{curves['run_id'].nunique()} run(s), {curves['task'].nunique()} task(s): "
                    f"wrote {', '.join(str(p) for p in written)}")
