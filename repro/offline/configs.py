@@ -7,6 +7,7 @@ config (CQL's section, ``CQLConfig``, already lives there). Each default names i
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 
 @dataclass
@@ -25,6 +26,12 @@ class IQLConfig:
     expectile: float = 0.7  # paper (TACO appendix): 0.7
     beta: float = 0.1  # inverse temperature; the TACO paper's 0.1; the IQL reference MuJoCo config uses 3
     max_weight: float = 100.0  # exp(beta * adv) is clipped here (IQL reference code)
+    # which V the actor's advantage and the critic's target use: "after" the value step (the JAX code's
+    # learner.py, the default) or "before" it (CORL's iql.py)
+    value_for_targets: str = "after"
+    # None: constant actor learning rate (DrQ-v2); N: cosine decay of the actor's rate to 0 over N updates
+    # (the JAX code's opt_decay_schedule "cosine" with max_steps = N)
+    actor_lr_cosine_updates: Optional[int] = None
 
 
 @dataclass
