@@ -204,3 +204,32 @@ def test_iql_actor_cosine_lr_switch_is_optax_cosine_decay():
     default = learner("iql")
     default.update(batch(), 3)
     assert default.actor_opt.param_groups[0]["lr"] == base  # DrQ-v2's constant rate by default
+
+
+def test_iql_learned_log_std_switch_is_the_jax_actor(monkeypatch):
+    """NormalTanhPolicy(state_dependent_std=False): log pi(a|s) = sum_i log N(a_i; tanh mu_i, exp(log_std_i)),
+    log_std zeros at start, trained by the actor's optimizer; checked in float64 at the first update."""
+    lrn = learner("iql", **{"agent.iql.learned_log_std": True})
+    assert dict(lrn.parameter_counts())["log_std"] == A and "log_std" in lrn.state_dict()["modules"]
+    actor_before = copy.deepcopy(lrn.actor)
+    seen: dict = {}
+    real_actor = offline_ac.iql_loss.actor_loss
+
+    def actor_spy(log_prob, tq1, tq2, v, **k):
+        seen["log_prob"] = log_prob.detach().clone()
+        return real_actor(log_prob, tq1, tq2, v, **k)
+
+    monkeypatch.setattr(offline_ac.iql_loss, "actor_loss", actor_spy)
+    inputs: list[torch.Tensor] = []
+    hook = lrn.value.register_forward_hook(lambda m, inp, out: inputs.append(inp[0].detach().clone()))
+    b = batch()
+    lrn.update(b, 0)
+    hook.remove()
+    with torch.no_grad():
+        mean = actor_before(inputs[0], 1.0).mean.double().numpy()
+    a = b["action"].double().numpy()
+    expected = (-0.5 * (a - mean) ** 2 - 0.5 * math.log(2 * math.pi)).sum(-1, keepdims=True)
+    np.testing.assert_allclose(seen["log_prob"].double().numpy(), expected, rtol=1e-5, atol=1e-5)
+    assert lrn.log_std.log_std.detach().abs().sum() > 0  # trained
+    default = learner("iql")
+    assert default.log_std is None and "log_std" not in dict(default.parameter_counts())

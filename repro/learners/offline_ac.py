@@ -46,11 +46,26 @@ class ValueNet(nn.Module):
         return self.v(self.trunk(h))
 
 
+class LogStd(nn.Module):
+    """The JAX IQL actor's state-independent, learned log-std (``log_stds``: zeros at start, clipped to
+    [LOG_STD_MIN, LOG_STD_MAX] when used); switch ``iql.learned_log_std``."""
+
+    LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0  # learner.py: log_std_min=-5.0; policy.py: LOG_STD_MAX = 2.0
+
+    def __init__(self, action_dim: int):
+        super().__init__()
+        self.log_std = nn.Parameter(torch.zeros(action_dim))
+
+    def forward(self) -> torch.Tensor:
+        return self.log_std.clamp(self.LOG_STD_MIN, self.LOG_STD_MAX).exp()
+
+
 class OfflineActorCritic(Agent):
     """Learners ``td3bc``, ``cql`` and ``iql`` (the ``_taco`` agent files switch on the auxiliary step)."""
 
     algorithm = "td3bc"
     value: ValueNet | None = None  # IQL's V(h); set before Agent.__init__ lists the modules
+    log_std: LogStd | None = None  # IQL's learned log-std (iql.learned_log_std)
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
@@ -62,12 +77,17 @@ class OfflineActorCritic(Agent):
             self.value = ValueNet(self.encoder.repr_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
             self.value_opt = torch.optim.Adam(self.value.parameters(), lr=cfg.lr)
             self.value.train(True)
+            if cfg.iql.learned_log_std:  # trained by the actor's optimizer, as the JAX actor's log_stds
+                self.log_std = LogStd(action_dim).to(self.device)
+                self.actor_opt.add_param_group({"params": list(self.log_std.parameters())})
 
     # ----------------------------------------------------------------- protocol
     def modules(self) -> dict[str, nn.Module]:
         mods = super().modules()
         if self.value is not None:
             mods["value"] = self.value
+        if self.log_std is not None:
+            mods["log_std"] = self.log_std
         return mods
 
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:
@@ -204,6 +224,8 @@ class OfflineActorCritic(Agent):
             for group in self.actor_opt.param_groups:
                 group["lr"] = iql_loss.cosine_lr(self.cfg.lr, step, c.actor_lr_cosine_updates)
         dist = self.actor(h, self.stddev(step))
+        if self.log_std is not None:  # the JAX actor: Normal(tanh mean, exp(clip(log_stds)))
+            dist = torch.distributions.Normal(dist.loc, self.log_std().expand_as(dist.loc))
         log_prob = dist.log_prob(action).sum(-1, keepdim=True)
         a_loss, metrics = iql_loss.actor_loss(log_prob, tq1, tq2, v, beta=c.beta, max_weight=c.max_weight)
         self._step(a_loss, self.actor_opt)
