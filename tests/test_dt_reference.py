@@ -153,3 +153,12 @@ def test_training_windows_pad_actions_with_minus_10_and_padding_never_reaches_a_
     # no position embedding: the same 3 steps unpadded give the same predictions (only timesteps position them)
     short = dt.SequenceSampler([_episode(6)], context=3, frame_stack=3).window(0, 3)
     torch.testing.assert_close(predict(short), predict(w)[2:], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("override", ["agent.dt.activation=swish", "agent.dt.init=xavier"])
+def test_bad_dt_switch_is_one_line_config_error(override: str):
+    from repro.config import ConfigError
+
+    with pytest.raises(ConfigError, match=override.split("=")[0]) as err:
+        compose(["agent=dt", "task=cheetah_run", override])
+    assert "\n" not in str(err.value)

@@ -233,3 +233,53 @@ def test_iql_learned_log_std_switch_is_the_jax_actor(monkeypatch):
     assert lrn.log_std.log_std.detach().abs().sum() > 0  # trained
     default = learner("iql")
     assert default.log_std is None and "log_std" not in dict(default.parameter_counts())
+
+
+@pytest.mark.parametrize("override, needle", [("agent.iql.value_for_targets=sideways", "value_for_targets"),
+                                              ("agent.iql.actor_lr_cosine_updates=0", "actor_lr_cosine_updates"),
+                                              ("agent.stddev_schedule.step_scale=0", "step_scale")])
+def test_bad_switch_values_are_one_line_config_errors(override: str, needle: str):
+    from repro.config import ConfigError
+
+    with pytest.raises(ConfigError, match=needle) as err:
+        compose(["agent=iql", "task=cheetah_run", "offline.dataset=medium", override])
+    assert "\n" not in str(err.value)
+
+
+NEW_KEYS = [("agent", "stddev_schedule", "step_scale"), ("agent", "cql", "clip_policy_samples"),
+            ("agent", "iql", "value_for_targets"), ("agent", "iql", "actor_lr_cosine_updates"),
+            ("agent", "iql", "learned_log_std"), ("agent", "dt", "activation"), ("agent", "dt", "init"),
+            ("agent", "dt", "ff_dropout"), ("agent", "dt", "action_pad")]
+
+
+def _pre_issue_16_run(tmp_path, overrides: list[str]):
+    """A run directory whose config.yaml lacks the keys issue 16 added (as one written before it)."""
+    import yaml
+
+    from repro.rundir import CONFIG, write_config
+
+    cfg = compose(overrides + [f"runtime.results_root={tmp_path}"])
+    write_config(tmp_path, cfg)
+    data = yaml.safe_load((tmp_path / CONFIG).read_text())
+    for a, b, c in NEW_KEYS:
+        data[a][b].pop(c)
+    (tmp_path / CONFIG).write_text(yaml.safe_dump(data))
+    return cfg
+
+
+@pytest.mark.parametrize("overrides, refused", [
+    (["agent=taco", "task=cheetah_run"], []),  # online: nothing changed, still resumes
+    (["agent=bc", "task=cheetah_run", "offline.dataset=medium"], []),  # BC does not read the schedule
+    (["agent=td3bc", "task=cheetah_run", "offline.dataset=medium"], ["agent.stddev_schedule.step_scale"]),
+    (["agent=cql", "task=cheetah_run", "offline.dataset=medium"],
+     ["agent.cql.clip_policy_samples", "agent.stddev_schedule.step_scale"]),
+    (["agent=iql", "task=cheetah_run", "offline.dataset=medium"],
+     ["agent.iql.value_for_targets", "agent.stddev_schedule.step_scale"]),
+    (["agent=dt", "task=cheetah_run", "offline.dataset=medium"],
+     ["agent.dt.action_pad", "agent.dt.activation", "agent.dt.ff_dropout", "agent.dt.init"]),
+])
+def test_a_run_written_before_issue_16_is_not_resumed_with_the_new_behaviour(tmp_path, overrides, refused):
+    from repro.rundir import config_diff
+
+    cfg = _pre_issue_16_run(tmp_path, overrides)
+    assert sorted(d.partition(":")[0] for d in config_diff(tmp_path, cfg)) == refused
