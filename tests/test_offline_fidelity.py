@@ -187,9 +187,12 @@ def test_iql_corl_switch_uses_v_before_the_value_step(monkeypatch):
         assert not torch.allclose(lrn.value(inputs[0]), before(inputs[0]))
 
 
-def test_iql_bad_order_switch_is_one_line_error():
-    with pytest.raises(ValueError, match="value_for_targets"):
-        learner("iql", **{"agent.iql.value_for_targets": "sideways"})
+def test_iql_learner_refuses_an_unknown_order():
+    """Built from a typed config directly (compose already refuses it, see below)."""
+    rc = typed(compose(["agent=iql", "task=cheetah_run", "profile=tiny", "offline.dataset=medium"]))
+    rc.agent.iql.value_for_targets = "sideways"
+    with pytest.raises(ValueError, match="'after' or 'before'"):
+        build_learner(rc.agent, OBS, A, "cpu")
 
 
 def test_iql_actor_cosine_lr_switch_is_optax_cosine_decay():
@@ -241,7 +244,7 @@ def test_iql_learned_log_std_switch_is_the_jax_actor(monkeypatch):
 def test_bad_switch_values_are_one_line_config_errors(override: str, needle: str):
     from repro.config import ConfigError
 
-    with pytest.raises(ConfigError, match=needle) as err:
+    with pytest.raises(ConfigError, match=f"{needle}.*(is not one of|must be)") as err:
         compose(["agent=iql", "task=cheetah_run", "offline.dataset=medium", override])
     assert "\n" not in str(err.value)
 
