@@ -22,6 +22,9 @@ VALID_CHOICES = {
     "replay.device": ("cpu", "cuda", "auto"),
     "runtime.device": ("cpu", "cuda", "auto"),
     "train.video_every": ("all", "last"),
+    "agent.iql.value_for_targets": ("after", "before"),
+    "agent.dt.activation": ("relu", "gelu", "gelu_new"),
+    "agent.dt.init": ("gpt2", "torch"),
 }
 
 
@@ -137,7 +140,8 @@ def validate(raw: DictConfig) -> DictConfig:
         value = str(OmegaConf.select(cfg, key))
         if not NAME_RE.match(value):
             raise ConfigError(f"{key}='{value}' may only contain letters, digits, '_', '.' and '-'.")
-    positive = ("agent.K", "agent.batch_size", "agent.nstep", "env.action_repeat", "env.frame_stack",
+    positive = ("agent.K", "agent.batch_size", "agent.nstep", "agent.stddev_schedule.step_scale",
+                "env.action_repeat", "env.frame_stack",
                 "train.frames", "train.eval_every_frames", "train.update_every_steps", "replay.capacity")
     for key in positive:
         if OmegaConf.select(cfg, key) < 1:
@@ -177,6 +181,9 @@ def _check_learner(cfg: DictConfig) -> None:
             raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
     if cfg.offline.eval_episodes < 0:
         raise ConfigError(f"offline.eval_episodes must be >= 0 (got {cfg.offline.eval_episodes}).")
+    cosine = cfg.agent.iql.actor_lr_cosine_updates
+    if cosine is not None and cosine < 1:
+        raise ConfigError(f"agent.iql.actor_lr_cosine_updates must be null or >= 1 (got {cosine}).")
     if learner == "cql" and cfg.agent.cql.alpha is None and dataset is not None:
         cfg.agent.cql.alpha = _table6_alpha(str(cfg.task.name), str(dataset))
 

@@ -64,7 +64,33 @@ def config_diff(path: str | Path, cfg: DictConfig) -> list[str]:
             diffs.append(f"{prefix[:-1]}: {a!r} -> {b!r}")
 
     walk(saved, new, "")
-    return [d for d in diffs if not _added_at_default(d)]
+    learner = str(OmegaConf.select(cfg, "agent.learner", default=""))
+    return [d for d in diffs if not _still_same(d, learner)]
+
+
+# Keys that came with a change of behaviour (issue 16): a run of these learners written before the key existed
+# behaved as the value here, not as the new default, so it is not the same run and is not resumed; for any
+# other learner the key changes nothing.
+ADDED_WITH_OLD_BEHAVIOUR: dict[str, tuple[tuple[str, ...], object]] = {
+    "agent.stddev_schedule.step_scale": (("td3bc", "cql", "iql"), 1),
+    "agent.cql.clip_policy_samples": (("cql",), False),
+    "agent.iql.value_for_targets": (("iql",), "actor before, critic after the value step"),
+    "agent.dt.activation": (("dt",), "gelu"),
+    "agent.dt.init": (("dt",), "torch"),
+    "agent.dt.ff_dropout": (("dt",), True),
+    "agent.dt.action_pad": (("dt",), 0.0),
+}
+
+
+def _still_same(diff: str, learner: str) -> bool:
+    """A difference that is none: a key of :data:`ADDED_WITH_OLD_BEHAVIOUR` absent from the saved run, when
+    ``learner`` does not read it or its old behaviour equals the new value; else a key added at its default."""
+    key, _, change = diff.partition(": ")
+    old, _, new = change.partition(" -> ")
+    if old == repr("<absent>") and key in ADDED_WITH_OLD_BEHAVIOUR:
+        learners, before = ADDED_WITH_OLD_BEHAVIOUR[key]
+        return learner not in learners or repr(before) == new
+    return _added_at_default(diff)
 
 
 def _added_at_default(diff: str) -> bool:

@@ -13,10 +13,14 @@ class StdSchedule:
     start: float = 1.0
     end: float = 0.1
     duration: int = 500_000
+    # the schedule counts step_scale x the step it is called with: 1 online (agent steps); 2 offline, where it
+    # is called with the update count and V-D4RL evaluates it at its loop step (update_every_steps 2: 2u)
+    step_scale: int = 1
 
     def __call__(self, step: int) -> float:
-        """Linear interpolation from ``start`` to ``end`` over ``duration`` agent steps."""
-        mix = min(max(step / max(self.duration, 1), 0.0), 1.0)
+        """Linear interpolation from ``start`` to ``end`` over ``duration`` schedule steps, at schedule step
+        ``step_scale * step``."""
+        mix = min(max(self.step_scale * step / max(self.duration, 1), 0.0), 1.0)
         return (1.0 - mix) * self.start + mix * self.end
 
 
@@ -28,7 +32,8 @@ class CQLConfig:
     n_samples: int = 10
     temperature: float = 1.0
     importance_sampling: bool = False
-    include_data_in_logsumexp: bool = False
+    include_data_in_logsumexp: bool = True  # V-D4RL's no-importance-sampling form (ignored with importance sampling)
+    clip_policy_samples: bool = True  # V-D4RL: policy samples drawn with sample(clip=stddev_clip)
 
 
 @dataclass

@@ -137,12 +137,15 @@ def test_cql_policy_samples_do_not_train_the_actor(monkeypatch):
 def test_iql_order_value_then_actor_then_critic_and_target_from_v(monkeypatch):
     lrn = learner("iql")
     order: list[str] = []
-    for name in ("_iql_value_actor", "_iql_critic"):
+    for name in ("_iql_value", "_iql_actor"):
         real = getattr(lrn, name)
         monkeypatch.setattr(lrn, name, lambda *a, _r=real, _n=name, **k: (order.append(_n), _r(*a, **k))[1])
+    real_critic = offline_ac.iql_loss.critic_loss
+    monkeypatch.setattr(offline_ac.iql_loss, "critic_loss",
+                        lambda *a, **k: (order.append("critic"), real_critic(*a, **k))[1])
     v_before = params(lrn.value)
     lrn.update(batch(lrn), 0)
-    assert order == ["_iql_value_actor", "_iql_critic"]
+    assert order == ["_iql_value", "_iql_actor", "critic"]
     assert changed(v_before, lrn.value)
     assert "value" in dict(lrn.parameter_counts()) and "value" in lrn.state_dict()["optimizers"]
 

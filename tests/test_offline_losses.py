@@ -401,7 +401,7 @@ def test_sequence_sampler_windows_never_cross_and_pad_left():
         assert mask.tolist() == [False] * (K - n_real) + [True] * n_real
         for k in range(K):
             if not mask[k]:
-                assert not batch["frames"][i, k].any() and not batch["actions"][i, k].any()
+                assert not batch["frames"][i, k].any() and (batch["actions"][i, k] == -10).all()  # Chen et al.: -10
                 assert batch["rtg"][i, k, 0] == 0 and batch["timesteps"][i, k] == 0
                 continue
             t = s + k - (K - n_real)

@@ -47,7 +47,8 @@ class DTLearner:
         self.sample_options: dict[str, Any] = {}
         self.model = DecisionTransformer(obs_shape, action_dim, context=self.dt.context, embed_dim=self.dt.embed_dim,
                                          n_layers=self.dt.n_layers, n_heads=self.dt.n_heads, dropout=self.dt.dropout,
-                                         max_timestep=self.dt.max_timestep).to(self.device)
+                                         max_timestep=self.dt.max_timestep, activation=self.dt.activation,
+                                         init=self.dt.init, ff_dropout=self.dt.ff_dropout).to(self.device)
         self.optimizer, self.scheduler = make_optimizer(self.model, lr=self.dt.lr, weight_decay=self.dt.weight_decay,
                                                         warmup_steps=self.dt.warmup_steps)
         self.sampler: SequenceSampler | None = None
@@ -94,7 +95,8 @@ class DTLearner:
     def make_sampler(self, episodes: Sequence[Mapping[str, np.ndarray]], seed: int) -> SequenceSampler:
         """The window sampler over ``episodes`` (kept: its RNG is part of ``state_dict``)."""
         self.sampler = SequenceSampler(episodes, context=self.dt.context, frame_stack=self.frame_stack,
-                                       rtg_scale=self.dt.rtg_scale, seed=seed, max_timestep=self.dt.max_timestep)
+                                       rtg_scale=self.dt.rtg_scale, seed=seed, max_timestep=self.dt.max_timestep,
+                                       action_pad=self.dt.action_pad)
         return self.sampler
 
     def update(self, batch: Mapping[str, Any], step: int) -> dict[str, float]:

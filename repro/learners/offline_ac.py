@@ -7,7 +7,9 @@ TD3+BC and CQL's uniform actions stay in raw action space. Each algorithm's loss
 ``repro/offline/losses/``; this file only wires networks to losses and steps the optimizers.
 
 Update order: TD3+BC and CQL as DrQ-v2 (critic with the encoder, actor on sg(h), target, auxiliary);
-IQL as the reference code (value, actor, critic with the encoder, target, auxiliary).
+IQL as the JAX reference code (value, actor, critic with the encoder, target, auxiliary), the actor's advantage
+and the critic's target from the updated V (``iql.value_for_targets: before``: CORL's, from V before the value
+step). The noise schedule counts V-D4RL's loop steps (``stddev_schedule.step_scale`` 2 per update).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import torch
 from torch import nn
 
 from repro.agent.agent import Agent, soft_update
-from repro.agent.networks import mlp, orthogonal_init, trunk
+from repro.agent.networks import TruncatedNormal, mlp, orthogonal_init, trunk
 from repro.agent.objectives import Objective
 from repro.offline.losses import cql as cql_loss
 from repro.offline.losses import iql as iql_loss
@@ -44,25 +46,48 @@ class ValueNet(nn.Module):
         return self.v(self.trunk(h))
 
 
+class LogStd(nn.Module):
+    """The JAX IQL actor's state-independent, learned log-std (``log_stds``: zeros at start, clipped to
+    [LOG_STD_MIN, LOG_STD_MAX] when used); switch ``iql.learned_log_std``."""
+
+    LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0  # learner.py: log_std_min=-5.0; policy.py: LOG_STD_MAX = 2.0
+
+    def __init__(self, action_dim: int):
+        super().__init__()
+        self.log_std = nn.Parameter(torch.zeros(action_dim))
+
+    def forward(self) -> torch.Tensor:
+        return self.log_std.clamp(self.LOG_STD_MIN, self.LOG_STD_MAX).exp()
+
+
 class OfflineActorCritic(Agent):
     """Learners ``td3bc``, ``cql`` and ``iql`` (the ``_taco`` agent files switch on the auxiliary step)."""
 
     algorithm = "td3bc"
     value: ValueNet | None = None  # IQL's V(h); set before Agent.__init__ lists the modules
+    log_std: LogStd | None = None  # IQL's learned log-std (iql.learned_log_std)
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
         super().__init__(cfg, obs_shape, action_dim, device=device, explore_steps=0)
         if self.algorithm == "iql":
+            if cfg.iql.value_for_targets not in ("after", "before"):
+                raise ValueError(f"agent.iql.value_for_targets must be 'after' or 'before', "
+                                 f"got {cfg.iql.value_for_targets!r}")
             self.value = ValueNet(self.encoder.repr_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
             self.value_opt = torch.optim.Adam(self.value.parameters(), lr=cfg.lr)
             self.value.train(True)
+            if cfg.iql.learned_log_std:  # trained by the actor's optimizer, as the JAX actor's log_stds
+                self.log_std = LogStd(action_dim).to(self.device)
+                self.actor_opt.add_param_group({"params": list(self.log_std.parameters())})
 
     # ----------------------------------------------------------------- protocol
     def modules(self) -> dict[str, nn.Module]:
         mods = super().modules()
         if self.value is not None:
             mods["value"] = self.value
+        if self.log_std is not None:
+            mods["log_std"] = self.log_std
         return mods
 
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:
@@ -104,8 +129,7 @@ class OfflineActorCritic(Agent):
         # dataset actions are data: no gradient ever flows into them
         action, reward, discount = batch["action"].detach(), batch["reward"], batch["discount"]
         if self.algorithm == "iql":
-            metrics.update(self._iql_value_actor(h.detach(), action, step))
-            metrics.update(self._iql_critic(h, action, reward, discount, next_h))
+            metrics.update(self._iql(h, action, reward, discount, next_h, step))
         else:
             metrics.update(self._critic(h, action, reward, discount, next_h, step))
             if self.algorithm == "td3bc":
@@ -144,26 +168,35 @@ class OfflineActorCritic(Agent):
         return metrics
 
     def _cql_regularisers(self, h, next_h, q_data, step):
+        """V-D4RL's draw order: N uniform actions, then N policy samples at h, then N at h' (each (B, N, A),
+        noise clipped to ``stddev_clip`` unless ``cql.clip_policy_samples`` is off)."""
         c = self.cfg.cql
         n, batch = c.n_samples, h.shape[0]
         std = self.stddev(step)
-        with torch.no_grad():  # policy samples carry no gradient (CQL issue 5)
-            dist = self.actor(h.detach(), std)
-            next_dist = self.actor(next_h, std)
-            policy = dist.sample(sample_shape=torch.Size([n])).transpose(0, 1)  # (B, N, A)
-            next_policy = next_dist.sample(sample_shape=torch.Size([n])).transpose(0, 1)
-            log_p = dist.log_prob(policy.transpose(0, 1)).sum(-1).transpose(0, 1)
-            log_np = next_dist.log_prob(next_policy.transpose(0, 1)).sum(-1).transpose(0, 1)
+        clip = self.cfg.stddev_clip if c.clip_policy_samples else None
         uniform = cql_loss.uniform_actions(batch, n, self.action_dim, like=h)
+        with torch.no_grad():  # policy samples carry no gradient (CQL issue 5)
+            policy, log_p = self._policy_samples(h.detach(), std, n, clip)
+            next_policy, log_np = self._policy_samples(next_h, std, n, clip)
 
         def critic(h_rows: torch.Tensor, actions: torch.Tensor):
             return self.critic(h_rows, self.encode_action(actions))
 
         assert c.alpha is not None, "agent.cql.alpha is resolved when the config is composed"
+        include_data = c.include_data_in_logsumexp and not c.importance_sampling  # V-D4RL: the no-IS form only
         return cql_loss.critic_regularisers(critic, h, q_data, uniform, policy, next_policy, float(c.alpha),
                                             c.temperature, importance_sampling=c.importance_sampling,
                                             log_prob_policy=log_p, log_prob_next_policy=log_np,
-                                            include_data_in_logsumexp=c.include_data_in_logsumexp)
+                                            include_data_in_logsumexp=include_data)
+
+    def _policy_samples(self, h: torch.Tensor, std: float, n: int,
+                        clip: float | None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(B, N, A) samples of pi(.|h) and their (B, N) log-probabilities (summed over action dimensions)."""
+        dist = self.actor(h, std)
+        expanded = TruncatedNormal(dist.loc.unsqueeze(1).expand(-1, n, -1),
+                                   dist.scale.unsqueeze(1).expand(-1, n, -1))
+        samples = expanded.sample(clip=clip)
+        return samples, expanded.log_prob(samples).sum(-1)
 
     def _td3bc_actor(self, h, data_action, step) -> dict[str, float]:
         dist = self.actor(h, self.stddev(step))
@@ -175,30 +208,47 @@ class OfflineActorCritic(Agent):
         self._step(loss, self.actor_opt)
         return metrics
 
-    def _iql_value_actor(self, h, action, step) -> dict[str, float]:
+    def _iql_value(self, h, action) -> tuple[torch.Tensor, torch.Tensor, dict[str, float]]:
+        """The expectile value step on V(h); returns the target critic's (Q1, Q2) at the data actions."""
         assert self.value is not None
-        c = self.cfg.iql
         with torch.no_grad():
             tq1, tq2 = self.critic_target(h, self.encode_action(action))
         v = self.value(h)
-        v_loss, metrics = iql_loss.value_loss(tq1, tq2, v, expectile=c.expectile)
+        v_loss, metrics = iql_loss.value_loss(tq1, tq2, v, expectile=self.cfg.iql.expectile)
         self._step(v_loss, self.value_opt)
+        return tq1, tq2, metrics
+
+    def _iql_actor(self, h, action, tq1, tq2, v, step) -> dict[str, float]:
+        c = self.cfg.iql
+        if c.actor_lr_cosine_updates is not None:
+            for group in self.actor_opt.param_groups:
+                group["lr"] = iql_loss.cosine_lr(self.cfg.lr, step, c.actor_lr_cosine_updates)
         dist = self.actor(h, self.stddev(step))
+        if self.log_std is not None:  # the JAX actor: Normal(tanh mean, exp(clip(log_stds)))
+            dist = torch.distributions.Normal(dist.loc, self.log_std().expand_as(dist.loc))
         log_prob = dist.log_prob(action).sum(-1, keepdim=True)
-        a_loss, a_metrics = iql_loss.actor_loss(log_prob, tq1, tq2, v.detach(), beta=c.beta,
-                                                max_weight=c.max_weight)
+        a_loss, metrics = iql_loss.actor_loss(log_prob, tq1, tq2, v, beta=c.beta, max_weight=c.max_weight)
         self._step(a_loss, self.actor_opt)
-        metrics.update(a_metrics)
         return metrics
 
-    def _iql_critic(self, h, action, reward, discount, next_h) -> dict[str, float]:
+    def _iql(self, h, action, reward, discount, next_h, step) -> dict[str, float]:
+        """IQL's update: value, actor, critic (with the encoder). The actor's advantage uses V(h) and the
+        critic's target V(h'), both after the value step (the JAX learner.py) or both before it (CORL)."""
         assert self.value is not None
-        with torch.no_grad():
-            next_v = self.value(next_h)
+        before = self.cfg.iql.value_for_targets == "before"
+        if before:
+            with torch.no_grad():
+                v_h, next_v = self.value(h.detach()), self.value(next_h)
+        tq1, tq2, metrics = self._iql_value(h.detach(), action)
+        if not before:
+            with torch.no_grad():
+                v_h, next_v = self.value(h.detach()), self.value(next_h)
+        metrics.update(self._iql_actor(h.detach(), action, tq1, tq2, v_h, step))
         target = iql_loss.critic_target(reward, discount, next_v)
         q1, q2 = self.critic(h, self.encode_action(action))
-        loss, metrics = iql_loss.critic_loss(q1, q2, target)
+        loss, critic_metrics = iql_loss.critic_loss(q1, q2, target)
         self._step(loss, self.encoder_opt, self.critic_opt)
+        metrics.update(critic_metrics)
         return metrics
 
 

@@ -7,6 +7,7 @@ config (CQL's section, ``CQLConfig``, already lives there). Each default names i
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 
 @dataclass
@@ -25,6 +26,15 @@ class IQLConfig:
     expectile: float = 0.7  # paper (TACO appendix): 0.7
     beta: float = 0.1  # inverse temperature; the TACO paper's 0.1; the IQL reference MuJoCo config uses 3
     max_weight: float = 100.0  # exp(beta * adv) is clipped here (IQL reference code)
+    # which V the actor's advantage and the critic's target use: "after" the value step (the JAX code's
+    # learner.py, the default) or "before" it (CORL's iql.py)
+    value_for_targets: str = "after"
+    # None: constant actor learning rate (DrQ-v2); N: cosine decay of the actor's rate to 0 over N updates
+    # (the JAX code's opt_decay_schedule "cosine" with max_steps = N)
+    actor_lr_cosine_updates: Optional[int] = None
+    # False: the DrQ-v2 actor's scheduled std in log pi (DrQ-v2); True: a learned state-independent log-std
+    # (the JAX actor: NormalTanhPolicy(state_dependent_std=False, log_std_min=-5), zeros at start)
+    learned_log_std: bool = False
 
 
 @dataclass
@@ -43,3 +53,7 @@ class DTConfig:
     batch_size: int = 64
     rtg_scale: float = 1e-3  # returns-to-go are multiplied by this (1/1000)
     max_timestep: int = 1000  # size of the learned timestep embedding; episodes must be shorter
+    activation: str = "relu"  # feed-forward activation (Chen et al.'s --activation_function default); CORL: gelu
+    init: str = "gpt2"  # "gpt2": N(0, 0.02) body weights (GPT2PreTrainedModel); "torch": torch's layer defaults
+    ff_dropout: bool = False  # a dropout after the activation (torch's TransformerEncoderLayer); GPT-2: none
+    action_pad: float = -10.0  # value of padded action slots in training windows (Chen et al.'s get_batch)

@@ -11,7 +11,9 @@ each x has its sampling log-density subtracted: log(2^-|A|) for the uniform acti
 log-probability for the policy samples. Default off, as in V-D4RL's pixel CQL (conglu1997/v-d4rl,
 ``drqbc/cql.py``: ``cql_importance_sample=False``). Without importance sampling V-D4RL (and the original
 CQL's "min_q_version 2") also put the data action's Q inside the logsumexp; that is
-``include_data_in_logsumexp=True`` here (default False: the three sample sets only).
+``include_data_in_logsumexp=True`` here; the learner's default (``agent.cql.include_data_in_logsumexp``,
+true) follows V-D4RL, this function's default (False) is the three sample sets only. V-D4RL draws the policy
+samples with their noise clipped to ``stddev_clip`` (the learner's ``agent.cql.clip_policy_samples``).
 
 Policy samples carry no gradient (CQL issue 5: otherwise the regulariser trains the policy). The caller
 must pass them detached (drawn under ``torch.no_grad()``); ``critic_regularisers`` detaches them and their

@@ -2,16 +2,19 @@
 
 Each step t of a window contributes three tokens, in this order: return-to-go R_t, state s_t, action a_t.
 Every token is a linear embedding plus a learned embedding of the step's timestep (no other position
-embedding), then LayerNorm and dropout. A causal mask lets a token see only earlier tokens; a padding mask
-hides left-padded steps from every real token (a padded token sees only itself, so no attention row is
-empty). The action a_t is predicted from the output at the state token s_t, which has seen
-R_<=t, s_<=t and a_<t. States are frame stacks, each through the DrQ-v2 conv Encoder and a linear layer
-(the Atari DT embeds pixels with a conv encoder the same way). Returns-to-go are scaled by ``rtg_scale``
-(1/1000); at evaluation the target return is scaled the same way and decremented by each scaled reward.
+embedding: Chen et al. removed GPT-2's), then LayerNorm and dropout, then GPT-2 blocks (pre-LayerNorm, a final
+LayerNorm, ReLU feed-forward, GPT-2's N(0, 0.02) initialisation; docs/deviations.md, "Offline references"). A
+causal mask lets a token see only earlier tokens; a padding mask hides left-padded steps from every real token
+(a padded token sees only itself, so no attention row is empty; Chen et al.'s padded tokens see other padded
+ones, which changes only outputs at padded steps, never used). The action a_t is predicted from the output at
+the state token s_t, which has seen R_<=t, s_<=t and a_<t. States are frame stacks, each through the DrQ-v2
+conv Encoder and a linear layer (the Atari DT embeds pixels with a conv encoder the same way). Returns-to-go
+are scaled by ``rtg_scale`` (1/1000); at evaluation the target return is scaled the same way and decremented
+by each scaled reward.
 
-Also here: the loss (MSE on the predicted actions of unpadded steps), ``SequenceSampler`` (windows that
-never cross an episode boundary, left-padded near an episode's end, as the reference sampler does),
-``EvalContext`` (the history an evaluation episode feeds the model) and ``make_optimizer``.
+Also here: the loss (MSE on the predicted actions of unpadded steps), ``SequenceSampler`` (windows that never
+cross an episode boundary, left-padded near an episode's end, as the reference sampler does), ``EvalContext``
+(the history an evaluation episode feeds the model) and ``make_optimizer``.
 """
 
 from __future__ import annotations
@@ -28,13 +31,107 @@ from repro.agent.networks import Encoder
 GRAD_CLIP = 0.25  # the caller clips: torch.nn.utils.clip_grad_norm_(model.parameters(), GRAD_CLIP)
 
 
+ACTIVATIONS = ("relu", "gelu", "gelu_new")  # GPT2Config.activation_function values (Chen et al.'s default: relu)
+INITS = ("gpt2", "torch")
+GPT2_INIT_STD = 0.02  # GPT2Config.initializer_range
+
+
+def activation(name: str) -> nn.Module:
+    """The feed-forward activation by its GPT2Config name: ``relu``, ``gelu`` (erf) or ``gelu_new`` (tanh)."""
+    if name == "relu":
+        return nn.ReLU()
+    if name == "gelu":
+        return nn.GELU()
+    if name == "gelu_new":
+        return nn.GELU(approximate="tanh")
+    raise ValueError(f"dt.activation must be one of {', '.join(ACTIVATIONS)}; got {name!r}")
+
+
+class GPT2MLP(nn.Module):
+    """c_fc, activation, c_proj, dropout (GPT-2's MLP). ``ff_dropout`` adds a dropout right after the
+    activation, as torch's TransformerEncoderLayer has (GPT-2 has none there)."""
+
+    def __init__(self, embed_dim: int, act: str, dropout: float, ff_dropout: bool = False):
+        super().__init__()
+        self.c_fc = nn.Linear(embed_dim, 4 * embed_dim)
+        self.act = activation(act)
+        self.act_dropout = nn.Dropout(dropout) if ff_dropout else nn.Identity()
+        self.c_proj = nn.Linear(4 * embed_dim, embed_dim)
+        self.dropout = nn.Dropout(dropout)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.dropout(self.c_proj(self.act_dropout(self.act(self.c_fc(x)))))
+
+
+class GPT2Block(nn.Module):
+    """GPT-2's pre-LayerNorm block: x + resid_drop(attn(ln_1(x))), then x + mlp(ln_2(x)).
+
+    ``attn``: softmax(q k^T / sqrt(head_dim)) v with dropout on the attention weights (attn_pdrop), then
+    the output projection (GPT-2's c_proj); ``resid_dropout`` after it (resid_pdrop).
+    """
+
+    def __init__(self, embed_dim: int, n_heads: int, dropout: float, act: str, ff_dropout: bool = False):
+        super().__init__()
+        self.ln_1 = nn.LayerNorm(embed_dim)
+        self.attn = nn.MultiheadAttention(embed_dim, n_heads, dropout=dropout, batch_first=True)
+        self.resid_dropout = nn.Dropout(dropout)
+        self.ln_2 = nn.LayerNorm(embed_dim)
+        self.mlp = GPT2MLP(embed_dim, act, dropout, ff_dropout)
+
+    def forward(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        y = self.ln_1(x)
+        x = x + self.resid_dropout(self.attn(y, y, y, attn_mask=mask, need_weights=False)[0])
+        return x + self.mlp(self.ln_2(x))
+
+
+class GPT2Stack(nn.Module):
+    """The GPT-2 body of Chen et al.'s trajectory_gpt2.GPT2Model: blocks ``h`` and the final LayerNorm ``ln_f``;
+    no position embedding (their wpe is removed: the timestep embedding is added to every token instead). The
+    embedding dropout (GPT-2's ``drop``) is the model's ``embed_drop``."""
+
+    def __init__(self, embed_dim: int, n_layers: int, n_heads: int, dropout: float, act: str,
+                 ff_dropout: bool = False):
+        super().__init__()
+        self.h = nn.ModuleList([GPT2Block(embed_dim, n_heads, dropout, act, ff_dropout) for _ in range(n_layers)])
+        self.ln_f = nn.LayerNorm(embed_dim)
+
+    def forward(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        for block in self.h:
+            x = block(x, mask)
+        return self.ln_f(x)
+
+
+def gpt2_init(module: nn.Module) -> None:
+    """GPT2PreTrainedModel._init_weights: Linear weights (incl. the attention projections) N(0, 0.02), their
+    biases 0, LayerNorm weight 1 and bias 0. Chen et al. apply it to the GPT-2 body only."""
+    for m in module.modules():
+        if isinstance(m, nn.Linear):
+            nn.init.normal_(m.weight, 0.0, GPT2_INIT_STD)
+            if m.bias is not None:
+                nn.init.zeros_(m.bias)
+        elif isinstance(m, nn.MultiheadAttention):
+            assert m.in_proj_weight is not None and m.in_proj_bias is not None
+            nn.init.normal_(m.in_proj_weight, 0.0, GPT2_INIT_STD)
+            nn.init.zeros_(m.in_proj_bias)
+        elif isinstance(m, nn.LayerNorm):
+            nn.init.ones_(m.weight)
+            nn.init.zeros_(m.bias)
+
+
 class DecisionTransformer(nn.Module):
-    """(frames, actions, returns-to-go, timesteps, mask) windows -> predicted actions, (B, K, A)."""
+    """(frames, actions, returns-to-go, timesteps, mask) windows -> predicted actions, (B, K, A).
+
+    Defaults as Chen et al.'s gym code: ReLU feed-forward (``--activation_function relu``), GPT-2 blocks
+    (pre-LayerNorm, final LayerNorm, no dropout after the activation) with GPT-2's initialisation of the
+    body. ``activation="gelu"`` is CORL's; ``init="torch"`` and ``ff_dropout=True`` give the earlier torch-layer model.
+    """
 
     def __init__(self, obs_shape: tuple[int, int, int], action_dim: int, context: int = 20,
                  embed_dim: int = 128, n_layers: int = 3, n_heads: int = 1, dropout: float = 0.1,
-                 max_timestep: int = 1000):
+                 max_timestep: int = 1000, activation: str = "relu", init: str = "gpt2", ff_dropout: bool = False):
         super().__init__()
+        if init not in INITS:
+            raise ValueError(f"dt.init must be one of {', '.join(INITS)}; got {init!r}")
         self.context, self.action_dim, self.n_heads, self.max_timestep = context, action_dim, n_heads, max_timestep
         self.encoder = Encoder(obs_shape)
         self.embed_state = nn.Linear(self.encoder.repr_dim, embed_dim)
@@ -43,10 +140,9 @@ class DecisionTransformer(nn.Module):
         self.embed_timestep = nn.Embedding(max_timestep, embed_dim)
         self.embed_ln = nn.LayerNorm(embed_dim)
         self.embed_drop = nn.Dropout(dropout)
-        layer = nn.TransformerEncoderLayer(embed_dim, n_heads, dim_feedforward=4 * embed_dim, dropout=dropout,
-                                           activation="gelu", batch_first=True, norm_first=True)
-        self.transformer = nn.TransformerEncoder(layer, n_layers, norm=nn.LayerNorm(embed_dim),
-                                                 enable_nested_tensor=False)
+        self.transformer = GPT2Stack(embed_dim, n_layers, n_heads, dropout, activation, ff_dropout)
+        if init == "gpt2":
+            gpt2_init(self.transformer)
         self.predict_action = nn.Sequential(nn.Linear(embed_dim, action_dim), nn.Tanh())
 
     def attention_mask(self, mask: torch.Tensor) -> torch.Tensor:
@@ -74,7 +170,7 @@ class DecisionTransformer(nn.Module):
         a = self.embed_action(actions.to(dtype)) + time
         tokens = interleave(r, s, a)
         x = self.embed_drop(self.embed_ln(tokens))
-        x = self.transformer(x, mask=self.attention_mask(mask.bool()))
+        x = self.transformer(x, self.attention_mask(mask.bool()))
         state_out = x.reshape(batch, steps, 3, -1)[:, :, 1]
         return self.predict_action(state_out)
 
@@ -104,14 +200,16 @@ def stack_indices(steps: np.ndarray, frame_stack: int) -> np.ndarray:
     return np.maximum(steps[:, None] - np.arange(frame_stack - 1, -1, -1)[None, :], 0)
 
 
-def left_pad(arrays: Mapping[str, np.ndarray], context: int) -> dict[str, np.ndarray]:
-    """Left-pad each (L, ...) array with zeros to (context, ...) and add ``mask`` (context,) bool."""
+def left_pad(arrays: Mapping[str, np.ndarray], context: int,
+             pad_values: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
+    """Left-pad each (L, ...) array to (context, ...) with its ``pad_values`` entry (0 when absent) and add
+    ``mask`` (context,) bool."""
     length = next(iter(arrays.values())).shape[0]
     if not 0 < length <= context:
         raise ValueError(f"window of {length} steps does not fit a context of {context}")
     out: dict[str, np.ndarray] = {}
     for key, value in arrays.items():
-        padded = np.zeros((context,) + value.shape[1:], dtype=value.dtype)
+        padded = np.full((context,) + value.shape[1:], (pad_values or {}).get(key, 0), dtype=value.dtype)
         padded[context - length:] = value
         out[key] = padded
     out["mask"] = np.arange(context) >= context - length
@@ -124,7 +222,8 @@ class SequenceSampler:
     Episodes are mappings with the Dataset contract's arrays: ``frames`` (T+1, 3, H, W) uint8, ``actions``
     (T, A), ``rewards`` (T,). A window starts at a step drawn uniformly over all steps of all episodes
     (an episode is chosen in proportion to its length) and runs to at most ``context`` steps, stopping at
-    the episode's end; shorter windows are left-padded (as kzl/decision-transformer's sampler).
+    the episode's end; shorter windows are left-padded (as kzl/decision-transformer's get_batch: frames, returns
+    and timesteps with 0, actions with ``action_pad``, -10 there; the padded steps are masked out).
     ``sample`` returns numpy arrays: ``frames`` (B, K, 3*frame_stack, H, W) uint8, ``actions`` (B, K, A)
     float32, ``rtg`` (B, K, 1) float32 (scaled), ``timesteps`` (B, K) int64, ``mask`` (B, K) bool, plus
     ``episode`` and ``start`` (B,) int64 naming where each window came from. With ``max_timestep`` (the
@@ -132,8 +231,10 @@ class SequenceSampler:
     """
 
     def __init__(self, episodes: Iterable[Mapping[str, np.ndarray]], context: int = 20, frame_stack: int = 3,
-                 rtg_scale: float = 1e-3, seed: int = 0, max_timestep: int | None = None):
+                 rtg_scale: float = 1e-3, seed: int = 0, max_timestep: int | None = None,
+                 action_pad: float = -10.0):
         self.context, self.frame_stack, self.rtg_scale = context, frame_stack, rtg_scale
+        self.action_pad = float(action_pad)
         self.frames: list[np.ndarray] = []
         self.actions: list[np.ndarray] = []
         self.rtg: list[np.ndarray] = []
@@ -167,7 +268,7 @@ class SequenceSampler:
         return left_pad({"frames": frames.reshape(len(steps), -1, *frames.shape[3:]),
                          "actions": self.actions[episode][start:end],
                          "rtg": self.rtg[episode][start:end, None],
-                         "timesteps": steps.astype(np.int64)}, self.context)
+                         "timesteps": steps.astype(np.int64)}, self.context, {"actions": self.action_pad})
 
     def sample(self, batch_size: int) -> dict[str, np.ndarray]:
         flat = self.rng.integers(0, int(self.offsets[-1]), size=batch_size)

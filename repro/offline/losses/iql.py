@@ -10,10 +10,13 @@ Everything that is a target is detached here: the target critic's Q values, V(s'
 and the advantage weight (the actor's loss reaches only log pi). beta is an inverse temperature: 0.1 is
 the TACO paper's value and the reference code's ``Learner`` default; the reference MuJoCo config
 (ikostrikov/implicit_q_learning, ``configs/mujoco_config.py``) uses temperature 3, i.e. beta = 3.
-The reference update order is value, actor, critic; the learner owns the order and the optimizer steps.
+The JAX reference order is value, actor, critic, the actor and the critic using V after the value step; the
+learner owns the order and the optimizer steps.
 """
 
 from __future__ import annotations
+
+import math
 
 import torch
 
@@ -60,3 +63,12 @@ def actor_loss(log_prob: torch.Tensor, target_q1: torch.Tensor, target_q2: torch
     loss = -(weight * log_prob).mean()
     return loss, {"actor_loss": loss.item(), "actor_adv": adv.mean().item(),
                   "actor_weight": weight.mean().item(), "actor_logprob": log_prob.mean().item()}
+
+
+def cosine_lr(base_lr: float, update: int, decay_updates: int) -> float:
+    """The JAX code's actor learning rate at 0-based update ``update``: optax's cosine_decay_schedule (alpha 0)
+    over ``decay_updates``, base_lr * (1 + cos(pi * min(update, decay_updates) / decay_updates)) / 2."""
+    if decay_updates <= 0:
+        raise ValueError(f"actor_lr_cosine_updates must be positive, got {decay_updates}")
+    progress = min(max(update, 0), decay_updates) / decay_updates
+    return base_lr * 0.5 * (1.0 + math.cos(math.pi * progress))

@@ -1,0 +1,288 @@
+"""The offline learners against their reference code (issue 16): V-D4RL's CQL regulariser and noise schedule,
+the JAX IQL update order. Known answers come from the references' equations in float64, not from the code
+under test (docs/deviations.md, "Offline references")."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from repro.config import compose, typed
+from repro.learners import build_learner, offline_ac
+
+OBS = (9, 84, 84)
+A = 6  # cheetah_run
+
+
+def learner(agent: str, **over):
+    overrides = [f"agent={agent}", "task=cheetah_run", "profile=tiny", "offline.dataset=medium"]
+    overrides += [f"{k}={v}" for k, v in over.items()]
+    torch.manual_seed(0)
+    return build_learner(typed(compose(overrides)).agent, OBS, A, "cpu")
+
+
+def batch(B: int = 8, K: int = 3) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(1)
+
+    def obs() -> torch.Tensor:
+        return torch.randint(0, 256, (B, *OBS), generator=g, dtype=torch.uint8)
+
+    return {"obs": obs(), "next_obs": obs(), "future_obs": obs(),
+            "action": torch.rand(B, A, generator=g) * 2 - 1, "action_seq": torch.rand(B, K, A, generator=g) * 2 - 1,
+            "reward": torch.rand(B, 1, generator=g), "discount": torch.full((B, 1), 0.99 ** 3),
+            "reward_ksum": torch.rand(B, 1, generator=g)}
+
+
+def vd4rl_sigma(update: int) -> float:
+    """V-D4RL's utils.schedule('linear(1.0,0.1,250000)', step) at its loop step 2u (update_every_steps 2)."""
+    mix = float(np.clip(np.float64(2 * update) / 250000.0, 0.0, 1.0))
+    return (1.0 - mix) * 1.0 + mix * 0.1
+
+
+# ----------------------------------------------------------------------------- 1. CQL samples clipped
+@pytest.mark.parametrize("agent", ["cql", "cql_taco"])
+def test_cql_policy_samples_lie_within_stddev_clip_of_the_mean(agent: str, monkeypatch):
+    """With the policy mean forced to 0 and sigma 1 (update 0), every one of the 2 x B x N x A policy samples
+    must lie in [-0.3, 0.3] (V-D4RL: sample(clip=stddev_clip)); unclipped, most would not."""
+    lrn = learner(agent)
+    last = lrn.actor.policy[-1]
+    with torch.no_grad():
+        last.weight.zero_()
+        last.bias.zero_()
+    seen = {}
+    real = offline_ac.cql_loss.critic_regularisers
+
+    def spy(critic, h, q_data, uniform, policy, next_policy, *a, **k):
+        seen.update(policy=policy.clone(), next_policy=next_policy.clone())
+        return real(critic, h, q_data, uniform, policy, next_policy, *a, **k)
+
+    monkeypatch.setattr(offline_ac.cql_loss, "critic_regularisers", spy)
+    lrn.update(batch(), 0)
+    assert lrn.stddev(0) == 1.0 and lrn.cfg.stddev_clip == 0.3
+    samples = torch.cat([seen["policy"].flatten(), seen["next_policy"].flatten()])
+    assert samples.numel() == 2 * 8 * 10 * A
+    assert samples.abs().max().item() <= 0.3 + 1e-6
+    assert samples.abs().max().item() > 0.25  # the noise is there, only clipped
+
+
+# ----------------------------------------------------------------------------- 2. data Q in the logsumexp
+def test_cql_regulariser_equals_vd4rl_equation_with_the_data_q_in_the_logsumexp(monkeypatch):
+    """V-D4RL drqbc/cql.py, no importance sampling: for each head
+    R = w * (T * mean_b logsumexp([Q_rand, Q(a_data), Q_next, Q_curr] / T) - mean_b Q(a_data)), in float64."""
+    lrn = learner("cql")
+    seen: dict = {}
+    real = offline_ac.cql_loss.critic_regularisers
+
+    def spy(critic, h, q_data, uniform, policy, next_policy, alpha, temperature, **k):
+        b, n, a = uniform.shape
+        with torch.no_grad():
+            rows = h.repeat_interleave(n, dim=0)
+            qs = [critic(rows, x.reshape(b * n, a)) for x in (uniform, policy, next_policy)]
+        seen.update(q_data=[q.detach().double().reshape(b) for q in q_data], alpha=alpha, T=temperature, n=n,
+                    q_samples=[[qs[j][i].double().reshape(b, n) for j in range(3)] for i in range(2)])
+        return real(critic, h, q_data, uniform, policy, next_policy, alpha, temperature, **k)
+
+    monkeypatch.setattr(offline_ac.cql_loss, "critic_regularisers", spy)
+    metrics = lrn.update(batch(), 0)
+    T, w = seen["T"], seen["alpha"]
+    for i in range(2):
+        q_d = seen["q_data"][i].numpy()
+        q_rand, q_curr, q_next = (x.numpy() for x in seen["q_samples"][i])
+        cat = np.concatenate([q_rand, q_d[:, None], q_next, q_curr], axis=1) / T
+        top = cat.max(axis=1, keepdims=True)
+        lse = (top[:, 0] + np.log(np.exp(cat - top).sum(axis=1))).mean() * T
+        expected = w * (lse - q_d.mean())
+        assert metrics[f"cql_reg_q{i + 1}"] == pytest.approx(expected, rel=1e-5, abs=1e-6)
+        assert cat.shape[1] == 3 * seen["n"] + 1
+
+
+# ----------------------------------------------------------------------------- 3. the schedule's unit
+@pytest.mark.parametrize("agent", ["td3bc", "td3bc_taco", "cql", "cql_taco", "iql"])
+def test_offline_sigma_at_update_u_is_vd4rl_schedule_at_loop_step_2u(agent: str):
+    lrn = learner(agent)
+    for u, hand in [(0, 1.0), (1000, None), (62_500, 0.55), (100_000, 0.28), (125_000, 0.1), (200_000, 0.1)]:
+        assert lrn.stddev(u) == pytest.approx(vd4rl_sigma(u), rel=1e-12, abs=1e-12), u
+        if hand is not None:
+            assert lrn.stddev(u) == pytest.approx(hand, rel=1e-12), u
+
+
+@pytest.mark.parametrize("agent", ["td3bc", "cql", "iql"])
+def test_the_update_acts_with_the_vd4rl_sigma(agent: str, monkeypatch):
+    """The std the actor is called with inside update(batch, 100000) is V-D4RL's 0.28, not 0.64."""
+    lrn = learner(agent)
+    stds: list[float] = []
+    real = lrn.actor.forward
+    monkeypatch.setattr(lrn.actor, "forward", lambda h, std: (stds.append(float(std)), real(h, std))[1])
+    lrn.update(batch(), 100_000)
+    assert stds and all(s == pytest.approx(0.28, rel=1e-12) for s in stds)
+
+
+def test_online_schedule_still_counts_agent_steps():
+    rc = typed(compose(["agent=taco", "task=cheetah_run"]))
+    sched = rc.agent.stddev_schedule
+    assert sched.step_scale == 1
+    for step in (0, 1, 12_345, sched.duration // 2, sched.duration, 2 * sched.duration):
+        mix = min(step / sched.duration, 1.0)
+        assert sched(step) == (1.0 - mix) * sched.start + mix * sched.end
+
+
+# ----------------------------------------------------------------------------- 4. IQL's order
+def _iql_values_used(lrn, monkeypatch) -> dict:
+    """Run one update, recording the V the actor's advantage and the critic's target were given and every
+    input the value network saw."""
+    seen: dict = {"inputs": []}
+    real_actor, real_target = offline_ac.iql_loss.actor_loss, offline_ac.iql_loss.critic_target
+
+    def actor_spy(log_prob, tq1, tq2, v, **k):
+        seen["actor_v"] = v.detach().clone()
+        return real_actor(log_prob, tq1, tq2, v, **k)
+
+    def target_spy(reward, discount, next_v):
+        seen["next_v"] = next_v.detach().clone()
+        return real_target(reward, discount, next_v)
+
+    monkeypatch.setattr(offline_ac.iql_loss, "actor_loss", actor_spy)
+    monkeypatch.setattr(offline_ac.iql_loss, "critic_target", target_spy)
+    seen["value_before"] = copy.deepcopy(lrn.value)  # before the hook, so the copy records nothing
+    hook = lrn.value.register_forward_hook(lambda m, inp, out: seen["inputs"].append(inp[0].detach().clone()))
+    lrn.update(batch(), 0)
+    hook.remove()
+    return seen
+
+
+def _v_of(net, inputs, target: torch.Tensor) -> torch.Tensor:
+    """V(x) by ``net`` for the recorded input x whose batch the target came from (h or h')."""
+    with torch.no_grad():
+        outs = [net(x) for x in inputs]
+    # the recorded input that gives the value closest to the target under either network identifies it
+    return min(outs, key=lambda o: (o - target).abs().max().item())
+
+
+def test_iql_actor_advantage_and_critic_target_use_v_after_the_value_step(monkeypatch):
+    """JAX learner.py: new_value = update_v(...); the actor gets new_value, update_q gets new_value."""
+    lrn = learner("iql")
+    seen = _iql_values_used(lrn, monkeypatch)
+    after, before = lrn.value, seen["value_before"]
+    h, inputs = seen["inputs"][0], seen["inputs"]  # the value loss's V(h) is the first call
+    with torch.no_grad():
+        assert not torch.allclose(after(h), before(h))  # the value step moved V
+        assert torch.equal(seen["actor_v"], after(h))
+    next_v = seen["next_v"]
+    assert torch.equal(_v_of(after, inputs, next_v), next_v)
+    with torch.no_grad():
+        assert all(not torch.equal(before(x), next_v) for x in inputs)
+
+
+def test_iql_corl_switch_uses_v_before_the_value_step(monkeypatch):
+    lrn = learner("iql", **{"agent.iql.value_for_targets": "before"})
+    seen = _iql_values_used(lrn, monkeypatch)
+    before, inputs = seen["value_before"], seen["inputs"]
+    with torch.no_grad():
+        assert torch.equal(seen["actor_v"], before(inputs[0]))
+        assert any(torch.equal(before(x), seen["next_v"]) for x in inputs)
+        assert not torch.allclose(lrn.value(inputs[0]), before(inputs[0]))
+
+
+def test_iql_learner_refuses_an_unknown_order():
+    """Built from a typed config directly (compose already refuses it, see below)."""
+    rc = typed(compose(["agent=iql", "task=cheetah_run", "profile=tiny", "offline.dataset=medium"]))
+    rc.agent.iql.value_for_targets = "sideways"
+    with pytest.raises(ValueError, match="'after' or 'before'"):
+        build_learner(rc.agent, OBS, A, "cpu")
+
+
+def test_iql_actor_cosine_lr_switch_is_optax_cosine_decay():
+    """optax.cosine_decay_schedule(lr, 4) at counts 0..5: lr * (1 + cos(pi * min(c, 4) / 4)) / 2."""
+    lrn = learner("iql", **{"agent.iql.actor_lr_cosine_updates": 4})
+    base = lrn.cfg.lr
+    hand = [1.0, (1 + math.sqrt(0.5)) / 2, 0.5, (1 - math.sqrt(0.5)) / 2, 0.0, 0.0]
+    for u, factor in enumerate(hand):
+        lrn.update(batch(), u)
+        assert lrn.actor_opt.param_groups[0]["lr"] == pytest.approx(base * factor, rel=1e-12, abs=1e-15)
+    assert lrn.critic_opt.param_groups[0]["lr"] == base and lrn.value_opt.param_groups[0]["lr"] == base
+    default = learner("iql")
+    default.update(batch(), 3)
+    assert default.actor_opt.param_groups[0]["lr"] == base  # DrQ-v2's constant rate by default
+
+
+def test_iql_learned_log_std_switch_is_the_jax_actor(monkeypatch):
+    """NormalTanhPolicy(state_dependent_std=False): log pi(a|s) = sum_i log N(a_i; tanh mu_i, exp(log_std_i)),
+    log_std zeros at start, trained by the actor's optimizer; checked in float64 at the first update."""
+    lrn = learner("iql", **{"agent.iql.learned_log_std": True})
+    assert dict(lrn.parameter_counts())["log_std"] == A and "log_std" in lrn.state_dict()["modules"]
+    actor_before = copy.deepcopy(lrn.actor)
+    seen: dict = {}
+    real_actor = offline_ac.iql_loss.actor_loss
+
+    def actor_spy(log_prob, tq1, tq2, v, **k):
+        seen["log_prob"] = log_prob.detach().clone()
+        return real_actor(log_prob, tq1, tq2, v, **k)
+
+    monkeypatch.setattr(offline_ac.iql_loss, "actor_loss", actor_spy)
+    inputs: list[torch.Tensor] = []
+    hook = lrn.value.register_forward_hook(lambda m, inp, out: inputs.append(inp[0].detach().clone()))
+    b = batch()
+    lrn.update(b, 0)
+    hook.remove()
+    with torch.no_grad():
+        mean = actor_before(inputs[0], 1.0).mean.double().numpy()
+    a = b["action"].double().numpy()
+    expected = (-0.5 * (a - mean) ** 2 - 0.5 * math.log(2 * math.pi)).sum(-1, keepdims=True)
+    np.testing.assert_allclose(seen["log_prob"].double().numpy(), expected, rtol=1e-5, atol=1e-5)
+    assert lrn.log_std.log_std.detach().abs().sum() > 0  # trained
+    default = learner("iql")
+    assert default.log_std is None and "log_std" not in dict(default.parameter_counts())
+
+
+@pytest.mark.parametrize("override, needle", [("agent.iql.value_for_targets=sideways", "value_for_targets"),
+                                              ("agent.iql.actor_lr_cosine_updates=0", "actor_lr_cosine_updates"),
+                                              ("agent.stddev_schedule.step_scale=0", "step_scale")])
+def test_bad_switch_values_are_one_line_config_errors(override: str, needle: str):
+    from repro.config import ConfigError
+
+    with pytest.raises(ConfigError, match=f"{needle}.*(is not one of|must be)") as err:
+        compose(["agent=iql", "task=cheetah_run", "offline.dataset=medium", override])
+    assert "\n" not in str(err.value)
+
+
+NEW_KEYS = [("agent", "stddev_schedule", "step_scale"), ("agent", "cql", "clip_policy_samples"),
+            ("agent", "iql", "value_for_targets"), ("agent", "iql", "actor_lr_cosine_updates"),
+            ("agent", "iql", "learned_log_std"), ("agent", "dt", "activation"), ("agent", "dt", "init"),
+            ("agent", "dt", "ff_dropout"), ("agent", "dt", "action_pad")]
+
+
+def _pre_issue_16_run(tmp_path, overrides: list[str]):
+    """A run directory whose config.yaml lacks the keys issue 16 added (as one written before it)."""
+    import yaml
+
+    from repro.rundir import CONFIG, write_config
+
+    cfg = compose(overrides + [f"runtime.results_root={tmp_path}"])
+    write_config(tmp_path, cfg)
+    data = yaml.safe_load((tmp_path / CONFIG).read_text())
+    for a, b, c in NEW_KEYS:
+        data[a][b].pop(c)
+    (tmp_path / CONFIG).write_text(yaml.safe_dump(data))
+    return cfg
+
+
+@pytest.mark.parametrize("overrides, refused", [
+    (["agent=taco", "task=cheetah_run"], []),  # online: nothing changed, still resumes
+    (["agent=bc", "task=cheetah_run", "offline.dataset=medium"], []),  # BC does not read the schedule
+    (["agent=td3bc", "task=cheetah_run", "offline.dataset=medium"], ["agent.stddev_schedule.step_scale"]),
+    (["agent=cql", "task=cheetah_run", "offline.dataset=medium"],
+     ["agent.cql.clip_policy_samples", "agent.stddev_schedule.step_scale"]),
+    (["agent=iql", "task=cheetah_run", "offline.dataset=medium"],
+     ["agent.iql.value_for_targets", "agent.stddev_schedule.step_scale"]),
+    (["agent=dt", "task=cheetah_run", "offline.dataset=medium"],
+     ["agent.dt.action_pad", "agent.dt.activation", "agent.dt.ff_dropout", "agent.dt.init"]),
+])
+def test_a_run_written_before_issue_16_is_not_resumed_with_the_new_behaviour(tmp_path, overrides, refused):
+    from repro.rundir import config_diff
+
+    cfg = _pre_issue_16_run(tmp_path, overrides)
+    assert sorted(d.partition(":")[0] for d in config_diff(tmp_path, cfg)) == refused
