@@ -35,11 +35,15 @@ lint: $(STAMP)
 	$(BIN)/ruff check repro analysis paper_figures repro_app tests benchmarks
 	$(BIN)/mypy
 
+# Two pytest workers (this project's CI machine has 2 cores); the tests sharing one session run (tests/conftest.py)
+# are kept on one worker (--dist loadgroup). The 15 slowest are printed so they stay visible.
+XDIST ?= -n 2 --dist loadgroup
 test: lint
-	$(BIN)/python -m pytest -q -ra $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -q -ra $(XDIST) --durations=15 $(PYTEST_ARGS)
 
+# The inner loop: unit tests only (no end-to-end runs, no SLURM), a few minutes.
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -q -ra -m "not slow and not slurm" $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -q -ra $(XDIST) -m "not slow and not slurm" $(PYTEST_ARGS)
 
 bench: $(STAMP)
 	$(BIN)/repro bench

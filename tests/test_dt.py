@@ -4,7 +4,6 @@ windows, return-conditioned acting, exact resume, two evaluation targets, and a 
 from __future__ import annotations
 
 import io
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -14,9 +13,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-from offline_fixtures import make_episode, write_dataset  # noqa: E402
+from offline_fixtures import make_episode, write_dataset
 from repro import api  # noqa: E402
 from repro.checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
 from repro.config import compose, typed  # noqa: E402

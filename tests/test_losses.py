@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from helpers import OBS, make_batch
 from repro.agent.agent import Agent
 from repro.agent.aug import RandomShift
 from repro.agent.networks import SharedHeads, default_latent_action_dim
@@ -13,16 +14,6 @@ from repro.agent.objectives import AuxBatch, ObjectiveContext
 from repro.agent.objectives.base import info_nce
 from repro.agent.objectives.taco import CURLObjective, RewardObjective, TACOObjective
 from repro.config import compose, typed
-
-OBS = (9, 84, 84)
-
-
-def make_batch(B=6, K=3, A=4, seed=0):
-    g = torch.Generator().manual_seed(seed)
-    u8 = lambda: torch.randint(0, 256, (B, *OBS), dtype=torch.uint8, generator=g)  # noqa: E731
-    return {"obs": u8(), "next_obs": u8(), "future_obs": u8(), "action": torch.rand(B, A, generator=g) * 2 - 1,
-            "action_seq": torch.rand(B, K, A, generator=g) * 2 - 1, "reward": torch.rand(B, 1, generator=g),
-            "discount": torch.full((B, 1), 0.99 ** 3), "reward_ksum": torch.rand(B, 1, generator=g) * 3}
 
 
 def agent_for(overrides, A=4):

@@ -5,14 +5,11 @@ from __future__ import annotations
 
 import math
 import shutil
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
 
 import paper_figures  # noqa: E402
 from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims  # noqa: E402
@@ -22,7 +19,7 @@ from analysis.offline import offline_runs, taco_poi  # noqa: E402
 from analysis.paper import OFFLINE_TASKS, PaperData  # noqa: E402
 from analysis.scores import final_scores  # noqa: E402
 from analysis.stats import pairwise_poi, poi_interval, probability_of_improvement  # noqa: E402
-from analysis_fixtures import write_run  # noqa: E402
+from analysis_fixtures import write_run
 from repro.offline.losses.cql import cql_alpha as table6_alpha  # noqa: E402
 
 DATASETS = ("medium", "medium-replay", "full-replay")

@@ -14,6 +14,7 @@ import typer
 import yaml
 from typer.testing import CliRunner
 
+from offline_fixtures import make_episode
 from repro.config import config_groups
 from repro.launch import local, slurm
 from repro.launch import spec as specs
@@ -23,7 +24,6 @@ from repro.launch.status import collect
 from repro.launch.waiting import waiting_lines
 from repro.offline.dataset import write_dataset
 from repro.runformat import run_path
-from tests.offline_fixtures import make_episode
 
 KINDS = ("medium", "medium-replay", "full-replay")
 LEARNERS = ("td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "bc", "dt")
@@ -263,10 +263,12 @@ def _t3_rows(results: Path, out: Path) -> list[dict[str, str]]:
 
 @pytest.mark.slow
 def test_tiny_offline_sweep_runs_every_learner_on_every_dataset_kind_then_t3(tmp_path):
-    """Every learner x the three kinds on tiny synthetic datasets of cheetah_run, 2 updates each (real
+    """Two learners x the three kinds on tiny synthetic datasets of cheetah_run, 2 updates each (real
     evaluation rollouts). First the full-replay dataset is missing: its runs wait, the others run; once it
-    is made, a relaunch runs just those; then T3 shows a reproduced cell for every learner and kind."""
-    learners = available_learners()
+    is made, a relaunch runs just those; then T3 shows a reproduced cell for every learner and kind. (Every
+    learner on real datasets made from a recorded run: the main job, tests/test_reproduce.py.)"""
+    learners = ["td3bc", "bc"]
+    assert set(learners) <= set(available_learners())
     root = tmp_path / "results"
     for i, kind in enumerate(KINDS[:2]):
         make_dataset(root, kind, seed=i)

@@ -18,9 +18,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-from offline_fixtures import action_of, reward_of, write_dataset  # noqa: E402
+from offline_fixtures import action_of, reward_of, write_dataset
 from repro import api, rundir  # noqa: E402
 from repro.config import compose, typed  # noqa: E402
 from repro.learners import LEARNERS, Learner, build_learner  # noqa: E402

@@ -15,16 +15,14 @@ import torch
 import typer
 from typer.testing import CliRunner
 
-from repro import api, rundir
+from helpers import REL, TINY, TINY_TACO, deterministic
+from repro import rundir
 from repro.agent.networks import Actor, Encoder
 from repro.config import compose, typed
 from repro.offline import make as mk
 from repro.offline.dataset import check_dataset
 from repro.offline.make_cli import register
 from repro.offline.record import Recorder, load_snapshot, snapshot_steps
-from tests.test_train_e2e import TINY, _kill_when, deterministic
-
-REL = Path("default/taco/base/cheetah_run/seed_3")
 
 
 def _cli() -> typer.Typer:
@@ -188,37 +186,14 @@ def test_bad_sources_get_one_line_and_exit_2(synthetic: Path, tmp_path: Path, br
 
 
 # --------------------------------------------------------------------------- real tiny runs (slow)
-@pytest.fixture(scope="module")
-def unrecorded(tmp_path_factory) -> Path:
-    return api.train(TINY + [f"runtime.results_root={tmp_path_factory.mktemp('plain')}"], echo=lambda s: None)
-
-
-@pytest.fixture(scope="module")
-def recorded(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("rec")
-    return api.train(TINY + [f"runtime.results_root={root}", "runtime.record=true"], echo=lambda s: None)
-
-
-def assert_same_recording(a: Path, b: Path) -> None:
-    names = lambda p, sub: sorted(f.name for f in (p / "record" / sub).iterdir())  # noqa: E731
-    assert names(a, "episodes") == names(b, "episodes") and names(a, "snapshots") == names(b, "snapshots")
-    for name in names(a, "episodes"):
-        with np.load(a / "record" / "episodes" / name) as x, np.load(b / "record" / "episodes" / name) as y:
-            assert sorted(x.files) == sorted(y.files)
-            for key in x.files:
-                np.testing.assert_array_equal(x[key], y[key], err_msg=f"{name}:{key}")
-    for name in names(a, "snapshots"):
-        x, y = load_snapshot(a / "record" / "snapshots" / name), load_snapshot(b / "record" / "snapshots" / name)
-        assert {k: v for k, v in x.items() if k not in ("encoder", "actor")} == \
-               {k: v for k, v in y.items() if k not in ("encoder", "actor")}
-        for part in ("encoder", "actor"):
-            assert x[part].keys() == y[part].keys()
-            for k in x[part]:
-                assert torch.equal(x[part][k], y[part][k]), f"{name}:{part}.{k}"
+# conftest's session runs: `tiny_taco` (unrecorded) and `tiny_taco_watched` (recorded); the SIGKILL-and-resume
+# check of a recording is part of tests/test_train_e2e.py's kill-and-resume run.
 
 
 @pytest.mark.slow
-def test_recorded_run_logs_equal_unrecorded_and_recording_is_complete(unrecorded: Path, recorded: Path):
+@pytest.mark.xdist_group(TINY_TACO)
+def test_recorded_run_logs_equal_unrecorded_and_recording_is_complete(tiny_taco: Path, tiny_taco_watched: Path):
+    unrecorded, recorded = tiny_taco, tiny_taco_watched
     for name in ("eval.csv", "train.csv"):
         pd.testing.assert_frame_equal(deterministic(recorded / name), deterministic(unrecorded / name))
     assert not (unrecorded / "record").exists()
@@ -240,32 +215,10 @@ def test_recorded_run_logs_equal_unrecorded_and_recording_is_complete(unrecorded
         assert os.stat(a).st_ino == os.stat(b).st_ino or a.read_bytes() == b.read_bytes()
 
 
-def _record_cmd(root: Path) -> list[str]:
-    return [sys.executable, "-m", "repro", "train", *TINY, f"runtime.results_root={root}", "runtime.record=true",
-            "--no-progress"]
-
-
 @pytest.mark.slow
-def test_sigkill_and_resume_leaves_the_recording_of_an_uninterrupted_run(recorded: Path, tmp_path: Path):
-    run = tmp_path / REL
-    snaps, eps = run / "record" / "snapshots", run / "record" / "episodes"
-    count = lambda d, pattern: len(list(d.glob(pattern))) if d.is_dir() else 0  # noqa: E731
-    # 1st kill: a snapshot is written, no checkpoint yet (everything recorded goes)
-    _kill_when(_record_cmd(tmp_path), lambda: count(snaps, "step_*.pt") >= 1 and not (run / "checkpoint.pt").exists())
-    # 2nd kill: after the checkpoint at step 100 and its evaluation's snapshot, which the resume writes again
-    _kill_when(_record_cmd(tmp_path), lambda: (run / "checkpoint.pt").exists() and count(eps, "ep_*.npz") >= 2
-               and count(snaps, "step_*.pt") >= 2)
-    assert not (run / "DONE").exists()
-    out = subprocess.run(_record_cmd(tmp_path), capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr
-    assert "resumed" in out.stdout
-    assert_same_recording(run, recorded)
-    for name in ("eval.csv", "train.csv"):
-        pd.testing.assert_frame_equal(deterministic(run / name), deterministic(recorded / name))
-
-
-@pytest.mark.slow
-def test_make_each_kind_from_a_recorded_run(recorded: Path, unrecorded: Path, tmp_path: Path):
+@pytest.mark.xdist_group(TINY_TACO)
+def test_make_each_kind_from_a_recorded_run(tiny_taco: Path, tiny_taco_watched: Path, tmp_path: Path):
+    unrecorded, recorded = tiny_taco, tiny_taco_watched
     source = mk.open_source(recorded)
     best = max(s.eval_return for s in source.snapshots)
     last = source.snapshots[-1]

@@ -1,4 +1,6 @@
-"""The README's main job: `repro reproduce` trains the tiny grid and builds the whole report from it."""
+"""The README's main job: `repro reproduce` trains the tiny online grid (recorded), makes two datasets from one
+of its runs, trains every offline learner on them, and builds the whole report from all of it (conftest's
+session fixture ``main_job`` runs it once)."""
 
 import json
 import subprocess
@@ -7,18 +9,20 @@ import sys
 import pandas as pd
 import pytest
 
-pytestmark = pytest.mark.slow
+from helpers import MAIN_JOB
+
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group(MAIN_JOB)]
+
+OFFLINE = {"td3bc": "TD3+BC", "td3bc_taco": "TD3+BC+TACO", "cql": "CQL", "cql_taco": "CQL+TACO", "iql": "IQL",
+           "bc": "BC", "dt": "DT"}
 
 
-def test_tiny_end_to_end_reproduction(tmp_path):
-    runs, out = tmp_path / "runs", tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "repro", "reproduce", "--results", str(runs), "--out", str(out),
-                           "--max-parallel", "2"], capture_output=True, text=True, timeout=1500)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+def test_tiny_end_to_end_reproduction_online(main_job):
+    runs, out, stdout = main_job.runs, main_job.out, main_job.stdout
     done = sorted(runs.glob("tiny/*/*/*/*/DONE"))
     assert len(done) == 8
     assert all(json.loads(p.read_text())["frame"] == 400 for p in done)
-    assert "eval.csv" in proc.stdout and "episode_reward" in proc.stdout  # the eval rows are printed
+    assert "eval.csv" in stdout and "episode_reward" in stdout  # the eval rows are printed
     for name in ("REPORT.md", "REPORT.html", "T1.csv", "T1.md", "T1.tex", "F4.png", "F4.pdf", "F11.png"):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     t1 = pd.read_csv(out / "T1.csv")
@@ -26,9 +30,34 @@ def test_tiny_end_to_end_reproduction(tmp_path):
     assert row.n == 2 and row.repro_mean == row.repro_mean  # reproduced from the two seeds (not NaN)
     assert t1[(t1.task == "quadruped_run") & (t1.method == "TACO")].iloc[0].n == 0  # no runs: shown, not faked
     report = (out / "REPORT.md").read_text()
-    assert "8 runs loaded (8 done)" in report and "## Claims" in report and "Audit" in report
-    # a second invocation finds everything done and only rebuilds the report
+    assert "22 runs loaded (22 done)" in report and "## Claims" in report and "Audit" in report
+
+
+def test_tiny_end_to_end_reproduction_offline(main_job):
+    runs, out = main_job.runs, main_job.out
+    for kind in ("medium", "full-replay"):
+        manifest = json.loads((runs / "datasets" / "cheetah_run" / kind / "manifest.json").read_text())
+        assert manifest["kind"] == kind and manifest["transitions"] > 0
+    offline = sorted(runs.glob("tiny_offline/*/*/cheetah_run/*/seed_1/DONE"))
+    assert len(offline) == 2 * len(OFFLINE)
+    t3 = pd.read_csv(out / "T3.csv")
+    for kind in ("medium", "full-replay"):
+        for method in OFFLINE.values():
+            cell = t3[(t3.task == "cheetah_run") & (t3.dataset == kind) & (t3.method == method)]
+            assert len(cell) == 1 and cell.iloc[0].n == 1 and cell.iloc[0].repro_mean == cell.iloc[0].repro_mean, \
+                (kind, method)
+    for name in ("T3b.csv", "T6.csv"):
+        assert (out / name).is_file(), name
+    report = (out / "REPORT.md").read_text()
+    verdicts = [ln for ln in report.splitlines() if ln.startswith("|") and ("supported" in ln or "refuted" in ln)]
+    assert not verdicts, verdicts  # tiny runs never give a verdict
+
+
+def test_second_invocation_finds_everything_done(main_job):
+    runs, out = main_job.runs, main_job.out
+    done = sorted(runs.glob("tiny*/**/DONE"))
     again = subprocess.run([sys.executable, "-m", "repro", "reproduce", "--results", str(runs), "--out", str(out)],
                            capture_output=True, text=True, timeout=900)
-    assert again.returncode == 0
-    assert sorted(runs.glob("tiny/*/*/*/*/DONE")) == done
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert "8 already done" in again.stdout and "14 already done" in again.stdout
+    assert sorted(runs.glob("tiny*/**/DONE")) == done

@@ -5,14 +5,11 @@ between CPUs (seam_reference.RTOL), and bit for bit when computed twice in one p
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-from seam_reference import AGENTS, RTOL, deviation, record, written_by  # noqa: E402
+from seam_reference import AGENTS, RTOL, deviation, record, written_by
 
 FIXTURE = Path(__file__).parent / "data" / "online_updates.json"
 

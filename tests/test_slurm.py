@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from test_sweeps import write_sweep  # the same tiny-run sweep files as the local launcher tests
+from helpers import write_sweep  # the same tiny-run sweep files as the local launcher tests
 
 pytestmark = [pytest.mark.slurm, pytest.mark.slow]
 

@@ -11,9 +11,9 @@ from __future__ import annotations
 import pytest
 import torch
 
+from helpers import OBS, make_batch
 from repro.agent.agent import Agent
 from repro.config import compose, typed
-from test_losses import OBS, make_batch
 
 LR = 1e-4  # agent.lr of the default (taco) agent
 

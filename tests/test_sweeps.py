@@ -19,15 +19,13 @@ import typer
 import yaml
 from typer.testing import CliRunner
 
+from helpers import write_sweep
 from repro.launch import lock
 from repro.launch import spec as specs
 from repro.launch.cli import register
 from repro.launch.runner import claim
 from repro.launch.state import RunRecord, state_dir, write_record
 from repro.launch.status import collect
-
-TINY = ["profile=tiny", "env.max_episode_frames=50", "train.seed_frames=50", "train.update_every_steps=4",
-        "train.eval_every_frames=100"]  # 50-frame episodes, updates from frame 50, evals every 100 frames
 
 
 def make_app() -> typer.Typer:
@@ -57,16 +55,6 @@ def cli_proc(*args: str, **kw) -> subprocess.Popen:
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
     return subprocess.Popen([sys.executable, "-m", "repro.launch.cli", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, env=env, **kw)
-
-
-def write_sweep(tmp: Path, name: str, tasks: list[str], variants: dict[str, list[str]], seeds: int,
-                frames: int = 100) -> Path:
-    data = {"name": name, "description": "test sweep", "artifacts": [], "experiment": name, "tasks": tasks,
-            "agents": ["taco"], "seeds": seeds, "frames": None, "eval": {"every_frames": None, "episodes": None},
-            "common": [*TINY, f"train.frames={frames}"], "variants": variants}
-    path = tmp / f"{name}.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path
 
 
 def rows(path: Path) -> list[list[str]]:

@@ -1,9 +1,11 @@
-"""End-to-end runs with real rendering and real updates: run directory, determinism, SIGKILL and resume."""
+"""End-to-end runs with real rendering and real updates: run directory, determinism, SIGKILL and resume.
+
+The tiny run is trained once per test session (conftest: ``tiny_taco`` plain, ``tiny_taco_watched`` recorded
+with TensorBoard and videos); the kill-and-resume run here checks the CSVs, the recording, the event files and
+the videos of a resumed run at once."""
 
 import json
-import os
 import platform
-import signal
 import socket
 import subprocess
 import sys
@@ -11,32 +13,33 @@ import time
 from importlib import metadata
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import torch
 import yaml
 
+from helpers import (
+    REL,
+    TINY,
+    TINY_TACO,
+    assert_mirrors_csv,
+    assert_same_recording,
+    deterministic,
+    kill_when,
+    rows,
+    train_cmd,
+)
 from repro import api, rundir
 from repro.logger import WALLCLOCK_COLUMNS
+from repro.runformat import CHECKPOINT, DONE, EVAL, TRAIN
+from repro.tblog import TB_DIR, read_scalars
 
-pytestmark = pytest.mark.slow
-
-TINY = ["profile=tiny", "task=cheetah_run", "seed=3", "runtime.threads=1"]
-REL = Path("default/taco/base/cheetah_run/seed_3")
-
-
-def deterministic(csv: Path) -> pd.DataFrame:
-    df = pd.read_csv(csv)
-    return df.drop(columns=[c for c in WALLCLOCK_COLUMNS if c in df.columns])
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group(TINY_TACO)]
 
 
-@pytest.fixture(scope="module")
-def reference(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("ref")
-    return api.train(TINY + [f"runtime.results_root={root}"], echo=lambda s: None)
-
-
-def test_run_directory_contract(reference: Path):
+def test_run_directory_contract(tiny_taco: Path):
+    reference = tiny_taco
     for name in ("config.yaml", "meta.json", "eval.csv", "train.csv", "checkpoint.pt", "DONE"):
         assert (reference / name).is_file(), name
     cfg = yaml.safe_load((reference / "config.yaml").read_text())
@@ -61,58 +64,67 @@ def test_run_directory_contract(reference: Path):
     assert tr["taco_loss"].iloc[1:].notna().all() and tr["critic_loss"].iloc[1:].notna().all()
     ckpt = torch.load(reference / "checkpoint.pt", weights_only=True)
     assert "action_encoder" in ckpt["agent"] and "step.0.weight" in ckpt["agent"]["action_encoder"]
-    import numpy as np
-
     frames = np.load(reference / "frames.npz")["frames"]
     assert frames.shape == (51, 84, 84, 3) and frames.dtype == np.uint8 and frames.std() > 0
     done = json.loads((reference / "DONE").read_text())
     assert done["frame"] == 400
 
 
-def test_same_seed_same_config_gives_identical_logs(reference: Path, tmp_path: Path):
-    run = api.train(TINY + [f"runtime.results_root={tmp_path}"], echo=lambda s: None)
-    for name in ("eval.csv", "train.csv"):
-        pd.testing.assert_frame_equal(deterministic(run / name), deterministic(reference / name))
+def test_same_seed_gives_identical_logs_and_recording_or_watching_changes_no_number(tiny_taco: Path,
+                                                                                    tiny_taco_watched: Path):
+    """The watched twin is a second run of the same seed and config, with recording, TensorBoard and videos on."""
+    for name in (EVAL, TRAIN):
+        pd.testing.assert_frame_equal(deterministic(tiny_taco_watched / name), deterministic(tiny_taco / name))
+    assert set(WALLCLOCK_COLUMNS) <= set(pd.read_csv(tiny_taco_watched / TRAIN).columns)
+    for extra in ("record", TB_DIR, "videos"):
+        assert (tiny_taco_watched / extra).is_dir() and not (tiny_taco / extra).exists(), extra
 
 
-def _rows(csv: Path) -> int:
-    return max(len(csv.read_text().splitlines()) - 1, 0) if csv.exists() else 0
+def _count(folder: Path, pattern: str) -> int:
+    return len(list(folder.glob(pattern))) if folder.is_dir() else 0
 
 
-def _train_cmd(root: Path) -> list[str]:
-    return [sys.executable, "-m", "repro", "train", *TINY, f"runtime.results_root={root}", "--no-progress"]
-
-
-def _kill_when(cmd: list[str], ready, timeout: float = 300) -> None:
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy())
-    t0 = time.time()
-    while not ready() and proc.poll() is None and time.time() - t0 < timeout:
-        time.sleep(0.05)
-    assert proc.poll() is None, "the run finished before it could be killed"
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-
-
-def test_sigkill_and_resume_matches_uninterrupted_run(reference: Path, tmp_path: Path):
+def test_sigkill_and_resume_matches_uninterrupted_run(tiny_taco: Path, tiny_taco_watched: Path, tmp_path: Path):
+    """Killed twice, then resumed: the logs, the recording and the event files are those of the uninterrupted
+    runs, and `train.video_every=last` leaves the final evaluation's video only."""
     run = tmp_path / REL
-    # 1st kill: right after the first evaluation row, before any checkpoint exists
-    _kill_when(_train_cmd(tmp_path), lambda: _rows(run / "eval.csv") >= 1)
-    assert not (run / "DONE").exists()
-    early_checkpoint = (run / "checkpoint.pt").exists()  # the kill is meant to come first; if not, one more resume
-    # 2nd kill: after a checkpoint, in the middle of a later episode
-    _kill_when(_train_cmd(tmp_path), lambda: _rows(run / "train.csv") >= 2 and (run / "checkpoint.pt").exists()
-               and _rows(run / "eval.csv") >= 2)
-    assert not (run / "DONE").exists()
-    out = subprocess.run(_train_cmd(tmp_path), capture_output=True, text=True, timeout=600)
+    snaps, eps = run / "record" / "snapshots", run / "record" / "episodes"
+    cmd = train_cmd(tmp_path, "runtime.record=true", "runtime.tensorboard=true", "train.save_video=true",
+                    "train.video_size=32", "train.video_every=last")
+    # 1st kill: after the first evaluation row and its snapshot, before any checkpoint (everything recorded goes)
+    kill_when(cmd, lambda: rows(run / EVAL) >= 1 and _count(snaps, "step_*.pt") >= 1
+              and not (run / CHECKPOINT).exists())
+    assert not (run / DONE).exists()
+    early_checkpoint = (run / CHECKPOINT).exists()  # the kill is meant to come first; if not, one more resume
+    # 2nd kill: after the evaluation at frame 200, which comes after the checkpoint of episode 2, in the middle of
+    # episode 3: the resume truncates that row and writes it (its snapshot and event) again, so a mirror that only
+    # appended would hold frame 200 twice. 1 s after the row appears, so that its event is written too.
+    seen: list[float] = []
+
+    def ready() -> bool:
+        if not seen and rows(run / EVAL) >= 2 and rows(run / TRAIN) >= 2 and (run / CHECKPOINT).exists() \
+                and _count(eps, "ep_*.npz") >= 2 and _count(snaps, "step_*.pt") >= 2:
+            seen.append(time.time())
+        return bool(seen) and time.time() - seen[0] > 1.0
+
+    kill_when(cmd, ready)
+    assert not (run / DONE).exists() and rows(run / TRAIN) == 2
+    assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200]  # the point the resume rewrites
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     assert "resumed" in out.stdout
-    for name in ("eval.csv", "train.csv"):
-        pd.testing.assert_frame_equal(deterministic(run / name), deterministic(reference / name))
+    for name in (EVAL, TRAIN):
+        pd.testing.assert_frame_equal(deterministic(run / name), deterministic(tiny_taco / name))
     meta = json.loads((run / "meta.json").read_text())
     assert len(meta["resumes"]) == 1 + early_checkpoint  # a start without a checkpoint is no resume
+    assert_same_recording(run, tiny_taco_watched)
+    assert_mirrors_csv(run)
+    assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200, 400]
+    assert [v.name for v in (run / "videos").iterdir()] == ["frame_000000400.mp4"]
 
 
-def test_rerun_of_done_run_is_skipped_and_other_config_refused(reference: Path):
+def test_rerun_of_done_run_is_skipped_and_other_config_refused(tiny_taco: Path):
+    reference = tiny_taco
     root = reference.parents[4]
     before = (reference / "eval.csv").read_bytes()
     out = subprocess.run([sys.executable, "-m", "repro", "train", *TINY, f"runtime.results_root={root}"],

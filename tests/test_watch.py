@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import csv
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -15,18 +12,16 @@ import pytest
 from typer.testing import CliRunner
 
 from analysis_fixtures import FRAMES, write_run
-from repro import api, rundir
+from helpers import TINY_TACO, assert_mirrors_csv
+from repro import rundir
 from repro.launch.state import record_launch, state_dir
 from repro.logger import RunLogger
-from repro.runformat import DONE, EVAL, TRAIN, WALLCLOCK_COLUMNS
+from repro.runformat import DONE, EVAL
 from repro.tblog import TB_DIR, read_scalars
 from repro.video import count_frames, write_mp4
 from repro_app.cli import app
-from test_train_e2e import TINY, _kill_when, _rows, deterministic
 
 METRICS = ["critic_loss"]
-WATCH = ["runtime.tensorboard=true", "train.save_video=true", "train.video_size=64"]
-REL = Path("default/taco/base/cheetah_run/seed_3")
 
 
 def cli(*args: str) -> tuple[int, str, str]:
@@ -34,28 +29,6 @@ def cli(*args: str) -> tuple[int, str, str]:
     if res.exception and not isinstance(res.exception, SystemExit):
         raise res.exception
     return res.exit_code, res.stdout, res.stderr
-
-
-def csv_series(run: Path) -> dict[str, list[tuple[int, float]]]:
-    """What the event files must hold: every non-empty numeric CSV cell as ``{file}/{column}`` at its frame."""
-    out: dict[str, list[tuple[int, float]]] = {}
-    for prefix, name in (("eval", EVAL), ("train", TRAIN)):
-        with open(run / name, newline="") as f:
-            for row in csv.DictReader(f):
-                for key, value in row.items():
-                    if key != "frame" and value != "":
-                        out.setdefault(f"{prefix}/{key}", []).append((int(row["frame"]), float(value)))
-    return out
-
-
-def assert_mirrors_csv(run: Path) -> None:
-    tb, expected = read_scalars(run), csv_series(run)
-    assert set(tb) == set(expected)
-    for tag, points in expected.items():
-        steps = [s for s, _ in tb[tag]]
-        assert len(steps) == len(set(steps)), f"{tag}: a step twice {steps}"
-        assert steps == [s for s, _ in points], tag
-        np.testing.assert_allclose([v for _, v in tb[tag]], [v for _, v in points], rtol=1e-6, err_msg=tag)
 
 
 def _train_row(frame: int, loss: float | None) -> dict:
@@ -154,30 +127,15 @@ def test_render_view_leaves_observations_unchanged(task: str):
     assert views[0].shape == (64, 64, 3) and views[0].dtype == np.uint8 and views[0].std() > 0
 
 
-@pytest.fixture(scope="module")
-def tiny_pair(tmp_path_factory) -> tuple[Path, Path]:
-    """The same tiny run without and with TensorBoard + videos (200 frames: evaluations at frames 0 and 200)."""
-    short = [*TINY, "train.frames=200"]
-    plain = api.train([*short, f"runtime.results_root={tmp_path_factory.mktemp('plain')}"], echo=lambda s: None)
-    watched = api.train([*short, *WATCH, f"runtime.results_root={tmp_path_factory.mktemp('watched')}"],
-                        echo=lambda s: None)
-    return plain, watched
-
-
+# conftest's session run `tiny_taco_watched` (TensorBoard, videos of every evaluation); that its logs equal the
+# plain run's, `video_every=last` and the SIGKILL-and-resume of the event files are checked by
+# tests/test_train_e2e.py.
 @pytest.mark.slow
-def test_video_and_tensorboard_change_no_logged_number(tiny_pair: tuple[Path, Path]):
-    plain, watched = tiny_pair
-    for name in (EVAL, TRAIN):
-        pd.testing.assert_frame_equal(deterministic(watched / name), deterministic(plain / name))
-    assert set(WALLCLOCK_COLUMNS) <= set(pd.read_csv(watched / TRAIN).columns)
-    assert not (plain / TB_DIR).exists() and not (plain / "videos").exists()
-
-
-@pytest.mark.slow
-def test_tiny_run_writes_videos_and_event_files(tiny_pair: tuple[Path, Path]):
+@pytest.mark.xdist_group(TINY_TACO)
+def test_tiny_run_writes_videos_and_event_files(tiny_taco_watched: Path):
     import imageio_ffmpeg
 
-    _, watched = tiny_pair
+    watched = tiny_taco_watched
     assert_mirrors_csv(watched)
     ev = pd.read_csv(watched / EVAL)
     videos = sorted((watched / "videos").iterdir())
@@ -187,36 +145,6 @@ def test_tiny_run_writes_videos_and_event_files(tiny_pair: tuple[Path, Path]):
         assert count_frames(video) == n + 1  # the reset frame and one per step
         meta = next(imageio_ffmpeg.read_frames(str(video)))
         assert tuple(meta["size"]) == (64, 64)
-
-
-@pytest.mark.slow
-def test_video_every_last_writes_the_final_evaluation_only(tmp_path: Path):
-    run = api.train([*TINY, "train.frames=200", "train.save_video=true", "train.video_size=32",
-                     "train.video_every=last", f"runtime.results_root={tmp_path}"], echo=lambda s: None)
-    assert [v.name for v in (run / "videos").iterdir()] == ["frame_000000200.mp4"]
-
-
-@pytest.mark.slow
-def test_sigkill_and_resume_leave_no_repeated_step_in_event_files(tmp_path: Path):
-    run = tmp_path / REL
-    cmd = [sys.executable, "-m", "repro", "train", *TINY, *WATCH, f"runtime.results_root={tmp_path}", "--no-progress"]
-    # Killed after the evaluation at frame 200, which comes after the checkpoint of episode 2: the resume
-    # truncates that row and writes it again, so a mirror that only appended would hold frame 200 twice.
-    seen: list[float] = []
-
-    def ready() -> bool:  # 1 s after the row appears, so that its event is written too (episode 3 takes longer)
-        if not seen and _rows(run / EVAL) >= 2 and (run / rundir.CHECKPOINT).exists():
-            seen.append(time.time())
-        return bool(seen) and time.time() - seen[0] > 1.0
-
-    _kill_when(cmd, ready)
-    assert not (run / DONE).exists() and _rows(run / TRAIN) == 2
-    assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200]  # the point the resume rewrites
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr
-    assert "resumed" in out.stdout
-    assert_mirrors_csv(run)
-    assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200, 400]
 
 
 # ----------------------------------------------------------------------------- repro tensorboard

@@ -1,0 +1,130 @@
+"""Helpers shared by several test modules (imported as ``from helpers import ...``; tests/ is on the path
+through pyproject's ``[tool.pytest.ini_options] pythonpath``). Run builders for the analysis and offline tests
+live beside it in analysis_fixtures.py, offline_fixtures.py and seam_reference.py, imported the same way."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+import yaml
+
+from repro.logger import WALLCLOCK_COLUMNS
+from repro.offline.record import load_snapshot
+from repro.runformat import EVAL, TRAIN
+from repro.tblog import read_scalars
+
+# The tiny online run several modules share (conftest's session fixtures train it once).
+TINY = ["profile=tiny", "task=cheetah_run", "seed=3", "runtime.threads=1"]
+REL = Path("default/taco/base/cheetah_run/seed_3")  # its run directory under a results root
+# Its recorded, watched twin: recording, TensorBoard and videos are runtime keys (not identity, not logs).
+WATCH = ["runtime.tensorboard=true", "train.save_video=true", "train.video_size=64"]
+RECORD = ["runtime.record=true"]
+# pytest-xdist groups: the tests that use one session run (conftest) run on one worker, so it is made once.
+TINY_TACO = "tiny_taco"
+MAIN_JOB = "main_job"
+
+
+def deterministic(csv: Path) -> pd.DataFrame:
+    """A run's CSV without its wall-clock columns (the part two runs of one seed must share)."""
+    df = pd.read_csv(csv)
+    return df.drop(columns=[c for c in WALLCLOCK_COLUMNS if c in df.columns])
+
+
+def rows(csv: Path) -> int:
+    """Data rows of a CSV file (0 when it does not exist yet)."""
+    return max(len(csv.read_text().splitlines()) - 1, 0) if csv.exists() else 0
+
+
+def train_cmd(root: Path, *extra: str) -> list[str]:
+    """`repro train` of the tiny run in its own process, under results root ``root``."""
+    return [sys.executable, "-m", "repro", "train", *TINY, *extra, f"runtime.results_root={root}", "--no-progress"]
+
+
+def kill_when(cmd: list[str], ready: Callable[[], bool], timeout: float = 300) -> None:
+    """Start ``cmd`` and SIGKILL it as soon as ``ready()`` holds; fails if it finished first."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy())
+    t0 = time.time()
+    while not ready() and proc.poll() is None and time.time() - t0 < timeout:
+        time.sleep(0.05)
+    assert proc.poll() is None, "the run finished before it could be killed"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+
+
+def assert_same_recording(a: Path, b: Path) -> None:
+    names = lambda p, sub: sorted(f.name for f in (p / "record" / sub).iterdir())  # noqa: E731
+    assert names(a, "episodes") == names(b, "episodes") and names(a, "snapshots") == names(b, "snapshots")
+    for name in names(a, "episodes"):
+        with np.load(a / "record" / "episodes" / name) as x, np.load(b / "record" / "episodes" / name) as y:
+            assert sorted(x.files) == sorted(y.files)
+            for key in x.files:
+                np.testing.assert_array_equal(x[key], y[key], err_msg=f"{name}:{key}")
+    for name in names(a, "snapshots"):
+        x, y = load_snapshot(a / "record" / "snapshots" / name), load_snapshot(b / "record" / "snapshots" / name)
+        assert {k: v for k, v in x.items() if k not in ("encoder", "actor")} == \
+               {k: v for k, v in y.items() if k not in ("encoder", "actor")}
+        for part in ("encoder", "actor"):
+            assert x[part].keys() == y[part].keys()
+            for k in x[part]:
+                assert torch.equal(x[part][k], y[part][k]), f"{name}:{part}.{k}"
+
+
+def csv_series(run: Path) -> dict[str, list[tuple[int, float]]]:
+    """What the event files must hold: every non-empty numeric CSV cell as ``{file}/{column}`` at its frame."""
+    out: dict[str, list[tuple[int, float]]] = {}
+    for prefix, name in (("eval", EVAL), ("train", TRAIN)):
+        with open(run / name, newline="") as f:
+            for row in csv.DictReader(f):
+                for key, value in row.items():
+                    if key != "frame" and value != "":
+                        out.setdefault(f"{prefix}/{key}", []).append((int(row["frame"]), float(value)))
+    return out
+
+
+def assert_mirrors_csv(run: Path) -> None:
+    tb, expected = read_scalars(run), csv_series(run)
+    assert set(tb) == set(expected)
+    for tag, points in expected.items():
+        steps = [s for s, _ in tb[tag]]
+        assert len(steps) == len(set(steps)), f"{tag}: a step twice {steps}"
+        assert steps == [s for s, _ in points], tag
+        np.testing.assert_allclose([v for _, v in tb[tag]], [v for _, v in points], rtol=1e-6, err_msg=tag)
+
+
+# Sweeps of tiny runs (the local and SLURM launcher tests).
+SWEEP_TINY = ["profile=tiny", "env.max_episode_frames=50", "train.seed_frames=50", "train.update_every_steps=4",
+              "train.eval_every_frames=100"]  # 50-frame episodes, updates from frame 50, evals every 100 frames
+
+
+def write_sweep(tmp: Path, name: str, tasks: list[str], variants: dict[str, list[str]], seeds: int,
+                frames: int = 100) -> Path:
+    """A sweep file of tiny TACO runs (SWEEP_TINY) in ``tmp``."""
+    data = {"name": name, "description": "test sweep", "artifacts": [], "experiment": name, "tasks": tasks,
+            "agents": ["taco"], "seeds": seeds, "frames": None, "eval": {"every_frames": None, "episodes": None},
+            "common": [*SWEEP_TINY, f"train.frames={frames}"], "variants": variants}
+    path = tmp / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+# Update-level batches (the objective and speed-up tests).
+OBS = (9, 84, 84)
+
+
+def make_batch(B: int = 6, K: int = 3, A: int = 4, seed: int = 0) -> dict[str, torch.Tensor]:
+    """A replay batch of random frames and actions, as ReplayBuffer.sample returns it."""
+    g = torch.Generator().manual_seed(seed)
+    u8 = lambda: torch.randint(0, 256, (B, *OBS), dtype=torch.uint8, generator=g)  # noqa: E731
+    return {"obs": u8(), "next_obs": u8(), "future_obs": u8(), "action": torch.rand(B, A, generator=g) * 2 - 1,
+            "action_seq": torch.rand(B, K, A, generator=g) * 2 - 1, "reward": torch.rand(B, 1, generator=g),
+            "discount": torch.full((B, 1), 0.99 ** 3), "reward_ksum": torch.rand(B, 1, generator=g) * 3}
