@@ -113,6 +113,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
                 state is not None and _checkpoint_changed(path, state)):
             state = _load_state(path, data)
         remove_torn_temporaries(path)
+        remove_torn_temporaries(path / rundir.REPLAY)
         resuming = state is not None
         if not (path / rundir.CONFIG).exists():
             rundir.write_config(path, cfg)

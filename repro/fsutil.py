@@ -8,6 +8,7 @@ was; the temporary file is removed.
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from collections.abc import Callable
@@ -87,8 +88,14 @@ def remove_torn_temporaries(folder: str | os.PathLike) -> list[Path]:
     return removed
 
 
+FULL = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)  # a full disk, a file size limit, a quota
+
+
 def write_error_message(exc: OSError) -> str:
-    """One line for a failed write: the file, the reason, and that re-running the command resumes."""
+    """One line for an OSError: for a full disk, file size limit or quota, the file, the reason and that
+    re-running the command resumes; otherwise the file and the reason."""
     where = f"{exc.filename}: " if exc.filename else ""
+    if exc.errno not in FULL:
+        return f"{where}{exc.strerror or exc}"
     return (f"cannot write {where}{exc.strerror or exc}; nothing written before is lost: free space (or raise "
             "the limit) and re-run the same command to resume")

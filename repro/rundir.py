@@ -28,6 +28,7 @@ from repro.runformat import (
     CONFIG,
     DONE,
     META,
+    REPLAY,
     RESOLVED,
     WRITER_LOCK,
     resolved_json,
@@ -36,9 +37,10 @@ from repro.runformat import (
 )
 from repro.schema import RunConfig
 
-__all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "RESOLVED", "RunDirMismatch", "config_diff", "config_matches",
-           "resolved_values", "run_dir", "RunLocked", "WriterLock", "acquire_writer_lock",
-           "lock_holder", "run_state", "write_config", "write_done", "write_meta", "write_resolved"]
+__all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "REPLAY", "RESOLVED", "WRITER_LOCK", "RunDirMismatch",
+           "RunLocked", "WriterLock", "acquire_writer_lock", "config_diff", "config_matches", "lock_holder",
+           "resolved_values", "run_dir", "run_state", "write_config", "write_done", "write_meta", "write_resolved",
+           "writer_lock_holder"]
 PACKAGES = ("torch", "numpy", "mujoco", "dm-control", "metaworld", "hydra-core", "omegaconf", "submitit",
             "pandas", "rliable", "taco-repro")
 
@@ -232,6 +234,22 @@ def lock_holder(path: str | Path) -> str:
         return f"pid {info['pid']} on {info['host']} (since {info['since']})"
     except (OSError, ValueError, KeyError, TypeError):
         return "another process"
+
+
+def writer_lock_holder(path: str | Path) -> str | None:
+    """Who holds the run directory's writer lock now, in words; None when nobody does (writes nothing)."""
+    file = Path(path) / WRITER_LOCK
+    try:
+        fd = os.open(file, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return lock_holder(path)
+    finally:
+        os.close(fd)  # closing drops a shared lock taken just now
+    return None
 
 
 def acquire_writer_lock(path: str | Path) -> WriterLock:

@@ -169,3 +169,22 @@ def test_a_second_make_into_one_destination_is_refused(tmp_path: Path):
             with _make_lock(out):
                 pass
     assert not list(tmp_path.joinpath("datasets").iterdir()), "the lock file stays after a make"
+
+
+def test_the_sweep_launcher_skips_a_run_that_a_hand_started_train_holds(tmp_path: Path):
+    from types import SimpleNamespace
+
+    from repro.launch import lock
+    from repro.launch.runner import claim
+
+    cfg = compose(["task=cheetah_run", f"runtime.results_root={tmp_path}"])
+    planned = SimpleNamespace(results_root=tmp_path, run_dir=rundir.run_dir(cfg), cfg=cfg)
+    planned.run_dir.mkdir(parents=True)
+    with rundir.acquire_writer_lock(planned.run_dir):
+        c = claim(planned, "local", "s", force=False)  # type: ignore[arg-type]
+        assert c.status == "locked" and c.info is not None
+        assert c.info.describe() == f"pid {os.getpid()} on {os.uname().nodename}"
+    assert not lock.lock_path(tmp_path, planned.run_dir).exists(), "the launcher's own claim was not released"
+    c = claim(planned, "local", "s", force=False)  # type: ignore[arg-type]
+    assert c.status == "claimed" and c.info is not None
+    lock.release(c.lock_path, c.info.token)

@@ -12,6 +12,7 @@ from typing import NoReturn, Optional
 import typer
 
 from repro.config import ConfigError, compose_base
+from repro.fsutil import FULL, write_error_message
 from repro.offline.convert import default_import_name, export_dataset, import_dataset
 from repro.offline.dataset import MANIFEST, DatasetError, check_dataset, dataset_path, is_folder_value, load_manifest
 from repro.offline.formats import FORMATS
@@ -121,8 +122,9 @@ def import_cmd(path: Path = typer.Argument(..., help="An input file or a folder 
         m = import_dataset(path, fmt, task, target, resize=resize)
     except DatasetError as exc:
         _fail(str(exc))
-    except OSError as exc:
-        _fail(_os_message(exc))
+    except OSError as exc:  # a full disk: the partial import is kept and a re-run resumes it
+        typer.echo(f"error: {write_error_message(exc)}", err=True)
+        raise typer.Exit(1 if exc.errno in FULL else 2) from None
     if existed:
         typer.echo(f"already imported: {target} holds this import ({len(m.episodes)} episodes); nothing written")
         return
