@@ -331,6 +331,17 @@ def _same_request(manifest: dict, fields: dict) -> bool:
     return all(json.loads(json.dumps(manifest.get(k))) == json.loads(json.dumps(fields[k])) for k in keys)
 
 
+def _staging_of(staging: Path, fields: dict) -> bool:
+    """Whether ``staging`` is a partial (or complete, not yet renamed) write of this very request."""
+    for name in (PENDING, MANIFEST):
+        try:
+            recorded = json.loads((staging / name).read_text())
+        except (OSError, ValueError):
+            continue
+        return isinstance(recorded, dict) and _same_request(recorded, fields)
+    return False
+
+
 @contextmanager
 def _make_lock(out: Path) -> Iterator[None]:
     """An flock on ``.{name}.make.lock`` beside ``out``: one ``make`` writes a destination at a time (a second
@@ -382,13 +393,9 @@ def make(source_dir: str | Path, kind: str, transitions: int | None = None, medi
     with _make_lock(p.out):
         if p.out.exists():  # another make finished it while this one waited for the lock
             return make(source_dir, kind, transitions, medium_fraction, seed, out, results_root, task, device, echo)
-        try:
-            write_dataset(staging, p.episodes(), **p.fields)
-        except DatasetError:
-            if not (staging / PENDING).exists() and not (staging / MANIFEST).exists():
-                raise
-            shutil.rmtree(staging)  # a staging folder of another request (or a damaged one): start afresh
-            write_dataset(staging, p.episodes(), **p.fields)
+        if staging.exists() and not _staging_of(staging, p.fields):
+            shutil.rmtree(staging)  # left by another request (or killed before it recorded one): start afresh
+        write_dataset(staging, p.episodes(), **p.fields)
         manifest = manifest_json(staging)
         problems = check_dataset(staging)
         if problems:
