@@ -92,6 +92,9 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         return path
     device = resolve_device(rc.runtime.device, "runtime.device")
     resolve_device(rc.replay.device, "replay.device")
+    holder = rundir.writer_lock_holder(path)  # refuse a running run before reading a large dataset for nothing
+    if holder is not None:
+        raise rundir.RunLocked(rundir.locked_message(path, holder))
     # An offline run reads and checks its whole dataset before anything is written.
     data = _load_dataset(rc) if is_offline(rc.agent.learner) else None
     state = _load_state(path, data)

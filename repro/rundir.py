@@ -39,8 +39,8 @@ from repro.schema import RunConfig
 
 __all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "REPLAY", "RESOLVED", "WRITER_LOCK", "RunDirMismatch",
            "RunLocked", "WriterLock", "acquire_writer_lock", "config_diff", "config_matches", "lock_holder",
-           "resolved_values", "run_dir", "run_state", "write_config", "write_done", "write_meta", "write_resolved",
-           "writer_lock_holder"]
+           "locked_message", "resolved_values", "run_dir", "run_state", "write_config", "write_done", "write_meta",
+           "write_resolved", "writer_lock_holder"]
 PACKAGES = ("torch", "numpy", "mujoco", "dm-control", "metaworld", "hydra-core", "omegaconf", "submitit",
             "pandas", "rliable", "taco-repro")
 
@@ -236,6 +236,11 @@ def lock_holder(path: str | Path) -> str:
         return "another process"
 
 
+def locked_message(path: Path, holder: str) -> str:
+    return (f"{path} is being written by {holder}; a run directory has one writer: wait for it to finish "
+            "(or stop it) and re-run to resume")
+
+
 def writer_lock_holder(path: str | Path) -> str | None:
     """Who holds the run directory's writer lock now, in words; None when nobody does (writes nothing)."""
     file = Path(path) / WRITER_LOCK
@@ -262,8 +267,7 @@ def acquire_writer_lock(path: str | Path) -> WriterLock:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         os.close(fd)
-        raise RunLocked(f"{path} is being written by {lock_holder(path)}; a run directory has one writer: "
-                        "wait for it to finish (or stop it) and re-run to resume") from None
+        raise RunLocked(locked_message(path, lock_holder(path))) from None
     except OSError as exc:  # a filesystem without locks: an error, never a silent second writer
         os.close(fd)
         raise named_os_error(exc, file) from None
