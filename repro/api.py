@@ -15,6 +15,7 @@ from repro import rundir
 from repro.checkpoint import load_checkpoint, save_checkpoint
 from repro.config import compose, typed
 from repro.episodes import EpisodeStore
+from repro.fsutil import remove_torn_temporaries
 from repro.learners import (
     Learner,
     OnlineLearner,
@@ -28,17 +29,37 @@ from repro.logger import RunLogger
 from repro.offline.record import Recorder
 from repro.offline.reference import score_reference
 from repro.offline.replay import DatasetError, OfflineData, load_offline_data, load_offline_episodes, resolve_dataset
-from repro.offline_trainer import BatchSource, OfflineLogger, OfflineTrainer
+from repro.offline_trainer import BatchSource, OfflineLogger, OfflineTrainer, check_resume_dataset
 from repro.replay import ReplayBuffer
 from repro.schema import RunConfig
 from repro.trainer import Trainer
 from repro.video import VIDEO_DIR, EvalVideos
 
 
-def resolve_device(name: str) -> str:
+class CheckpointError(ValueError):
+    """A run's checkpoint that cannot be read (one line)."""
+
+
+class DeviceError(ValueError):
+    """A device name that is unknown or not present on this machine (one line)."""
+
+
+def resolve_device(name: str, key: str = "device") -> str:
+    """``auto`` -> cuda when available, else cpu; ``cpu``/``cuda``/``cuda:N`` as given when present.
+
+    Raises :class:`DeviceError` (one line, naming ``key``) for another name or a CUDA device this machine
+    lacks, before anything is written."""
     if name == "auto":
         return "cuda" if torch.cuda.is_available() else "cpu"
-    return name
+    if name == "cpu":
+        return name
+    if name == "cuda" or (name.startswith("cuda:") and name[5:].isdigit()):
+        if not torch.cuda.is_available():
+            raise DeviceError(f"{key}={name}: this machine has no CUDA device (torch sees none); use cpu or auto")
+        if ":" in name and int(name[5:]) >= torch.cuda.device_count():
+            raise DeviceError(f"{key}={name}: this machine has {torch.cuda.device_count()} CUDA device(s)")
+        return name
+    raise DeviceError(f"{key}={name}: unknown device; one of auto, cpu, cuda, cuda:N")
 
 
 def build_env(rc: RunConfig, seed: int):
@@ -57,36 +78,100 @@ def build_agent(rc: RunConfig, obs_shape: tuple[int, int, int], action_dim: int,
 
 
 def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress: bool | None = None) -> Path:
-    """Train (or resume, or skip if done) the run described by ``cfg``; return its run directory."""
+    """Train (or resume, or skip if done) the run described by ``cfg``; return its run directory.
+
+    Everything that can refuse the run is checked before anything is written (the config against the run
+    directory's, the devices, the dataset, a checkpoint's dataset), so a refusal leaves the run directory
+    byte-identical. The run directory then has one writer: its writer lock is taken before the first write
+    and the state is read again under it (RunLocked when another process holds it)."""
     rc = typed(cfg)
     path = rundir.run_dir(cfg)
+    _refuse_other_config(path, cfg)
+    if rundir.run_state(path) == "done":
+        echo(f"already done: {path}")
+        return path
+    device = resolve_device(rc.runtime.device, "runtime.device")
+    resolve_device(rc.replay.device, "replay.device")
+    holder = rundir.writer_lock_holder(path)  # refuse a running run before reading a large dataset for nothing
+    if holder is not None:
+        raise rundir.RunLocked(rundir.locked_message(path, holder))
+    # An offline run reads and checks its whole dataset before anything is written.
+    data = _load_dataset(rc) if is_offline(rc.agent.learner) else None
+    state = _load_state(path, data)
+    created = not path.exists()
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        lock = rundir.acquire_writer_lock(path)
+    except BaseException:
+        if created:
+            _remove_empty(path)
+        raise
+    with lock:
+        # Under the lock: another writer may have finished, started or changed the run since the checks above.
+        _refuse_other_config(path, cfg)
+        if rundir.run_state(path) == "done":
+            echo(f"already done: {path}")
+            return path
+        if (state is None) != (not (path / rundir.CHECKPOINT).exists()) or (
+                state is not None and _checkpoint_changed(path, state)):
+            state = _load_state(path, data)
+        remove_torn_temporaries(path)
+        remove_torn_temporaries(path / rundir.REPLAY)
+        resuming = state is not None
+        if not (path / rundir.CONFIG).exists():
+            rundir.write_config(path, cfg)
+        if rc.runtime.threads:
+            torch.set_num_threads(int(rc.runtime.threads))
+        rundir.write_meta(path, device, resumed=resuming)
+        if data is not None:
+            _train_offline(rc, path, data, device, state, echo, progress)
+        else:
+            _train_online(rc, path, device, state, echo, progress)
+    return path
+
+
+def _refuse_other_config(path: Path, cfg: DictConfig) -> None:
     diff = rundir.config_diff(path, cfg)
     if diff:
         raise rundir.RunDirMismatch(f"{path} holds a run with another config ({diff[0]}"
                                     f"{f' and {len(diff) - 1} more' if len(diff) > 1 else ''}); "
                                     "use another experiment/variant name or move it away.")
-    if rundir.run_state(path) == "done":
-        echo(f"already done: {path}")
-        return path
-    # An offline run reads and checks its whole dataset before anything is written.
-    data = _load_dataset(rc) if is_offline(rc.agent.learner) else None
-    path.mkdir(parents=True, exist_ok=True)
-    ckpt_file = path / rundir.CHECKPOINT
-    resuming = ckpt_file.exists()
-    if not (path / rundir.CONFIG).exists():
-        rundir.write_config(path, cfg)
-    device = resolve_device(rc.runtime.device)
-    if rc.runtime.threads:
-        torch.set_num_threads(int(rc.runtime.threads))
-    rundir.write_meta(path, device, resumed=resuming)
+
+
+def _load_state(path: Path, data: OfflineData | None) -> dict | None:
+    """The run's checkpoint (None without one), refused (DatasetError) when it was trained on another dataset."""
+    file = path / rundir.CHECKPOINT
+    if not file.exists():
+        return None
+    try:
+        state = load_checkpoint(file)
+    except (OSError, RuntimeError, ValueError, EOFError) as exc:
+        raise CheckpointError(f"{file} cannot be read ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+                              "); move the run directory away to start it afresh") from None
     if data is not None:
-        _train_offline(rc, path, data, device, resuming, echo, progress)
-    else:
-        _train_online(rc, path, device, resuming, echo, progress)
-    return path
+        check_resume_dataset(state, data.digest)
+    state["_mtime_ns"] = file.stat().st_mtime_ns
+    return state
 
 
-def _train_online(rc: RunConfig, path: Path, device: str, resuming: bool, echo: Callable[[str], None],
+def _checkpoint_changed(path: Path, state: dict) -> bool:
+    try:
+        return (path / rundir.CHECKPOINT).stat().st_mtime_ns != state.get("_mtime_ns")
+    except FileNotFoundError:
+        return True
+
+
+def _remove_empty(path: Path) -> None:
+    """Remove ``path`` and the lock file in it when nothing else was written (a refused first start)."""
+    try:
+        if {p.name for p in path.iterdir()} <= {rundir.WRITER_LOCK}:
+            (path / rundir.WRITER_LOCK).unlink(missing_ok=True)
+            path.rmdir()
+    except OSError:
+        pass
+
+
+def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, echo: Callable[[str], None],
                   progress: bool | None) -> None:
     ckpt_file = path / rundir.CHECKPOINT
     env = build_env(rc, rc.seed)
@@ -99,7 +184,6 @@ def _train_online(rc: RunConfig, path: Path, device: str, resuming: bool, echo: 
         buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
                               rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device)
         episodes = EpisodeStore(path / "replay")
-        state = load_checkpoint(ckpt_file) if resuming else None
         if state is None:
             episodes.prune(set())
         recorder = Recorder.open(path, rc.agent, spec.obs_shape, spec.action_dim, state) if rc.runtime.record else None
@@ -158,7 +242,7 @@ def run_action_dim(rc: RunConfig) -> int:
     return get_task(rc.task.name).action_dim + rc.env.distracting_dims
 
 
-def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, resuming: bool,
+def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, state: dict | None,
                    echo: Callable[[str], None], progress: bool | None) -> None:
     ckpt_file = path / rundir.CHECKPOINT
     eval_env = build_env(rc, rc.seed + 10_000)
@@ -169,7 +253,6 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, re
         values.update({"dataset_dir": str(data.directory), "dataset_kind": data.manifest.kind,
                        "dataset_manifest_sha256": data.digest})
         rundir.write_resolved(path, values)
-        state = load_checkpoint(ckpt_file) if resuming else None
         logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo,
                                return_conditioned=isinstance(learner, ReturnConditioned),
                                tensorboard=rc.runtime.tensorboard)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import os
 import re
 from collections.abc import Iterable
 from pathlib import Path
@@ -146,6 +147,8 @@ def validate(raw: DictConfig) -> DictConfig:
     for key in positive:
         if OmegaConf.select(cfg, key) < 1:
             raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
+    if cfg.seed < 0:
+        raise ConfigError(f"seed must be >= 0 (got {cfg.seed}).")
     if cfg.env.distracting_dims < 0 or cfg.train.eval_episodes < 0:
         raise ConfigError("env.distracting_dims and train.eval_episodes must be >= 0.")
     if cfg.train.video_size < 16 or cfg.train.video_size % 2:
@@ -172,6 +175,10 @@ def _check_learner(cfg: DictConfig) -> None:
             raise ConfigError(f"offline.dataset is read by offline learners only (agent.learner={learner} "
                               "trains online); pick an offline agent, e.g. agent=bc.")
         return
+    if dataset is not None and is_folder_value(str(dataset)):
+        # A folder is identity (the run directory's dataset tag): one folder, one spelling. ds/x, ds/x/, ./ds/x
+        # and a symlink to it all become its absolute real path (an absolute real path is kept as written).
+        dataset = cfg.offline.dataset = os.path.realpath(os.path.expanduser(str(dataset)))
     if dataset is not None and not is_folder_value(str(dataset)) and not NAME_RE.match(str(dataset)):
         raise ConfigError(f"offline.dataset='{dataset}': a dataset kind may only contain letters, digits, '_', '.' "
                           "and '-' (a folder needs a '/', e.g. ./my_dataset).")

@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from repro.fsutil import named_os_error
 from repro.runformat import EVAL, EVAL_COLUMNS, TRAIN, TRAIN_COLUMNS, WALLCLOCK_COLUMNS, train_columns
 from repro.tblog import TensorBoardMirror
 
@@ -62,9 +63,12 @@ class CsvLog:
             line = format_row(self.columns, row)
         except KeyError as exc:
             raise KeyError(f"{self.path.name}: {exc.args[0]}") from None
-        self._f.write(line.encode())
-        self._f.flush()
-        os.fsync(self._f.fileno())
+        try:
+            self._f.write(line.encode())
+            self._f.flush()
+            os.fsync(self._f.fileno())
+        except OSError as exc:  # a full disk: a torn row is cut again by the resume's truncation
+            raise named_os_error(exc, self.path) from None
 
     def offset(self) -> int:
         return self._f.tell()

@@ -36,6 +36,13 @@ BatchSource = Union[ReplayBuffer, Sampler]  # where update batches come from (bo
 LEARNER_STATE = ("modules", "optimizers")  # learner state_dict keys stored as "agent" / "optimizers"
 
 
+def check_resume_dataset(state: dict, digest: str) -> None:
+    """DatasetError when the checkpoint ``state`` was trained on another dataset than the one of ``digest``."""
+    if state.get("offline", {}).get("dataset") != digest:
+        raise DatasetError("the dataset changed since this run started (its manifest.json differs from the "
+                           "one the checkpoint was trained on); use another variant or move the run away")
+
+
 class OfflineLogger(CsvPairLogger):
     """eval.csv and train.csv of an offline run (columns: repro/runformat.py), TensorBoard step = update."""
 
@@ -91,10 +98,8 @@ class OfflineTrainer:
                 "last_eval": self.last_eval}
 
     def restore(self, state: dict) -> None:
+        check_resume_dataset(state, self.dataset_digest)
         off = state["offline"]
-        if off["dataset"] != self.dataset_digest:
-            raise DatasetError("the dataset changed since this run started (its manifest.json differs from the "
-                               "one the checkpoint was trained on); use another variant or move the run away")
         self.update = int(off["update"])
         self._sums, self._n = dict(off["sums"]), int(off["n"])
         self._window_seconds = float(off["window_seconds"])

@@ -3,13 +3,16 @@ resolved values, DONE marker."""
 
 from __future__ import annotations
 
+import fcntl
 import getpass
 import json
+import os
 import platform
 import socket
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -18,13 +21,26 @@ import yaml
 from omegaconf import DictConfig, OmegaConf
 
 from repro.config import drop_non_identity, identity
-from repro.fsutil import atomic_write_text
+from repro.fsutil import atomic_write_text, named_os_error
 from repro.learners.registry import is_offline
-from repro.runformat import CHECKPOINT, CONFIG, DONE, META, RESOLVED, resolved_json, run_path, run_state
+from repro.runformat import (
+    CHECKPOINT,
+    CONFIG,
+    DONE,
+    META,
+    REPLAY,
+    RESOLVED,
+    WRITER_LOCK,
+    resolved_json,
+    run_path,
+    run_state,
+)
 from repro.schema import RunConfig
 
-__all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "RESOLVED", "RunDirMismatch", "config_diff", "config_matches",
-           "resolved_values", "run_dir", "run_state", "write_config", "write_done", "write_meta", "write_resolved"]
+__all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "REPLAY", "RESOLVED", "WRITER_LOCK", "RunDirMismatch",
+           "RunLocked", "WriterLock", "acquire_writer_lock", "config_diff", "config_matches", "lock_holder",
+           "locked_message", "resolved_values", "run_dir", "run_state", "write_config", "write_done", "write_meta",
+           "write_resolved", "writer_lock_holder"]
 PACKAGES = ("torch", "numpy", "mujoco", "dm-control", "metaworld", "hydra-core", "omegaconf", "submitit",
             "pandas", "rliable", "taco-repro")
 
@@ -202,3 +218,92 @@ def write_meta(path: Path, device: str, resumed: bool) -> dict:
 
 def write_done(path: Path, summary: dict) -> None:
     atomic_write_text(path / DONE, json.dumps(summary, indent=2) + "\n")
+
+
+# ---------------------------------------------------------------------------------------------- one writer
+class RunLocked(RuntimeError):
+    """Another process is writing this run directory (one line naming it)."""
+
+
+@dataclass
+class WriterLock:
+    """An exclusive ``flock`` on ``{run}/.writer.lock``, held while a process writes the run directory.
+
+    The kernel releases it when the holder exits in any way (SIGKILL included), so a dead holder never
+    blocks a resume; the file stays (removing it would let a third process lock a fresh file while a second
+    still waits on the old one) and names the last holder (pid, host, start time) for the refusal message.
+    On NFS (v4, or v3 with lockd) Linux maps ``flock`` to a server-side lock: a lost node's lock goes when
+    the server's lease for it expires (NFSv4: about 90 s) or its lockd is told the node rebooted (v3); a
+    SLURM requeue after a node failure may be refused for that long and then succeeds on the next try.
+    """
+
+    path: Path
+    fd: int
+
+    def release(self) -> None:
+        if self.fd >= 0:
+            fcntl.flock(self.fd, fcntl.LOCK_UN)
+            os.close(self.fd)
+            self.fd = -1
+
+    def __enter__(self) -> WriterLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def lock_holder(path: str | Path) -> str:
+    """Who last held (or holds) the writer lock of the run directory ``path``, in words."""
+    try:
+        info = json.loads((Path(path) / WRITER_LOCK).read_text())
+        return f"pid {info['pid']} on {info['host']} (since {info['since']})"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "another process"
+
+
+def locked_message(path: Path, holder: str) -> str:
+    return (f"{path} is being written by {holder}; a run directory has one writer: wait for it to finish "
+            "(or stop it) and re-run to resume")
+
+
+def writer_lock_holder(path: str | Path) -> str | None:
+    """Who holds the run directory's writer lock now, in words; None when nobody does (writes nothing)."""
+    file = Path(path) / WRITER_LOCK
+    try:
+        fd = os.open(file, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return lock_holder(path)
+    finally:
+        os.close(fd)  # closing drops a shared lock taken just now
+    return None
+
+
+def acquire_writer_lock(path: str | Path) -> WriterLock:
+    """Take the run directory's writer lock now, or raise :class:`RunLocked` (never waits: a second start
+    of a running run is a mistake to report, not a queue; the sweep launcher skips runs it sees locked)."""
+    path = Path(path)
+    file = path / WRITER_LOCK
+    fd = os.open(file, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise RunLocked(locked_message(path, lock_holder(path))) from None
+    except OSError as exc:  # a filesystem without locks: an error, never a silent second writer
+        os.close(fd)
+        raise named_os_error(exc, file) from None
+    try:
+        text = json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
+                           "since": time.strftime("%Y-%m-%dT%H:%M:%S%z")}).encode()
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, text, 0)
+    except OSError as exc:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+        raise named_os_error(exc, file) from None
+    return WriterLock(file, fd)

@@ -28,6 +28,7 @@ FRAMES = "frames.npz"  # the final evaluation's first episode (trajectory figure
 REPLAY = "replay"  # folder of replay episodes, so that a resume does not rewrite the buffer
 TB = "tb"  # runtime.tensorboard: TensorBoard event files mirroring eval.csv and train.csv (repro/tblog.py)
 VIDEOS = "videos"  # train.save_video: frame_XXXXXXXXX.mp4 (offline: update_...) per evaluation (repro/video.py)
+WRITER_LOCK = ".writer.lock"  # flock()ed by the one process writing the run; names the last holder (repro/rundir.py)
 FILES = (CONFIG, META, RESOLVED, EVAL, TRAIN, CHECKPOINT, DONE, FRAMES, REPLAY, TB, VIDEOS)
 
 # ---------------------------------------------------------------- CSV columns
@@ -107,7 +108,9 @@ def is_folder_value(value: str) -> bool:
 
 def dataset_tag(value: str) -> str:
     """Run directory component of ``offline.dataset``: a kind (``medium``) as is; a folder: its name and the
-    first 8 hex digits of the sha256 of the value as written (``84px-1a2b3c4d``), so two folders never share one."""
+    first 8 hex digits of the sha256 of the value (``84px-1a2b3c4d``), so two folders never share one. The config
+    turns a folder value into its absolute real path first (repro/config.py), so every spelling of one folder
+    gives one tag, and an absolute real path gives the tag it always had."""
     if not is_folder_value(value):
         return value
     name = re.sub(r"[^A-Za-z0-9_.\-]", "_", Path(value.rstrip("/")).name) or "dataset"

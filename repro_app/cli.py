@@ -41,14 +41,17 @@ def train(ctx: typer.Context,
     if dry_run:
         _dry_run(cfg)
         return
-    from repro.api import train_config
+    from repro.api import CheckpointError, DeviceError, train_config
+    from repro.fsutil import write_error_message
     from repro.offline.replay import DatasetError
-    from repro.rundir import RunDirMismatch
+    from repro.rundir import RunDirMismatch, RunLocked
 
     try:
         path = train_config(cfg, echo=typer.echo, progress=progress)
-    except (RunDirMismatch, DatasetError) as exc:
+    except (RunDirMismatch, DatasetError, DeviceError, CheckpointError, RunLocked) as exc:
         fail(str(exc))
+    except OSError as exc:  # a full disk or a file size limit: every file is written atomically or truncated on resume
+        fail(write_error_message(exc), code=1)
     typer.echo(f"run directory: {path}")
 
 

@@ -47,15 +47,27 @@ def move_aside(planned: PlannedRun) -> Path:
     return dest
 
 
+def _writer(holder: str) -> lock.LockInfo:
+    """A LockInfo that describes the holder of a run directory's writer lock (``describe()``: pid N on HOST)."""
+    words = holder.split()
+    if len(words) >= 4 and words[0] == "pid" and words[1].isdigit() and words[2] == "on":
+        return lock.LockInfo(token="", host=words[3], pid=int(words[1]), pid_start=None, launcher="train")
+    return lock.LockInfo(token="", host="?", pid=0, pid_start=None, launcher="train")
+
+
 def claim(planned: PlannedRun, launcher: str, sweep: str, force: bool) -> Claim:
     """Lock the run, then re-read its state under the lock (another launcher may have finished it)."""
-    from repro.rundir import config_diff, run_state
+    from repro.rundir import config_diff, run_state, writer_lock_holder
 
     info = lock.LockInfo.mine(launcher, sweep)
     path = lock.lock_path(planned.results_root, planned.run_dir)
     ok, owner = lock.acquire(path, info, job_states)
     if not ok:
         return Claim(planned, "locked", owner)
+    holder = writer_lock_holder(planned.run_dir)  # a `repro train` started by hand or from another root
+    if holder is not None:
+        lock.release(path, info.token)
+        return Claim(planned, "locked", _writer(holder))
     state = run_state(planned.run_dir)
     diff = config_diff(planned.run_dir, planned.cfg) if state != "absent" else []
     if diff and not force:

@@ -12,6 +12,7 @@ from typing import NoReturn, Optional
 import typer
 
 from repro.config import ConfigError, compose_base
+from repro.fsutil import FULL, write_error_message
 from repro.offline.convert import default_import_name, export_dataset, import_dataset
 from repro.offline.dataset import MANIFEST, DatasetError, check_dataset, dataset_path, is_folder_value, load_manifest
 from repro.offline.formats import FORMATS
@@ -52,12 +53,16 @@ def info_cmd(directory: Path = typer.Argument(..., help="Dataset folder."),
     try:
         m = load_manifest(directory)
         s = summarize(m, directory)
-        png = out or directory / "returns.png"
-        plot_returns(m.returns, png, f"{m.task} / {m.kind}: {s['episodes']} episodes", bins=max(1, bins))
     except DatasetError as exc:
         _fail(str(exc))
     except OSError as exc:
         _fail(_os_message(exc))
+    png = out or directory / "returns.png"
+    try:
+        plot_returns(m.returns, png, f"{m.task} / {m.kind}: {s['episodes']} episodes", bins=max(1, bins))
+        plotted = str(png)
+    except OSError as exc:  # a read-only dataset (a shared datasets folder): the statistics still print
+        plotted = f"not written ({_os_message(exc)}); pass --out FILE.png to write it elsewhere"
     echo = typer.echo
     echo(f"dataset      {directory}")
     echo(f"task         {s['task']} (action dim {s['action_dim']}, frames {'x'.join(map(str, s['frame_shape']))})")
@@ -75,7 +80,7 @@ def info_cmd(directory: Path = typer.Argument(..., help="Dataset folder."),
     r = s["returns"]
     for i in range(0, len(r), 10):
         echo(f"  {i:>6}: " + " ".join(f"{x:.2f}" for x in r[i:i + 10]))
-    echo(f"histogram    {png}")
+    echo(f"histogram    {plotted}")
 
 
 @dataset_app.command("check")
@@ -102,6 +107,9 @@ def import_cmd(path: Path = typer.Argument(..., help="An input file or a folder 
                    None, "--out", "-o",
                    help="A name (-> RESULTS/datasets/TASK/NAME) or a folder (with a '/'); "
                         "default: imported-FORMAT."),
+               resize: Optional[int] = typer.Option(
+                   None, "--resize", help="Accept frames of any size and resize them to NxN (bicubic; recorded in "
+                                          "the manifest). Without it each format takes its documented size only."),
                results_root: Optional[Path] = RESULTS_OPT) -> None:
     """Import V-D4RL (hdf5 84px, npz 64px) or DrQ-v2/TACO replay episodes as a dataset (resumable)."""
     if fmt not in FORMATS:
@@ -111,11 +119,12 @@ def import_cmd(path: Path = typer.Argument(..., help="An input file or a folder 
     try:
         target = dataset_path(name, root, task)
         existed = (target / MANIFEST).exists()
-        m = import_dataset(path, fmt, task, target)
+        m = import_dataset(path, fmt, task, target, resize=resize)
     except DatasetError as exc:
         _fail(str(exc))
-    except OSError as exc:
-        _fail(_os_message(exc))
+    except OSError as exc:  # a full disk: the partial import is kept and a re-run resumes it
+        typer.echo(f"error: {write_error_message(exc)}", err=True)
+        raise typer.Exit(1 if exc.errno in FULL else 2) from None
     if existed:
         typer.echo(f"already imported: {target} holds this import ({len(m.episodes)} episodes); nothing written")
         return

@@ -17,6 +17,7 @@ import hashlib
 import io
 import json
 import math
+import os
 import re
 import zipfile
 import zlib
@@ -116,6 +117,9 @@ def load_manifest(directory: str | Path) -> Manifest:
         raise DatasetError(f"no dataset at {d} (no {MANIFEST})")
     try:
         data = json.loads(path.read_text())
+    except PermissionError:
+        raise DatasetError(f"cannot read {path}: permission denied (made by another user with a private mode? "
+                           "its owner can `chmod -R a+rX` the dataset folder)") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DatasetError(f"corrupt {path}: {exc}") from None
     return Manifest.from_json(data, str(path))
@@ -141,19 +145,68 @@ def _load_npz(raw: bytes, path: Path) -> Episode:
 
 
 def iter_episodes(directory: str | Path, *, verify: bool = True) -> Iterator[Episode]:
-    """Yield every episode of a complete dataset in order; with ``verify``, check hashes and structure."""
+    """Yield every episode of a complete dataset in order.
+
+    With ``verify`` (training and export read this way), what ``check_dataset`` checks is checked on the way,
+    each first problem a :class:`DatasetError`: the listing (names inside ``episodes/``, no unlisted episode
+    file, totals) before the first file is read, then each file's sha256, arrays, transitions and return
+    against the manifest. A file whose size, mtime and manifest hash equal those of a file already verified
+    (a per-user cache, :func:`verified_cache_file`) is not hashed again; everything else is checked each time.
+    """
     d = Path(directory)
     m = load_manifest(d)
+    if verify:
+        problems = listing_problems(d, m)
+        if problems:
+            raise DatasetError(f"{d}: {problems[0]}")
+    cache = _read_cache(d) if verify else {}
+    seen: dict[str, list[Any]] = {}
     for i, entry in enumerate(m.episodes):
         path = d / entry.file
-        ep = read_episode_file(path, entry.sha256 if verify else None)
+        stat = _stat(path) if verify else None
+        known = cache.get(entry.file)
+        hashed = not (stat is not None and known == [*stat, entry.sha256])
+        ep = read_episode_file(path, entry.sha256 if verify and hashed else None)
         if verify:
-            problems = episode_problems(ep, action_dim=m.action_dim, frame_shape=m.frame_shape, ep_id=i)
-            if ep_transitions(ep) != entry.transitions and not problems:
-                problems.append(f"{ep_transitions(ep)} transitions, the manifest says {entry.transitions}")
+            problems = entry_problems(ep, entry, i, m)
             if problems:
                 raise DatasetError(f"{path}: {problems[0]}")
+            if stat is not None:
+                seen[entry.file] = [*stat, entry.sha256]
+            if i == len(m.episodes) - 1 and seen != cache:  # before the last yield: a reader may stop there
+                _write_cache(d, seen)
         yield ep
+
+
+def verified_cache_file(directory: str | Path) -> Path:
+    """Where the hashes verified for the dataset at ``directory`` are remembered (sizes, mtimes, sha256):
+    ``$XDG_CACHE_HOME/repro/verified/`` (default ``~/.cache``), one file per dataset folder (its real path)."""
+    root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    key = hashlib.sha256(os.path.realpath(directory).encode()).hexdigest()[:32]
+    return root / "repro" / "verified" / f"{key}.json"
+
+
+def _stat(path: Path) -> tuple[int, int] | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return int(st.st_size), int(st.st_mtime_ns)
+
+
+def _read_cache(d: Path) -> dict[str, list[Any]]:
+    try:
+        data = json.loads(verified_cache_file(d).read_text())
+        return {str(k): list(v) for k, v in data["files"].items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
+
+
+def _write_cache(d: Path, files: dict[str, list[Any]]) -> None:
+    try:
+        atomic_write_text(verified_cache_file(d), json.dumps({"dataset": os.path.realpath(d), "files": files}))
+    except OSError:
+        pass  # a cache only: without it the next load hashes again
 
 
 def ep_transitions(ep: Mapping[str, np.ndarray]) -> int:
@@ -201,13 +254,30 @@ def episode_problems(ep: Mapping[str, np.ndarray], *, action_dim: int | None = N
     return out
 
 
-def check_dataset(directory: str | Path) -> list[str]:
-    """Every problem found in a dataset folder, one line each (empty: the dataset is valid)."""
-    d = Path(directory)
-    try:
-        m = load_manifest(d)
-    except DatasetError as exc:
-        return [str(exc)]
+MIN_FRAME = 15  # the smallest frame side the DrQ-v2 encoder accepts ((S - 3) // 2 + 1 - 6 >= 1)
+
+
+def usable_problems(m: Manifest) -> list[str]:
+    """What no run could use: an unknown task, fewer action dims than the task has (a run may add
+    distracting dims, never remove any), frames that are not square RGB of at least MIN_FRAME pixels."""
+    from repro.envs.registry import TASKS
+
+    info = TASKS.get(m.task)
+    if info is None:
+        return [f"unknown task '{m.task}' in {MANIFEST} (known: {', '.join(sorted(TASKS))})"]
+    out = []
+    if m.action_dim < info.action_dim:
+        out.append(f"action dim {m.action_dim}: task {m.task} has {info.action_dim} (another task's data?)")
+    c, h, w = m.frame_shape
+    if c != 3 or h != w or h < MIN_FRAME:
+        out.append(f"frame shape {list(m.frame_shape)}: a run renders square RGB frames (3, S, S) with S >= "
+                   f"{MIN_FRAME} (env.image_size)")
+    return out
+
+
+def listing_problems(d: Path, m: Manifest) -> list[str]:
+    """What is wrong with the manifest's listing of episode files, found without reading one: names (each
+    episode at ``episodes/ep_{i:07d}.npz``, so nothing outside the folder), duplicates, totals, unlisted files."""
     problems: list[str] = []
     listed: set[str] = set()
     for i, entry in enumerate(m.episodes):
@@ -217,19 +287,6 @@ def check_dataset(directory: str | Path) -> list[str]:
         listed.add(entry.file)
         if entry.file != f"{EPISODES}/ep_{i:07d}.npz":
             problems.append(f"episode {i} is stored as {entry.file}, expected {EPISODES}/ep_{i:07d}.npz")
-        try:
-            ep = read_episode_file(d / entry.file, entry.sha256)
-        except DatasetError as exc:
-            problems.append(str(exc))
-            continue
-        found = episode_problems(ep, action_dim=m.action_dim, frame_shape=m.frame_shape, ep_id=i)
-        problems += [f"{entry.file}: {p}" for p in found]
-        if found:
-            continue
-        if ep_transitions(ep) != entry.transitions:
-            problems.append(f"{entry.file}: {ep_transitions(ep)} transitions, the manifest says {entry.transitions}")
-        if not math.isclose(episode_return(ep), entry.return_, rel_tol=1e-9, abs_tol=1e-9):
-            problems.append(f"{entry.file}: return {episode_return(ep):.6g}, the manifest says {entry.return_:.6g}")
     total = sum(e.transitions for e in m.episodes)
     if total != m.transitions:
         problems.append(f"{MANIFEST} says {m.transitions} transitions, its episodes hold {total}")
@@ -240,6 +297,41 @@ def check_dataset(directory: str | Path) -> list[str]:
             rel = f"{EPISODES}/{p.name}"
             if _EP_NAME.match(p.name) and rel not in listed:
                 problems.append(f"{rel} is not listed in {MANIFEST}")
+    return problems
+
+
+def entry_problems(ep: Mapping[str, np.ndarray], entry: EpisodeEntry, i: int, m: Manifest) -> list[str]:
+    """What is wrong with episode ``i``'s arrays against the dataset and its manifest entry."""
+    found = episode_problems(ep, action_dim=m.action_dim, frame_shape=m.frame_shape, ep_id=i)
+    if found:
+        return found
+    if ep_transitions(ep) != entry.transitions:
+        found.append(f"{ep_transitions(ep)} transitions, the manifest says {entry.transitions}")
+    if not math.isclose(episode_return(ep), entry.return_, rel_tol=1e-9, abs_tol=1e-9):
+        found.append(f"return {episode_return(ep):.6g}, the manifest says {entry.return_:.6g}")
+    return found
+
+
+def check_dataset(directory: str | Path) -> list[str]:
+    """Every problem found in a dataset folder, one line each (empty: the dataset is valid)."""
+    d = Path(directory)
+    try:
+        m = load_manifest(d)
+    except DatasetError as exc:
+        return [str(exc)]
+    problems = usable_problems(m) + listing_problems(d, m)
+    listed: set[str] = set()
+    for i, entry in enumerate(m.episodes):
+        if entry.file in listed or entry.file != f"{EPISODES}/ep_{i:07d}.npz":
+            listed.add(entry.file)
+            continue  # reported by listing_problems; never read a file outside the folder
+        listed.add(entry.file)
+        try:
+            ep = read_episode_file(d / entry.file, entry.sha256)
+        except DatasetError as exc:
+            problems.append(str(exc))
+            continue
+        problems += [f"{entry.file}: {p}" for p in entry_problems(ep, entry, i, m)]
     return problems
 
 

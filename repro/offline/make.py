@@ -10,16 +10,23 @@
 - full-replay: the same draw over the whole recording.
 
 The dataset is built in a hidden staging folder beside its destination and renamed into place once its
-manifest is written and checked, so a killed ``make`` never leaves a dataset that looks complete; a
-re-run removes the staging folder and builds it again (the result is the same for the same seed).
+manifest is written and checked, so a killed ``make`` never leaves a dataset that looks complete. A re-run
+of the same request continues in the staging folder (``write_dataset``: an episode file already there is
+kept when the episode computed again equals it, so files are not rewritten, but the episodes are computed
+again: the result is the same for the same seed); a staging folder of another request is removed first.
+One ``make`` writes a destination at a time (an flock beside it).
 """
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
+import os
 import shutil
+import socket
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,9 +37,9 @@ import yaml
 
 from repro import rundir
 from repro.agent.networks import Actor, Encoder
-from repro.api import build_env, resolve_device
+from repro.api import DeviceError, build_env, resolve_device
 from repro.config import CONF_DIR, ConfigError, typed, validate
-from repro.offline.dataset import DatasetError, check_dataset, load_manifest, write_dataset
+from repro.offline.dataset import MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
 from repro.offline.record import EPISODES, SNAPSHOTS, load_snapshot, record_dir, snapshot_path, snapshot_steps
 from repro.schema import RunConfig
 from repro.trainer import episode_seed
@@ -245,6 +252,16 @@ def results_root_of(run_dir: Path, cfg: RunConfig) -> Path:
     raise MakeError(f"cannot tell the results root of {run_dir} from its path; pass --results or --out")
 
 
+def _check_seed_and_device(seed: int, device: str) -> str:
+    """The resolved torch device; MakeError (one line) for a negative seed or a device this machine lacks."""
+    if int(seed) < 0:
+        raise MakeError(f"--seed must be >= 0 (got {seed})")
+    try:
+        return resolve_device(device, "--device")
+    except DeviceError as exc:
+        raise MakeError(str(exc)) from None
+
+
 @dataclass
 class Plan:
     kind: str
@@ -259,6 +276,7 @@ def plan(source: Source, kind: str, transitions: int | None = None, medium_fract
     """Check the request and decide what to write (no file is written)."""
     if kind not in KINDS:
         raise MakeError(f"unknown kind {kind!r}; one of {', '.join(KINDS)}")
+    dev = _check_seed_and_device(seed, device)
     n = default_transitions(source.task) if transitions is None else int(transitions)
     if n < 1:
         raise MakeError(f"--transitions must be >= 1 (got {n})")
@@ -285,7 +303,6 @@ def plan(source: Source, kind: str, transitions: int | None = None, medium_fract
         rule.update({"selection": "rollouts of the snapshot policy with its exploration noise, whole episodes "
                                   "until >= transitions", "stddev": stddev,
                      "episode_seeds": f"episode_seed(run seed, {ROLLOUT_KIND}, index, seed)"})
-        dev = resolve_device(device)
         episodes = lambda: _rollouts(source, snap, n, int(seed), dev)  # noqa: E731
     else:
         if kind == "medium-replay":
@@ -314,10 +331,48 @@ def _same_request(manifest: dict, fields: dict) -> bool:
     return all(json.loads(json.dumps(manifest.get(k))) == json.loads(json.dumps(fields[k])) for k in keys)
 
 
+def _staging_of(staging: Path, fields: dict) -> bool:
+    """Whether ``staging`` is a partial (or complete, not yet renamed) write of this very request."""
+    for name in (PENDING, MANIFEST):
+        try:
+            recorded = json.loads((staging / name).read_text())
+        except (OSError, ValueError):
+            continue
+        return isinstance(recorded, dict) and _same_request(recorded, fields)
+    return False
+
+
+@contextmanager
+def _make_lock(out: Path) -> Iterator[None]:
+    """An flock on ``.{name}.make.lock`` beside ``out``: one ``make`` writes a destination at a time (a second
+    refuses in one line naming the first); the kernel releases it when its holder dies; removed on success."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    file = out.parent / f".{out.name}.make.lock"
+    fd = os.open(file, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                holder = json.loads(file.read_text())
+                who = f"pid {holder['pid']} on {holder['host']}"
+            except (OSError, ValueError, KeyError, TypeError):
+                who = "another process"
+            raise MakeError(f"{out} is being made by {who}; wait for it to finish (re-running then finds it "
+                            "made)") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname()}).encode(), 0)
+        yield
+        file.unlink(missing_ok=True)  # still held: a process that opened it before now sees out made
+    finally:
+        os.close(fd)
+
+
 def make(source_dir: str | Path, kind: str, transitions: int | None = None, medium_fraction: float | None = None,
          seed: int = 0, out: str | Path | None = None, results_root: str | Path | None = None,
          task: str | None = None, device: str = "auto", echo: Callable[[str], None] = print) -> Path:
     """Make (or find already made) the dataset; return its folder. Raises MakeError with one line."""
+    _check_seed_and_device(seed, device)
     source = open_source(source_dir, task)
     p = plan(source, kind, transitions, medium_fraction, seed, out, results_root, device)
     if p.out.exists():
@@ -335,14 +390,16 @@ def make(source_dir: str | Path, kind: str, transitions: int | None = None, medi
             raise MakeError(f"{p.out} holds another dataset ({manifest.get('kind')} from "
                             f"{manifest.get('source', {}).get('run_dir')}); move it away or pass --out")
     staging = p.out.parent / f".{p.out.name}.partial"
-    if staging.exists():
-        shutil.rmtree(staging)
-    staging.mkdir(parents=True)
-    write_dataset(staging, p.episodes(), **p.fields)
-    manifest = manifest_json(staging)
-    problems = check_dataset(staging)
-    if problems:
-        raise MakeError(f"{staging}: the dataset written fails its check: {problems[0]}")
-    staging.rename(p.out)
+    with _make_lock(p.out):
+        if p.out.exists():  # another make finished it while this one waited for the lock
+            return make(source_dir, kind, transitions, medium_fraction, seed, out, results_root, task, device, echo)
+        if staging.exists() and not _staging_of(staging, p.fields):
+            shutil.rmtree(staging)  # left by another request (or killed before it recorded one): start afresh
+        write_dataset(staging, p.episodes(), **p.fields)
+        manifest = manifest_json(staging)
+        problems = check_dataset(staging)
+        if problems:
+            raise MakeError(f"{staging}: the dataset written fails its check: {problems[0]}")
+        staging.rename(p.out)
     echo(f"{kind}: {manifest['transitions']} transitions in {len(manifest['episodes'])} episodes -> {p.out}")
     return p.out

@@ -7,6 +7,7 @@ from typing import Optional
 
 import typer
 
+from repro.fsutil import write_error_message
 from repro.offline.dataset import DatasetError
 from repro.offline.make import KINDS, make
 
@@ -35,3 +36,6 @@ def register(dataset_app: typer.Typer) -> None:
         except DatasetError as exc:  # MakeError included
             typer.echo(f"error: {exc}", err=True)
             raise typer.Exit(2) from None
+        except OSError as exc:  # a full disk: the staging folder is kept and a re-run resumes from it
+            typer.echo(f"error: {write_error_message(exc)}", err=True)
+            raise typer.Exit(1) from None

@@ -14,12 +14,14 @@ from repro.offline.formats.common import Scan
 @dataclass(frozen=True)
 class Format:
     name: str
+    size: int  # the documented frame size (H = W) of the layout; other sizes need --resize
     scan: Callable[[Path], Scan]
-    read: Callable[[Scan], Iterator[Episode]]
+    read: Callable[[Scan, int | None], Iterator[Episode]]  # (scan, resize to or None)
     write: Callable[[Iterable[Episode], Path], list[Path]]
 
 
-FORMATS: dict[str, Format] = {m.NAME: Format(m.NAME, m.scan, m.read, m.write) for m in (vd4rl84, vd4rl64, drqv2)}
+FORMATS: dict[str, Format] = {m.NAME: Format(m.NAME, m.SIZE, m.scan, m.read, m.write)
+                              for m in (vd4rl84, vd4rl64, drqv2)}
 
 
 def get_format(name: str) -> Format:

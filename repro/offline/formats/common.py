@@ -120,3 +120,13 @@ def load_npz(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
             return {k: z[k] for k in keys if k in z.files}
     except (zipfile.BadZipFile, OSError, ValueError, EOFError, zlib.error) as exc:
         raise DatasetError(f"corrupt or truncated file {path}: {type(exc).__name__}") from None
+
+
+def resize_frames(frames: np.ndarray, size: int) -> np.ndarray:
+    """(N, 3, H, W) uint8 -> (N, 3, size, size) uint8, bicubic (Pillow); a no-op at that size."""
+    if frames.shape[2:] == (size, size):
+        return frames
+    from PIL import Image
+
+    return np.stack([np.asarray(Image.fromarray(np.ascontiguousarray(f.transpose(1, 2, 0))).resize(
+        (size, size), Image.Resampling.BICUBIC)).transpose(2, 0, 1) for f in frames])

@@ -17,11 +17,22 @@ from pathlib import Path
 import numpy as np
 
 from repro.offline.dataset import DatasetError, Episode
-from repro.offline.formats.common import Scan, Unit, column, from_rows, input_files, load_npz, npz_header, to_rows
+from repro.offline.formats.common import (
+    Scan,
+    Unit,
+    column,
+    from_rows,
+    input_files,
+    load_npz,
+    npz_header,
+    resize_frames,
+    to_rows,
+)
 
 NAME = "drqv2"
 KEYS = ("observation", "action", "reward", "discount")
 FRAME_STACK = 3
+SIZE = 84  # the only frame size import accepts without --resize
 _NAME = re.compile(r"^([^_]+)_(\d+)_(\d+)\.npz$")
 
 
@@ -76,7 +87,8 @@ def newest_frames(obs: np.ndarray, where: str) -> np.ndarray:
     return obs[:, -3:]
 
 
-def read(scan_: Scan) -> Iterator[Episode]:
+def read(scan_: Scan, image_size: int | None = None) -> Iterator[Episode]:
+    """The episodes; ``image_size``: resize the frames to it (bicubic), as asked by ``--resize``."""
     for u in scan_.units:
         z = load_npz(u.file, KEYS)
         where, n = str(u.file), u.stop
@@ -85,7 +97,8 @@ def read(scan_: Scan) -> Iterator[Episode]:
         action = np.asarray(z["action"], dtype=np.float64)
         if not np.all(np.isfinite(action)):
             raise DatasetError(f"{where}: non-finite values in 'action'")
-        yield from_rows(newest_frames(z["observation"], where), action,
+        frames = newest_frames(z["observation"], where)
+        yield from_rows(frames if image_size is None else resize_frames(frames, image_size), action,
                         column(z["reward"], n, "reward", where), column(z["discount"], n, "discount", where), where)
 
 

@@ -26,7 +26,8 @@ from repro.offline.formats.common import Scan, Unit, column, from_rows, input_fi
 NAME = "vd4rl-64"
 KEYS = ("image", "action", "reward", "discount")
 FLAGS = ("is_first", "is_last")
-IMPORT_SIZE = 84
+SIZE = 64  # the only frame size import accepts without --resize
+IMPORT_SIZE = 84  # the documented conversion: 64x64 in, 84x84 in the dataset (recorded in the manifest)
 EXPORT_SIZE = 64
 _ROWS = re.compile(r"-(\d+)\.npz$")
 
@@ -85,7 +86,9 @@ def scan(path: Path) -> Scan:
                 details={"resized_to": IMPORT_SIZE, "interpolation": "bicubic (Pillow)"})
 
 
-def read(scan_: Scan, image_size: int = IMPORT_SIZE) -> Iterator[Episode]:
+def read(scan_: Scan, image_size: int | None = None) -> Iterator[Episode]:
+    """The episodes, frames resized to ``image_size`` (default IMPORT_SIZE), bicubic."""
+    size = IMPORT_SIZE if image_size is None else image_size
     for u in scan_.units:
         z = load_npz(u.file, KEYS)
         where, n = str(u.file), u.stop
@@ -94,7 +97,7 @@ def read(scan_: Scan, image_size: int = IMPORT_SIZE) -> Iterator[Episode]:
         action = np.asarray(z["action"], dtype=np.float64)
         if not np.all(np.isfinite(action)):
             raise DatasetError(f"{where}: non-finite values in 'action'")
-        frames = resize(z["image"], image_size).transpose(0, 3, 1, 2)
+        frames = resize(z["image"], size).transpose(0, 3, 1, 2)
         yield from_rows(frames, action, column(z["reward"], n, "reward", where),
                         column(z["discount"], n, "discount", where), where)
 

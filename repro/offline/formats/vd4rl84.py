@@ -15,11 +15,12 @@ import h5py
 import numpy as np
 
 from repro.offline.dataset import DatasetError, Episode
-from repro.offline.formats.common import Scan, Unit, column, from_rows, input_files, to_rows
+from repro.offline.formats.common import Scan, Unit, column, from_rows, input_files, resize_frames, to_rows
 
 NAME = "vd4rl-84"
 KEYS = ("observation", "action", "reward", "discount", "step_type")
 OUT_FILE = "data.hdf5"
+SIZE = 84  # the only frame size import accepts without --resize
 
 
 def _open(path: Path) -> h5py.File:
@@ -96,7 +97,8 @@ def scan(path: Path) -> Scan:
     return Scan(units, transitions, action_dim, size)
 
 
-def read(scan_: Scan) -> Iterator[Episode]:
+def read(scan_: Scan, image_size: int | None = None) -> Iterator[Episode]:
+    """The episodes; ``image_size``: resize the frames to it (bicubic), as asked by ``--resize``."""
     handle: h5py.File | None = None
     try:
         for u in scan_.units:
@@ -113,7 +115,9 @@ def read(scan_: Scan) -> Iterator[Episode]:
             action = np.asarray(rows["action"], dtype=np.float64)
             if not np.all(np.isfinite(action)):
                 raise DatasetError(f"{where}: non-finite values in 'action'")
-            yield from_rows(rows["observation"], action, column(rows["reward"], n, "reward", where),
+            frames = rows["observation"]
+            yield from_rows(frames if image_size is None else resize_frames(frames, image_size), action,
+                            column(rows["reward"], n, "reward", where),
                             column(rows["discount"], n, "discount", where), where)
     finally:
         if handle is not None:
