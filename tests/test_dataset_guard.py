@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import os
 import stat
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,9 +13,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-from offline_fixtures import make_episode, write_dataset  # noqa: E402
+from offline_fixtures import make_episode, write_dataset
 from repro import api  # noqa: E402
 from repro.config import compose, typed  # noqa: E402
 from repro.fsutil import atomic_write_text  # noqa: E402

@@ -18,9 +18,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-from offline_fixtures import write_dataset  # noqa: E402
+from offline_fixtures import write_dataset
 from repro import api, rundir  # noqa: E402
 from repro.config import compose  # noqa: E402
 from repro_app.cli import app  # noqa: E402
