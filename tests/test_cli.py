@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
+from helpers import write_sweep
 from repro.envs import TASKS
 from repro_app.cli import app
 
@@ -85,9 +86,8 @@ def test_sweep_results_flag_is_the_results_root(tmp_path, monkeypatch):
     assert both.exit_code == 2 and "not both" in both.output
 
 
+@pytest.mark.slow
 def test_sweep_short_results_flag_launches_under_root(tmp_path):
-    from test_sweeps import write_sweep  # the launcher tests' one-run tiny sweep file
-
     sweep = write_sweep(tmp_path, "res", ["reacher_hard"], {"base": []}, 1)
     root = tmp_path / "elsewhere"
     result = runner.invoke(app, ["sweep", str(sweep), "-r", str(root), "--max-parallel", "1"])
