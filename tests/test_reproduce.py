@@ -30,7 +30,7 @@ def test_tiny_end_to_end_reproduction_online(main_job):
     assert row.n == 2 and row.repro_mean == row.repro_mean  # reproduced from the two seeds (not NaN)
     assert t1[(t1.task == "quadruped_run") & (t1.method == "TACO")].iloc[0].n == 0  # no runs: shown, not faked
     report = (out / "REPORT.md").read_text()
-    assert "22 runs loaded (22 done)" in report and "## Claims" in report and "Audit" in report
+    assert "36 runs loaded (36 done)" in report and "## Claims" in report and "Audit" in report
 
 
 def test_tiny_end_to_end_reproduction_offline(main_job):
@@ -38,16 +38,20 @@ def test_tiny_end_to_end_reproduction_offline(main_job):
     for kind in ("medium", "full-replay"):
         manifest = json.loads((runs / "datasets" / "cheetah_run" / kind / "manifest.json").read_text())
         assert manifest["kind"] == kind and manifest["transitions"] > 0
-    offline = sorted(runs.glob("tiny_offline/*/*/cheetah_run/*/seed_1/DONE"))
-    assert len(offline) == 2 * len(OFFLINE)
+    offline = sorted(runs.glob("tiny_offline/*/*/cheetah_run/*/seed_*/DONE"))
+    assert len(offline) == 2 * 2 * len(OFFLINE)  # two datasets, two seeds
     t3 = pd.read_csv(out / "T3.csv")
     for kind in ("medium", "full-replay"):
         for method in OFFLINE.values():
             cell = t3[(t3.task == "cheetah_run") & (t3.dataset == kind) & (t3.method == method)]
-            assert len(cell) == 1 and cell.iloc[0].n == 1 and cell.iloc[0].repro_mean == cell.iloc[0].repro_mean, \
+            assert len(cell) == 1 and cell.iloc[0].n == 2 and cell.iloc[0].repro_mean == cell.iloc[0].repro_mean, \
                 (kind, method)
-    for name in ("T3b.csv", "T6.csv"):
-        assert (out / name).is_file(), name
+    t3b = pd.read_csv(out / "T3b.csv")
+    pairs = t3b[(t3b.task == "cheetah_run") & t3b.dataset.isin(["medium", "full-replay"])]
+    assert len(pairs) == 4 and pairs.poi.between(0, 1).all() and (pairs.n_method == 2).all(), pairs
+    t6 = pd.read_csv(out / "T6.csv").set_index(["task", "dataset"])
+    for kind, alpha in (("medium", 0.5), ("full-replay", 4.0)):  # Table 6, used by the CQL(+TACO) runs
+        assert t6.loc[("cheetah_run", kind), "runs_alpha"] == alpha and t6.loc[("cheetah_run", kind), "runs"] == 4
     report = (out / "REPORT.md").read_text()
     verdicts = [ln for ln in report.splitlines() if ln.startswith("|") and ("supported" in ln or "refuted" in ln)]
     assert not verdicts, verdicts  # tiny runs never give a verdict
@@ -59,5 +63,5 @@ def test_second_invocation_finds_everything_done(main_job):
     again = subprocess.run([sys.executable, "-m", "repro", "reproduce", "--results", str(runs), "--out", str(out)],
                            capture_output=True, text=True, timeout=900)
     assert again.returncode == 0, again.stderr[-2000:]
-    assert "8 already done" in again.stdout and "14 already done" in again.stdout
+    assert "8 already done" in again.stdout and "28 already done" in again.stdout
     assert sorted(runs.glob("tiny*/**/DONE")) == done
