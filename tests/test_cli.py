@@ -86,14 +86,14 @@ def test_sweep_results_flag_is_the_results_root(tmp_path, monkeypatch):
     assert both.exit_code == 2 and "not both" in both.output
 
 
-@pytest.mark.slow
 def test_sweep_short_results_flag_launches_under_root(tmp_path):
+    """`-r ROOT` is `--results ROOT` for sweep and status (a dry run: the launch itself is the one every
+    launcher test makes)."""
     sweep = write_sweep(tmp_path, "res", ["reacher_hard"], {"base": []}, 1)
     root = tmp_path / "elsewhere"
-    result = runner.invoke(app, ["sweep", str(sweep), "-r", str(root), "--max-parallel", "1"])
+    result = runner.invoke(app, ["sweep", str(sweep), "-r", str(root), "--dry-run"], terminal_width=400)
     assert result.exit_code == 0, result.output
-    run_dir = root / "res/taco/base/reacher_hard/seed_1"
-    assert (run_dir / "DONE").exists() and (run_dir / "eval.csv").exists()
-    assert (root / ".sweeps/res/state.json").exists()
-    status = runner.invoke(app, ["status", "res", "-r", str(root)], terminal_width=240)
-    assert status.exit_code == 0 and "1 done" in status.output, status.output
+    assert "res/taco/base/reacher_hard/seed_1" in result.output and f"Results root: {root}\n" in result.output
+    status = runner.invoke(app, ["status", "-r", str(root)], terminal_width=240)
+    assert status.exit_code == 0 and f"no sweep launched under {root}" in status.output, status.output
+    assert not (tmp_path / "runs").exists()

@@ -30,7 +30,7 @@ def test_tiny_end_to_end_reproduction_online(main_job):
     assert row.n == 2 and row.repro_mean == row.repro_mean  # reproduced from the two seeds (not NaN)
     assert t1[(t1.task == "quadruped_run") & (t1.method == "TACO")].iloc[0].n == 0  # no runs: shown, not faked
     report = (out / "REPORT.md").read_text()
-    assert "36 runs loaded (36 done)" in report and "## Claims" in report and "Audit" in report
+    assert "30 runs loaded (30 done)" in report and "## Claims" in report and "Audit" in report
 
 
 def test_tiny_end_to_end_reproduction_offline(main_job):
@@ -39,12 +39,13 @@ def test_tiny_end_to_end_reproduction_offline(main_job):
         manifest = json.loads((runs / "datasets" / "cheetah_run" / kind / "manifest.json").read_text())
         assert manifest["kind"] == kind and manifest["transitions"] > 0
     offline = sorted(runs.glob("tiny_offline/*/*/cheetah_run/*/seed_*/DONE"))
-    assert len(offline) == 2 * 2 * len(OFFLINE)  # two datasets, two seeds
+    assert len(offline) == 2 * (2 * 4 + 3)  # two datasets; two seeds of the four learners T3b pairs, one of three
     t3 = pd.read_csv(out / "T3.csv")
     for kind in ("medium", "full-replay"):
         for method in OFFLINE.values():
             cell = t3[(t3.task == "cheetah_run") & (t3.dataset == kind) & (t3.method == method)]
-            assert len(cell) == 1 and cell.iloc[0].n == 2 and cell.iloc[0].repro_mean == cell.iloc[0].repro_mean, \
+            seeds = 1 if method in ("IQL", "BC", "DT") else 2
+            assert len(cell) == 1 and cell.iloc[0].n == seeds and cell.iloc[0].repro_mean == cell.iloc[0].repro_mean, \
                 (kind, method)
     t3b = pd.read_csv(out / "T3b.csv")
     pairs = t3b[(t3b.task == "cheetah_run") & t3b.dataset.isin(["medium", "full-replay"])]
@@ -60,8 +61,9 @@ def test_tiny_end_to_end_reproduction_offline(main_job):
 def test_second_invocation_finds_everything_done(main_job):
     runs, out = main_job.runs, main_job.out
     done = sorted(runs.glob("tiny*/**/DONE"))
-    again = subprocess.run([sys.executable, "-m", "repro", "reproduce", "--results", str(runs), "--out", str(out)],
+    again = subprocess.run([sys.executable, "-m", "repro", "reproduce", "--results", str(runs), "--out", str(out),
+                            "--reps", "500"],
                            capture_output=True, text=True, timeout=900)
     assert again.returncode == 0, again.stderr[-2000:]
-    assert "8 already done" in again.stdout and "28 already done" in again.stdout
+    assert "8 already done" in again.stdout and "22 already done" in again.stdout
     assert sorted(runs.glob("tiny*/**/DONE")) == done

@@ -311,15 +311,15 @@ def _wait(pred, timeout: float, what: str) -> None:
 
 @pytest.mark.slow
 def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_path):
-    """2 tasks x 2 variants x 2 seeds: kill the launcher halfway (SIGKILL), then two launchers at once
-    finish the grid; every run ends DONE exactly once with complete, duplicate-free CSVs."""
+    """2 tasks x 2 variants: kill the launcher halfway (SIGKILL), then two launchers at once finish the grid;
+    every run ends DONE exactly once with complete, duplicate-free CSVs."""
     sweep = write_sweep(
-        tmp_path, "grid", ["reacher_hard", "cheetah_run"], {"K1": ["agent.K=1"], "K3": ["agent.K=3"]}, 2
+        tmp_path, "grid", ["reacher_hard", "cheetah_run"], {"K1": ["agent.K=1"], "K3": ["agent.K=3"]}, 1
     )
     root = tmp_path / "results"
     common = [str(sweep), "--set", f"runtime.results_root={root}"]
     planned = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={root}",))))
-    assert len(planned) == 8
+    assert len(planned) == 4
     dirs = [p.run_dir for p in planned]
 
     first = cli_proc("sweep", *common, "--max-parallel", "2")
@@ -357,9 +357,9 @@ def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_
 
     again = cli_proc("sweep", *common)
     out = again.communicate(timeout=120)[0]
-    assert again.returncode == 0 and "0 started" in out and "8 already done" in out, out
+    assert again.returncode == 0 and "0 started" in out and "4 already done" in out, out
     code, out = run_cli("status", "grid", "--results-root", str(root))
-    assert code == 0 and "grid: 8 done" in out
+    assert code == 0 and "grid: 4 done" in out
 
 
 @pytest.mark.slow
@@ -399,3 +399,18 @@ def test_exclude_must_have_a_reason(tmp_path):
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(specs.SweepError, match="reason"):
         specs.load_file(path)
+
+
+def test_an_exclusion_naming_seeds_leaves_out_those_runs_only(tmp_path):
+    spec = specs.load("tiny_offline")
+    runs = specs.expand(spec)
+    by = {(r.agent, r.dataset, r.seed) for r in runs}
+    assert ("iql", "medium", 1) in by and ("iql", "medium", 2) not in by and ("cql", "medium", 2) in by
+    assert len(runs) == 2 * (4 * 2 + 3 * 1)
+    assert specs.excluded(spec) == []  # no cell is n/a: its other seeds run
+    bad = yaml.safe_load(spec.path.read_text())
+    bad["exclude"][0]["seeds"] = ["two"]
+    path = tmp_path / "tiny_offline.yaml"
+    path.write_text(yaml.safe_dump(bad))
+    with pytest.raises(specs.SweepError, match="seeds must be a list"):
+        specs.load(str(path))

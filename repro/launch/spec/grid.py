@@ -53,7 +53,7 @@ def excluded(spec: SweepSpec, sel: Selection | None = None) -> list[tuple[str, s
         for agent in ((named["agent"],) if "agent" in named else spec.agents):
             for task in tasks:
                 for ex in spec.exclude:
-                    if ex.matches(agent, variant, task):
+                    if ex.matches(agent, variant, task):  # cell-level exclusions only (no seeds named)
                         cells.append((agent, variant, task, ex.reason))
                         break
     return cells
@@ -89,6 +89,8 @@ def expand(spec: SweepSpec, sel: Selection = Selection()) -> list[Run]:
                 if any(ex.matches(agent, variant, task) for ex in spec.exclude):
                     continue
                 for seed in seeds:
+                    if any(ex.matches(agent, variant, task, seed) for ex in spec.exclude):
+                        continue
                     identity = (f"experiment={spec.experiment}", f"agent={agent}", f"task={task}",
                                 f"seed={seed}", f"variant={variant}")
                     overrides = merge_overrides(identity, budget, spec.common, vovers, sel.sets, extra)

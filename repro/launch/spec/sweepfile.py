@@ -15,7 +15,7 @@ from repro.launch.spec.overrides import merge_overrides
 
 FIELDS = {"name", "description", "artifacts", "experiment", "tasks", "agents", "seeds", "frames", "eval",
           "common", "variants", "product", "exclude"}
-EXCLUDE_FIELDS = {"agents", "variants", "tasks", "reason"}
+EXCLUDE_FIELDS = {"agents", "variants", "tasks", "seeds", "reason"}
 REQUIRED = {"name", "description", "artifacts", "tasks", "agents", "seeds", "frames", "eval", "variants"}
 
 
@@ -54,15 +54,20 @@ class SweepSpec:
 class Exclusion:
     """Grid cells a sweep does not run (shown as n/a), e.g. DRIML where K=1 (there it equals TACO).
 
-    An empty ``agents``/``variants``/``tasks`` matches every value of that axis.
+    An empty ``agents``/``variants``/``tasks``/``seeds`` matches every value of that axis. An exclusion that
+    names seeds leaves out those seeds' runs only: its cells still run with the other seeds.
     """
 
     agents: tuple[str, ...]
     variants: tuple[str, ...]
     tasks: tuple[str, ...]
     reason: str
+    seeds: tuple[int, ...] = ()
 
-    def matches(self, agent: str, variant: str, task: str) -> bool:
+    def matches(self, agent: str, variant: str, task: str, seed: int | None = None) -> bool:
+        """Whether the cell (``seed`` None) or the run (a seed) is left out."""
+        if self.seeds and (seed is None or seed not in self.seeds):
+            return False
         return ((not self.agents or agent in self.agents) and (not self.variants or variant in self.variants)
                 and (not self.tasks or task in self.tasks))
 
@@ -74,9 +79,14 @@ def _exclusions(data: dict, path: Path) -> tuple[Exclusion, ...]:
     out = []
     for i, item in enumerate(raw):
         if not isinstance(item, dict) or set(item) - EXCLUDE_FIELDS or "reason" not in item:
-            raise SweepError(f"{path}: exclude[{i}] must be a mapping of agents/variants/tasks lists and a reason.")
+            raise SweepError(f"{path}: exclude[{i}] must be a mapping of agents/variants/tasks/seeds lists and a "
+                             "reason.")
         lists = {k: _str_list(item, k, path) if k in item else () for k in ("agents", "variants", "tasks")}
-        out.append(Exclusion(reason=str(item["reason"]), **lists))
+        seeds = item.get("seeds") or []
+        if not isinstance(seeds, list) or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 1
+                                                  for s in seeds):
+            raise SweepError(f"{path}: exclude[{i}].seeds must be a list of seeds (integers >= 1).")
+        out.append(Exclusion(reason=str(item["reason"]), seeds=tuple(seeds), **lists))
     return tuple(out)
 
 
