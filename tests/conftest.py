@@ -83,7 +83,7 @@ def _main_job_started_early(request: pytest.FixtureRequest, tmp_path_factory: py
         fcntl.flock(lock, fcntl.LOCK_EX)
         if not (folder / "started").exists():
             cmd = [sys.executable, "-m", "repro", "reproduce", "--results", str(folder / "runs"), "--out",
-                   str(folder / "out"), "--max-parallel", "2", "--reps", "500"]  # fewer bootstrap repetitions: same code
+                   str(folder / "out"), "--max-parallel", "2", "--reps", "500"]  # fewer bootstrap reps
             # the exit code goes to a file that every worker can wait for
             script = " ".join(shlex.quote(c) for c in cmd) + f" > {shlex.quote(str(folder / 'stdout'))} 2>&1; " \
                 f"echo $? > {shlex.quote(str(folder / 'rc.tmp'))} && mv {shlex.quote(str(folder / 'rc.tmp'))} " \
