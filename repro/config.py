@@ -24,6 +24,7 @@ VALID_CHOICES = {
     "runtime.device": ("cpu", "cuda", "auto"),
     "train.video_every": ("all", "last"),
     "agent.iql.value_for_targets": ("after", "before"),
+    "agent.iql.reward_scaling": ("none", "return_range"),
     "agent.dt.activation": ("relu", "gelu", "gelu_new"),
     "agent.dt.init": ("gpt2", "torch"),
 }

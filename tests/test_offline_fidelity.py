@@ -286,3 +286,59 @@ def test_a_run_written_before_issue_16_is_not_resumed_with_the_new_behaviour(tmp
 
     cfg = _pre_issue_16_run(tmp_path, overrides)
     assert sorted(d.partition(":")[0] for d in config_diff(tmp_path, cfg)) == refused
+
+
+# ----------------------------------------------------------------------------- IQL reward scaling (JAX code)
+def _critic_reward(lrn, b, monkeypatch) -> torch.Tensor:
+    seen = {}
+    real = offline_ac.iql_loss.critic_target
+
+    def spy(reward, discount, next_v):
+        seen["reward"] = reward.detach().clone()
+        return real(reward, discount, next_v)
+
+    monkeypatch.setattr(offline_ac.iql_loss, "critic_target", spy)
+    lrn.update(b, 0)
+    return seen["reward"]
+
+
+def test_iql_return_range_scaling_is_the_jax_normalize(monkeypatch):
+    """train_offline.py's normalize(): rewards / (best - worst episode return) x 1000; by hand: returns 10, 50, 30
+    give x 25. The default (DrQ-v2, V-D4RL) leaves them as they are."""
+    b = batch()
+    scaled = learner("iql", **{"agent.iql.reward_scaling": "return_range"})
+    scaled.set_dataset_returns([10.0, 50.0, 30.0])
+    assert scaled.reward_scale == 25.0
+    torch.testing.assert_close(_critic_reward(scaled, b, monkeypatch), b["reward"] * 25.0)
+    plain = learner("iql")
+    plain.set_dataset_returns([10.0, 50.0, 30.0])
+    torch.testing.assert_close(_critic_reward(plain, b, monkeypatch), b["reward"])
+    with pytest.raises(ValueError, match="different returns"):
+        scaled.set_dataset_returns([3.0, 3.0])
+
+
+def test_iql_reward_scaling_bad_value_is_one_config_line():
+    from repro.config import ConfigError
+
+    with pytest.raises(ConfigError, match="agent.iql.reward_scaling"):
+        compose(["agent=iql", "task=cheetah_run", "agent.iql.reward_scaling=minmax"])
+
+
+@pytest.mark.slow
+def test_iql_run_scales_by_its_datasets_return_range_and_records_it(tmp_path):
+    """The training entry point hands the dataset's episode returns to the learner: resolved.json records the
+    factor, 1000 / (best - worst return) of the manifest, computed here from the manifest by hand."""
+    import json
+
+    from offline_fixtures import write_dataset
+    from repro import api
+
+    folder = tmp_path / "datasets" / "cheetah_run" / "medium"
+    write_dataset(folder, task="cheetah_run", action_dim=6, best_return=200.0)
+    returns = [e["return"] for e in json.loads((folder / "manifest.json").read_text())["episodes"]]
+    run = api.train(["agent=iql", "task=cheetah_run", "profile=tiny", "runtime.threads=1", "offline.dataset=medium",
+                     "offline.updates=2", "offline.eval_every_updates=2", "offline.eval_episodes=1",
+                     "env.max_episode_frames=10", "agent.iql.reward_scaling=return_range",
+                     f"runtime.results_root={tmp_path}"], echo=lambda s: None)
+    resolved = json.loads((run / "resolved.json").read_text())
+    assert resolved["iql_reward_scale"] == pytest.approx(1000.0 / (max(returns) - min(returns)))

@@ -14,6 +14,7 @@ step). The noise schedule counts V-D4RL's loop steps (``stddev_schedule.step_sca
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import cast
 
 import torch
@@ -66,6 +67,7 @@ class OfflineActorCritic(Agent):
     algorithm = "td3bc"
     value: ValueNet | None = None  # IQL's V(h); set before Agent.__init__ lists the modules
     log_std: LogStd | None = None  # IQL's learned log-std (iql.learned_log_std)
+    reward_scale: float = 1.0  # IQL's reward factor (iql.reward_scaling), set from the dataset's returns
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
@@ -77,9 +79,21 @@ class OfflineActorCritic(Agent):
             self.value = ValueNet(self.encoder.repr_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
             self.value_opt = torch.optim.Adam(self.value.parameters(), lr=cfg.lr)
             self.value.train(True)
+            if cfg.iql.reward_scaling not in ("none", "return_range"):
+                raise ValueError(f"agent.iql.reward_scaling must be 'none' or 'return_range', "
+                                 f"got {cfg.iql.reward_scaling!r}")
             if cfg.iql.learned_log_std:  # trained by the actor's optimizer, as the JAX actor's log_stds
                 self.log_std = LogStd(action_dim).to(self.device)
                 self.actor_opt.add_param_group({"params": list(self.log_std.parameters())})
+
+    def set_dataset_returns(self, returns: Sequence[float]) -> None:
+        """The dataset's episode returns, for IQL's ``iql.reward_scaling: return_range`` (the JAX code's
+        normalize(): rewards / (best - worst episode return) x 1000); other learners and settings ignore them."""
+        if self.algorithm == "iql" and self.cfg.iql.reward_scaling == "return_range":
+            spread = float(max(returns)) - float(min(returns))
+            if not spread > 0:
+                raise ValueError("agent.iql.reward_scaling=return_range needs episodes of different returns")
+            self.reward_scale = 1000.0 / spread
 
     # ----------------------------------------------------------------- protocol
     def modules(self) -> dict[str, nn.Module]:
@@ -116,6 +130,8 @@ class OfflineActorCritic(Agent):
         out: dict[str, object] = {"algorithm": self.algorithm}
         if self.algorithm == "cql":
             out["cql_alpha"] = self.cfg.cql.alpha
+        if self.algorithm == "iql":
+            out["iql_reward_scale"] = self.reward_scale  # 1.0 unless iql.reward_scaling=return_range
         return out
 
     # ----------------------------------------------------------------- updates
@@ -244,7 +260,7 @@ class OfflineActorCritic(Agent):
             with torch.no_grad():
                 v_h, next_v = self.value(h.detach()), self.value(next_h)
         metrics.update(self._iql_actor(h.detach(), action, tq1, tq2, v_h, step))
-        target = iql_loss.critic_target(reward, discount, next_v)
+        target = iql_loss.critic_target(reward * self.reward_scale, discount, next_v)
         q1, q2 = self.critic(h, self.encode_action(action))
         loss, critic_metrics = iql_loss.critic_loss(q1, q2, target)
         self._step(loss, self.encoder_opt, self.critic_opt)

@@ -35,6 +35,9 @@ class IQLConfig:
     # False: the DrQ-v2 actor's scheduled std in log pi (DrQ-v2); True: a learned state-independent log-std
     # (the JAX actor: NormalTanhPolicy(state_dependent_std=False, log_std_min=-5), zeros at start)
     learned_log_std: bool = False
+    # "none": the dataset's rewards as they are (DrQ-v2 / V-D4RL); "return_range": rewards x 1000 / (best - worst
+    # episode return of the dataset), the JAX code's normalize() of locomotion datasets (train_offline.py)
+    reward_scaling: str = "none"
 
 
 @dataclass
