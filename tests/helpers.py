@@ -12,6 +12,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -50,12 +51,13 @@ def train_cmd(root: Path, *extra: str) -> list[str]:
     return [sys.executable, "-m", "repro", "train", *TINY, *extra, f"runtime.results_root={root}", "--no-progress"]
 
 
-def kill_when(cmd: list[str], ready: Callable[[], bool], timeout: float = 300) -> None:
-    """Start ``cmd`` and SIGKILL it as soon as ``ready()`` holds; fails if it finished first."""
+def kill_when(cmd: list[str], ready: Callable[[], bool], timeout: float = 300, poll: float = 0.05) -> None:
+    """Start ``cmd`` and SIGKILL it as soon as ``ready()`` holds (checked every ``poll`` s); fails if it finished
+    first."""
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy())
     t0 = time.time()
     while not ready() and proc.poll() is None and time.time() - t0 < timeout:
-        time.sleep(0.05)
+        time.sleep(poll)
     assert proc.poll() is None, "the run finished before it could be killed"
     proc.send_signal(signal.SIGKILL)
     proc.wait()
@@ -119,6 +121,18 @@ def write_sweep(tmp: Path, name: str, tasks: list[str], variants: dict[str, list
 
 # Update-level batches (the objective and speed-up tests).
 OBS = (9, 84, 84)
+
+
+def offline_learner(agent: str, **over: object) -> Any:
+    """An offline learner of agent file ``agent`` for cheetah_run (|A| = 6) under profile=tiny, seeded; ``over``:
+    dotted config overrides."""
+    from repro.config import compose, typed
+    from repro.learners import build_learner
+
+    overrides = [f"agent={agent}", "task=cheetah_run", "profile=tiny", "offline.dataset=medium"]
+    overrides += [f"{k}={v}" for k, v in over.items()]
+    torch.manual_seed(0)
+    return build_learner(typed(compose(overrides)).agent, OBS, 6, "cpu")
 
 
 def make_batch(B: int = 6, K: int = 3, A: int = 4, seed: int = 0) -> dict[str, torch.Tensor]:

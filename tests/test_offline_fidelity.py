@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from helpers import offline_learner
 from repro.config import compose, typed
 from repro.learners import build_learner, offline_ac
 
@@ -18,11 +19,7 @@ OBS = (9, 84, 84)
 A = 6  # cheetah_run
 
 
-def learner(agent: str, **over):
-    overrides = [f"agent={agent}", "task=cheetah_run", "profile=tiny", "offline.dataset=medium"]
-    overrides += [f"{k}={v}" for k, v in over.items()]
-    torch.manual_seed(0)
-    return build_learner(typed(compose(overrides)).agent, OBS, A, "cpu")
+learner = offline_learner  # an offline learner for cheetah_run under profile=tiny
 
 
 def batch(B: int = 8, K: int = 3) -> dict[str, torch.Tensor]:

@@ -8,8 +8,9 @@ import io
 import pytest
 import torch
 
+from helpers import offline_learner
 from repro.config import compose, typed
-from repro.learners import build_learner, offline_ac
+from repro.learners import offline_ac
 from repro.offline.losses import cql as cql_loss
 from repro.offline.losses import td3bc as td3bc_loss
 
@@ -17,11 +18,7 @@ OBS = (9, 84, 84)
 A = 6  # cheetah_run
 
 
-def learner(agent: str, **over):
-    overrides = [f"agent={agent}", "task=cheetah_run", "profile=tiny", "offline.dataset=medium"]
-    overrides += [f"{k}={v}" for k, v in over.items()]
-    torch.manual_seed(0)
-    return build_learner(typed(compose(overrides)).agent, OBS, A, "cpu")
+learner = offline_learner  # an offline learner for cheetah_run under profile=tiny
 
 
 def batch(lrn, B: int = 8) -> dict[str, torch.Tensor]:

@@ -5,11 +5,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +15,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from helpers import kill_when, rows
 from offline_fixtures import action_of, reward_of, write_dataset
 from repro import api, rundir  # noqa: E402
 from repro.config import compose, typed  # noqa: E402
@@ -212,26 +210,12 @@ def test_bc_end_to_end_run_files_and_normalised_scores(reference: Path):
         (Path(resolved["dataset_dir"]) / "manifest.json").read_bytes()).hexdigest()
 
 
-def _rows(csv: Path) -> int:
-    return max(len(csv.read_text().splitlines()) - 1, 0) if csv.exists() else 0
-
-
-def _kill_when(cmd: list[str], ready, timeout: float = 300) -> None:
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy())
-    t0 = time.time()
-    while not ready() and proc.poll() is None and time.time() - t0 < timeout:
-        time.sleep(0.01)
-    assert proc.poll() is None, "the run finished before it could be killed"
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-
-
 @pytest.mark.slow
 def test_offline_sigkill_and_resume_matches_uninterrupted_run(reference: Path, tmp_path: Path):
     root = _root_with_dataset(tmp_path)
     run = root / REL
     cmd = [sys.executable, "-m", "repro", "train", *TINY, f"runtime.results_root={root}", "--no-progress"]
-    _kill_when(cmd, lambda: _rows(run / "eval.csv") >= 2)  # after checkpoints at 5 and 10, mid-run
+    kill_when(cmd, lambda: rows(run / "eval.csv") >= 2, poll=0.01)  # after checkpoints at 5 and 10, mid-run
     assert (run / "checkpoint.pt").exists() and not (run / "DONE").exists()
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
