@@ -577,25 +577,16 @@ def evaluate_claims(ctx: Context) -> list[Verdict]:
             continue
         seeds = max(spec.min_seeds, ctx.min_seeds)
         short = _short_of_budget(ctx, spec)
-        if short is not None:
-            verdict, evidence = NO_DATA, short
-        else:
-            verdict, evidence = _judge(_claim_context(ctx, spec, spec.budget, below=False), fn)
-        evidence = f"at {spec.text()}: {evidence}"
-        label = ""
-        if verdict == NO_DATA and ctx.indicative:
-            label, extra = _indicative(ctx, spec, fn)
-            evidence = f"{evidence}. {extra}"
+        verdict, evidence, label = _reading(ctx, spec, short, fn)
         out.append(Verdict(row.id, row.claim, verdict, evidence, rule, spec.text(), seeds, label))
         if row.id == "online_avg_gain":
             out.append(_published_gain(ctx, row.claim, spec, short))
     return out
 
 
-def _published_gain(ctx: Context, claim: str, spec: ClaimBudget, short: str | None) -> Verdict:
-    """The reading of online_avg_gain against the published DrQ-v2 curves, under the same budget rule (the
-    claim's budget and seed minimum; an indicative reading below it on request)."""
-    fn = _online_avg_gain_published
+def _reading(ctx: Context, spec: ClaimBudget, short: str | None, fn) -> tuple[str, str, str]:
+    """(verdict, evidence, indicative label) of claim function ``fn`` under the budget rule: no data when the
+    runs fall ``short`` of the claim's budget (with a labelled indicative reading on request), else judged."""
     if short is not None:
         verdict, evidence = NO_DATA, short
     else:
@@ -605,6 +596,13 @@ def _published_gain(ctx: Context, claim: str, spec: ClaimBudget, short: str | No
     if verdict == NO_DATA and ctx.indicative:
         label, extra = _indicative(ctx, spec, fn)
         evidence = f"{evidence}. {extra}"
+    return verdict, evidence, label
+
+
+def _published_gain(ctx: Context, claim: str, spec: ClaimBudget, short: str | None) -> Verdict:
+    """The reading of online_avg_gain against the published DrQ-v2 curves, under the same budget rule (the
+    claim's budget and seed minimum; an indicative reading below it on request)."""
+    verdict, evidence, label = _reading(ctx, spec, short, _online_avg_gain_published)
     text = f"{claim} [read against DrQ-v2 as published by its authors, not against your DrQ-v2 runs: {SOURCE_TEXT}]"
     return Verdict(PUBLISHED_GAIN_ID, text, verdict, evidence, PUBLISHED_GAIN_RULE, spec.text(),
                    max(spec.min_seeds, ctx.min_seeds), label)
