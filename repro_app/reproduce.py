@@ -11,6 +11,7 @@ Three steps, each resumable (a re-run skips what is done):
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -35,7 +36,7 @@ def _call(cmd: list[str], what: str) -> None:
         raise typer.Exit(1)
 
 
-def _offline_leg(results_root: Path, sweep: str, max_parallel: Optional[int]) -> bool:
+def _offline_leg(results_root: Path, sweep: str, max_parallel: int) -> bool:
     """Make the two datasets from the recorded source run and train the offline sweep on them. False (with one
     line saying why) when the source run has no recording, e.g. a `tiny` run trained before recording was on."""
     source = results_root / sweep / SOURCE_RUN
@@ -51,9 +52,7 @@ def _offline_leg(results_root: Path, sweep: str, max_parallel: Optional[int]) ->
             continue
         _call([*repro, "dataset", "make", "--source", str(source), "--kind", kind, "--transitions",
                str(transitions), "--seed", "1", "--device", "cpu"], f"dataset make --kind {kind}")
-    cmd = [*repro, "sweep", OFFLINE_SWEEP, "--results", str(results_root)]
-    if max_parallel:
-        cmd += ["--max-parallel", str(max_parallel)]
+    cmd = [*repro, "sweep", OFFLINE_SWEEP, "--results", str(results_root), "--max-parallel", str(max_parallel)]
     _call(cmd, f"the {OFFLINE_SWEEP} sweep (see `repro status {OFFLINE_SWEEP}`)")
     return True
 
@@ -64,7 +63,8 @@ def register(app: typer.Typer) -> None:
         results_root: Path = typer.Option(Path("runs/tiny"), "--results", help="Results root."),
         out: Path = typer.Option(Path("results/tiny"), "--out", help="Where tables, figures and the report go."),
         sweep: str = typer.Option("tiny", help="Sweep to train before reporting."),
-        max_parallel: Optional[int] = typer.Option(None, "--max-parallel", help="Runs at once (default: cores / 2)."),
+        max_parallel: Optional[int] = typer.Option(
+            None, "--max-parallel", help="Runs at once (default: one per core; each tiny run is one thread)."),
         reps: int = typer.Option(2000, help="Bootstrap repetitions (rliable's default is 50,000)."),
         offline: bool = typer.Option(True, "--offline/--no-offline",
                                      help="Also make two tiny datasets and train every offline learner on them."),
@@ -75,9 +75,9 @@ def register(app: typer.Typer) -> None:
         """Train the tiny sweeps locally (online, then offline), then build every table, figure, claim and the
         report from them."""
         t0 = time.time()
-        cmd = [sys.executable, "-m", "repro", "sweep", sweep, "--results", str(results_root)]
-        if max_parallel:
-            cmd += ["--max-parallel", str(max_parallel)]
+        parallel = max_parallel or max(1, os.cpu_count() or 1)
+        cmd = [sys.executable, "-m", "repro", "sweep", sweep, "--results", str(results_root), "--max-parallel",
+               str(parallel)]
         typer.echo(f"[1/3] online training: {' '.join(cmd[2:])}")
         rc = subprocess.call(cmd)
         if rc != 0:
@@ -90,7 +90,7 @@ def register(app: typer.Typer) -> None:
         experiment_map = {"main": [sweep]}
         if not offline:
             typer.echo("  skipped (--no-offline)")
-        elif _offline_leg(results_root, sweep, max_parallel):
+        elif _offline_leg(results_root, sweep, parallel):
             experiment_map["offline"] = [OFFLINE_SWEEP]
 
         from analysis.context import Context
