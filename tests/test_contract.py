@@ -21,6 +21,9 @@ from repro import api, rundir, runformat
 from repro.config import compose, typed
 from repro.envs import get_task
 
+# its module-scoped runs are made once: every test of this module on one pytest-xdist worker
+pytestmark = pytest.mark.xdist_group("contract")
+
 # hopper_hop: |A| = 4, so upstream's int(1.25|A|) + 1 = 6 differs from the paper's ceil(1.25|A|) = 5.
 OVERRIDES = ["profile=tiny", "task=hopper_hop", "experiment=contract", "variant=v1", "seed=5", "agent.K=2",
              "env.action_repeat=4", "train.frames=200", "train.eval_every_frames=200", "train.save_frames=false",

@@ -21,6 +21,9 @@ from analysis_fixtures import FRAMES, full_coverage_root
 from repro_app.analysis_cli import register
 from repro_app.report import build_report
 
+# its module-scoped runs are made once: every test of this module on one pytest-xdist worker
+pytestmark = pytest.mark.xdist_group("figures")
+
 REPS = 200
 EXPECTED = ["T1", "T2", "T3", "T3b", "T4", "T5", "T6", "F1", "F3", "F4", "F5", "F6", "F7a", "F7b", "F8", "F9", "F10",
             "F11", "F12", "F13"]

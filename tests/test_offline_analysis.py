@@ -22,6 +22,9 @@ from analysis.stats import pairwise_poi, poi_interval, probability_of_improvemen
 from analysis_fixtures import write_run
 from repro.offline.losses.cql import cql_alpha as table6_alpha  # noqa: E402
 
+# its module-scoped runs are made once: every test of this module on one pytest-xdist worker
+pytestmark = pytest.mark.xdist_group("offline_analysis")
+
 DATASETS = ("medium", "medium-replay", "full-replay")
 REF = 200.0  # every fixture run's reference return (score_reference "source"): normalised = final / 2
 UPDATES = 1000

@@ -26,6 +26,9 @@ from repro.offline.replay import DatasetError, load_offline_data  # noqa: E402
 from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_WALLCLOCK_COLUMNS  # noqa: E402
 from repro_app.cli import app  # noqa: E402
 
+# its module-scoped runs are made once: every test of this module on one pytest-xdist worker
+pytestmark = pytest.mark.xdist_group("offline_train")
+
 TINY = ["agent=bc", "task=cheetah_run", "profile=tiny", "seed=2", "runtime.threads=1", "offline.dataset=medium",
         "offline.updates=20", "offline.eval_every_updates=10", "offline.eval_episodes=1",
         "offline.checkpoint_every_updates=5", "offline.log_every_updates=5"]

@@ -11,6 +11,9 @@ import pytest
 
 from seam_reference import AGENTS, RTOL, deviation, record, written_by
 
+# its module-scoped runs are made once: every test of this module on one pytest-xdist worker
+pytestmark = pytest.mark.xdist_group("seam")
+
 FIXTURE = Path(__file__).parent / "data" / "online_updates.json"
 
 

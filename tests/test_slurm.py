@@ -162,7 +162,11 @@ def test_usr2_requeues_and_resumes_without_duplicate_rows(slurm, tmp_path):
     assert_complete(run, 400)
     meta = json.loads((run / "meta.json").read_text())
     assert len(meta["resumes"]) == 1, "the requeued job must resume, not restart"
-    states = subprocess.run(["sacct", "-n", "-X", "-D", "-P", "-o", "State", "-j", job], capture_output=True,
-                            text=True).stdout.split()
-    assert "REQUEUED" in states and states[-1] == "COMPLETED", states
+    def states() -> list[str]:
+        return subprocess.run(["sacct", "-n", "-X", "-D", "-P", "-o", "State", "-j", job], capture_output=True,
+                              text=True).stdout.split()
+
+    # the accounting daemon records the end a moment after the job leaves the queue
+    wait(lambda: states()[-1:] == ["COMPLETED"], 60, f"sacct to record the completion (states {states()})")
+    assert "REQUEUED" in states(), states()
     assert "req: 1 done, 0 running, 0 queued, 1 failed" in status_line("req", root)
