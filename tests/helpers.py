@@ -135,6 +135,19 @@ def offline_learner(agent: str, **over: object) -> Any:
     return build_learner(typed(compose(overrides)).agent, OBS, 6, "cpu")
 
 
+def offline_batch(B: int = 8, K: int = 3, A: int = 6) -> dict[str, torch.Tensor]:
+    """A fixed-seed replay batch for the offline learners (random frames, actions in [-1, 1], K-step sequences)."""
+    g = torch.Generator().manual_seed(1)
+
+    def obs() -> torch.Tensor:
+        return torch.randint(0, 256, (B, *OBS), generator=g, dtype=torch.uint8)
+
+    return {"obs": obs(), "next_obs": obs(), "future_obs": obs(),
+            "action": torch.rand(B, A, generator=g) * 2 - 1, "action_seq": torch.rand(B, K, A, generator=g) * 2 - 1,
+            "reward": torch.rand(B, 1, generator=g), "discount": torch.full((B, 1), 0.99 ** 3),
+            "reward_ksum": torch.rand(B, 1, generator=g)}
+
+
 def make_batch(B: int = 6, K: int = 3, A: int = 4, seed: int = 0) -> dict[str, torch.Tensor]:
     """A replay batch of random frames and actions, as ReplayBuffer.sample returns it."""
     g = torch.Generator().manual_seed(seed)

@@ -8,7 +8,7 @@ import io
 import pytest
 import torch
 
-from helpers import offline_learner
+from helpers import offline_batch, offline_learner
 from repro.config import compose, typed
 from repro.learners import offline_ac
 from repro.offline.losses import cql as cql_loss
@@ -22,16 +22,7 @@ learner = offline_learner  # an offline learner for cheetah_run under profile=ti
 
 
 def batch(lrn, B: int = 8) -> dict[str, torch.Tensor]:
-    g = torch.Generator().manual_seed(1)
-    K = lrn.cfg.K
-
-    def obs() -> torch.Tensor:
-        return torch.randint(0, 256, (B, *OBS), generator=g, dtype=torch.uint8)
-
-    return {"obs": obs(), "next_obs": obs(), "future_obs": obs(),
-            "action": torch.rand(B, A, generator=g) * 2 - 1, "action_seq": torch.rand(B, K, A, generator=g) * 2 - 1,
-            "reward": torch.rand(B, 1, generator=g), "discount": torch.full((B, 1), 0.99 ** 3),
-            "reward_ksum": torch.rand(B, 1, generator=g)}
+    return offline_batch(B, lrn.cfg.K)
 
 
 def params(module: torch.nn.Module) -> list[torch.Tensor]:
