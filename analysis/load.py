@@ -1,6 +1,6 @@
 """Walk a results root, validate every run directory (docs/run-format.md) and build tidy tables.
 
-A run directory is any folder holding ``config.yaml`` (format: repro/runformat.py). Identity columns come
+A run directory is any folder holding ``config.yaml`` (format: repro/runs/runformat.py). Identity columns come
 from the config and from the values the run recorded in ``resolved.json``, never from the path and never
 recomputed. A malformed or truncated CSV is reported as a :class:`Problem` (with its path) and
 skipped; loading never raises because of one bad run.
@@ -23,7 +23,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from analysis.identity import algo_key, enabled_objectives, method_label, normalize_dataset
-from repro.runformat import (
+from repro.runs.runformat import (
     CONFIG,
     EVAL,
     EVAL_COLUMNS,
@@ -46,7 +46,7 @@ from repro.runformat import (
 )
 
 # Identity columns of every row of the tidy tables (run_id is the run directory relative to the root):
-# the config's identity keys and the run's resolved values (repro/runformat.py), plus labels and status.
+# the config's identity keys and the run's resolved values (repro/runs/runformat.py), plus labels and status.
 IDENTITY = (
     "run_id",
     "experiment",

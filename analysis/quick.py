@@ -2,7 +2,7 @@
 
 Each argument is a results root or one run directory; both go through :func:`analysis.load.load_results`.
 A metric of eval.csv comes from the loaded evaluation rows; any other metric is a train.csv column, read with
-the same strict CSV reader (file name and required columns from repro/runformat.py). Bad input raises
+the same strict CSV reader (file name and required columns from repro/runs/runformat.py). Bad input raises
 :class:`PlotInputError` with one line.
 """
 
@@ -14,7 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.load import IDENTITY, ResultsRootError, load_results, read_csv_strict
-from repro.runformat import EVAL_COLUMNS, TRAIN, TRAIN_REQUIRED
+from repro.runs.runformat import EVAL_COLUMNS, TRAIN, TRAIN_REQUIRED
 
 # Names accepted by --by besides the identity columns of analysis/load.py.
 BY_ALIASES = {"agent": "algo", "frames": "train_frames"}

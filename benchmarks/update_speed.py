@@ -5,7 +5,7 @@ Usage: `python benchmarks/update_speed.py [--device cuda] [--warmup N] [--repeat
 upstream TACO code, time both side by side on your machine as docs/performance.md describes.
 """
 
-from repro.bench import register  # noqa: F401  (the implementation lives in the package)
+from repro.bench.cli import register  # noqa: F401  (the implementation lives in the package)
 from repro_app.cli import app
 
 if __name__ == "__main__":

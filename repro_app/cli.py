@@ -9,10 +9,10 @@ from typing import Optional
 import typer
 from omegaconf import OmegaConf
 
-from repro import bench
+from repro.bench import cli as bench
+from repro.data.cli import dataset_app
 from repro.launch import cli as launch_cli
-from repro.offline import make_cli
-from repro.offline.cli import dataset_app
+from repro.train import make_dataset_cli as make_cli
 from repro_app import analysis_cli, reproduce, watch_cli
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -32,7 +32,7 @@ def train(ctx: typer.Context,
           dry_run: bool = typer.Option(False, "--dry-run", help="Print the resolved config and parameter counts."),
           progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="Rich progress bar.")):
     """Train one run: `repro train agent=taco task=hopper_hop agent.K=3 seed=2` (Hydra overrides)."""
-    from repro.config import ConfigError, compose
+    from repro.config.compose import ConfigError, compose
 
     try:
         cfg = compose(ctx.args)
@@ -41,10 +41,10 @@ def train(ctx: typer.Context,
     if dry_run:
         _dry_run(cfg)
         return
-    from repro.api import CheckpointError, DeviceError, train_config
-    from repro.fsutil import write_error_message
-    from repro.offline.replay import DatasetError
-    from repro.rundir import RunDirMismatch, RunLocked
+    from repro.data.offline_replay import DatasetError
+    from repro.runs.fsutil import write_error_message
+    from repro.runs.rundir import RunDirMismatch, RunLocked
+    from repro.train.api import CheckpointError, DeviceError, train_config
 
     try:
         path = train_config(cfg, echo=typer.echo, progress=progress)
@@ -58,9 +58,9 @@ def train(ctx: typer.Context,
 def _dry_run(cfg) -> None:
     from rich.table import Table
 
-    from repro.api import build_agent
-    from repro.config import typed
+    from repro.config.compose import typed
     from repro.envs import get_task
+    from repro.train.api import build_agent
 
     rc = typed(cfg)
     console = _console()
@@ -77,7 +77,7 @@ def _dry_run(cfg) -> None:
         table.add_row(name, f"{count:,}")
     table.add_row("[bold]total", f"[bold]{sum(c for _, c in rows):,}")
     console.print(table)
-    from repro.rundir import run_dir
+    from repro.runs.rundir import run_dir
     console.print(f"run directory: {run_dir(cfg)}")
 
 
@@ -86,7 +86,7 @@ def tasks():
     """List every task with its suite, action dimension and defaults."""
     from rich.table import Table
 
-    from repro.config import compose
+    from repro.config.compose import compose
     from repro.envs import TASKS
 
     table = Table(title="tasks")

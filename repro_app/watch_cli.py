@@ -14,7 +14,7 @@ from typing import Optional
 
 import typer
 
-from repro.tblog import TB_DIR
+from repro.runs.tblog import TB_DIR
 
 
 def _fail(message: str) -> None:

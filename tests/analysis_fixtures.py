@@ -17,13 +17,13 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from repro import rundir, runformat
 from repro.agent.agent import ACTOR_METRICS, CRITIC_METRICS
 from repro.agent.networks import default_latent_action_dim
-from repro.config import compose, group_options, typed, validate
+from repro.config.compose import compose, group_options, typed, validate
+from repro.data.reference import PAPER_TACO_RETURN, normalized_score, score_reference
 from repro.envs import get_task
-from repro.logger import format_row, header_line
-from repro.offline.reference import PAPER_TACO_RETURN, normalized_score, score_reference
+from repro.runs import rundir, runformat
+from repro.runs.logger import format_row, header_line
 
 METRICS = (*CRITIC_METRICS, *ACTOR_METRICS)  # the online learner's base update metrics (train.csv)
 FRAMES = 100_000  # the synthetic frame budget
@@ -119,7 +119,7 @@ def write_run(
     An offline agent (conf/agent/td3bc.yaml, cql_taco.yaml, ...; needs ``dataset``) writes the offline format
     instead: ``updates`` and ``eval_every_updates`` are its offline.updates and offline.eval_every_updates, its
     evaluation return ramps from 0 to ``final`` over the updates, normalised by ``reference`` (default: the
-    return repro.offline.reference falls back to, the paper's TACO return of the task), and ``done`` writes
+    return repro.data.reference falls back to, the paper's TACO return of the task), and ``done`` writes
     DONE as the offline trainer does; ``cql_alpha`` None leaves CQL's alpha to the config (Table 6)."""
     cfg = run_config(
         algo, task, seed, root, experiment=experiment, variant=variant, **{
@@ -173,7 +173,7 @@ def write_run(
 
 def _write_offline_logs(run: Path, final: float, updates: int, eval_every: int, reference: tuple[float | None, str],
                         rate: float) -> None:
-    """eval.csv and train.csv in the offline format (repro/runformat.py OFFLINE_*_COLUMNS), as the offline
+    """eval.csv and train.csv in the offline format (repro/runs/runformat.py OFFLINE_*_COLUMNS), as the offline
     trainer writes them: an evaluation at update 0, every ``eval_every`` updates and at ``updates``."""
     points = sorted({*range(0, updates + 1, eval_every), updates})
     lines = [header_line(runformat.OFFLINE_EVAL_COLUMNS)]

@@ -38,14 +38,14 @@ def _quiet(_: str) -> None:
 
 @pytest.fixture(scope="session")
 def tiny_taco(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from repro import api
+    from repro.train import api
 
     return api.train([*TINY, f"runtime.results_root={tmp_path_factory.mktemp('tiny_taco')}"], echo=_quiet)
 
 
 @pytest.fixture(scope="session")
 def tiny_taco_watched(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from repro import api
+    from repro.train import api
 
     root = tmp_path_factory.mktemp("tiny_taco_watched")
     return api.train([*TINY, *RECORD, *WATCH, f"runtime.results_root={root}"], echo=_quiet)

@@ -19,10 +19,10 @@ import pandas as pd
 import torch
 import yaml
 
-from repro.logger import WALLCLOCK_COLUMNS
-from repro.offline.record import load_snapshot
-from repro.runformat import EVAL, TRAIN
-from repro.tblog import read_scalars
+from repro.data.record import load_snapshot
+from repro.runs.logger import WALLCLOCK_COLUMNS
+from repro.runs.runformat import EVAL, TRAIN
+from repro.runs.tblog import read_scalars
 
 # The tiny online run several modules share (conftest's session fixtures train it once).
 TINY = ["profile=tiny", "task=cheetah_run", "seed=3", "runtime.threads=1"]
@@ -126,7 +126,7 @@ OBS = (9, 84, 84)
 def offline_learner(agent: str, **over: object) -> Any:
     """An offline learner of agent file ``agent`` for cheetah_run (|A| = 6) under profile=tiny, seeded; ``over``:
     dotted config overrides."""
-    from repro.config import compose, typed
+    from repro.config.compose import compose, typed
     from repro.learners import build_learner
 
     overrides = [f"agent={agent}", "task=cheetah_run", "profile=tiny", "offline.dataset=medium"]

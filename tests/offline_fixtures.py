@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from repro.offline.dataset import write_dataset as real_write_dataset
+from repro.data.dataset import write_dataset as real_write_dataset
 
 
 def reward_of(ep: int, t: int) -> float:
@@ -35,7 +35,7 @@ def make_episode(ep: int, transitions: int, frame_shape: tuple[int, int, int], a
 def write_dataset(directory: Path, task: str = "hopper_hop", lengths: tuple[int, ...] = (12, 9, 15),
                   frame_shape: tuple[int, int, int] = (3, 84, 84), action_dim: int = 4, kind: str = "medium",
                   best_return: float | None = None, seed: int = 0) -> Path:
-    """A tiny dataset written through the real dataset writer (repro.offline.dataset.write_dataset)."""
+    """A tiny dataset written through the real dataset writer (repro.data.dataset.write_dataset)."""
     directory = Path(directory)
     rng = np.random.default_rng(seed)
     episodes = [make_episode(ep, n, frame_shape, action_dim, rng) for ep, n in enumerate(lengths)]

@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from repro import api
-from repro.config import compose, typed
-from repro.replay import ReplayBuffer
+from repro.config.compose import compose, typed
+from repro.data.replay import ReplayBuffer
+from repro.train import api
 
 AGENTS = ("taco", "drqv2")
 UPDATES = 3

@@ -11,9 +11,9 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from repro.bench import register, same_run_ratios
-from repro.bench_data import episode_lengths, synthetic_episode
-from repro.bench_offline import OFFLINE_AGENTS, available, run_offline_bench
+from repro.bench.cli import register, same_run_ratios
+from repro.bench.data import episode_lengths, synthetic_episode
+from repro.bench.offline import OFFLINE_AGENTS, available, run_offline_bench
 
 
 def _app() -> typer.Typer:
@@ -98,7 +98,7 @@ def test_offline_bench_prints_each_learners_ratio_to_drqv2_from_this_run(tmp_pat
 
 
 def test_an_unregistered_learner_is_skipped_with_its_reason(monkeypatch):
-    from repro.bench_offline import LEARNERS
+    from repro.bench.offline import LEARNERS
 
     monkeypatch.delitem(LEARNERS, "iql")
     assert "unknown agent.learner 'iql'" in available("iql") and "\n" not in available("iql")
@@ -152,7 +152,7 @@ def test_offline_data_bench_times_the_offline_sampler_it_names(tmp_path, monkeyp
     """The loaded replay's sampler made slower by a known 40 ms a batch: the offline rate must show it (at most
     25 batches/s) and the online one must not, so a bench that timed one buffer twice, or swapped the two,
     fails here."""
-    from repro import bench_data
+    from repro.bench import data as bench_data
 
     real_load = bench_data.load_offline_data
 

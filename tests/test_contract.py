@@ -1,4 +1,4 @@
-"""The trainer -> analysis contract (repro/runformat.py): a real run loads through analysis with every identity
+"""The trainer -> analysis contract (repro/runs/runformat.py): a real run loads through analysis with every identity
 and resolved field equal to what the config says and what the trained networks show; runs written before
 resolved.json existed fall back to their config, marked, never to a formula; fixtures obey the schema."""
 
@@ -17,9 +17,10 @@ from analysis.context import Context
 from analysis.load import IDENTITY, load_results
 from analysis_fixtures import FRAMES, run_config, write_run
 from paper_figures import f10_action_dim
-from repro import api, rundir, runformat
-from repro.config import compose, typed
+from repro.config.compose import compose, typed
 from repro.envs import get_task
+from repro.runs import rundir, runformat
+from repro.train import api
 
 # its module-scoped runs are made once: every test of this module on one pytest-xdist worker
 pytestmark = pytest.mark.xdist_group("contract")

@@ -14,12 +14,12 @@ import torch
 from typer.testing import CliRunner
 
 from offline_fixtures import make_episode, write_dataset
-from repro import api  # noqa: E402
-from repro.config import compose, typed  # noqa: E402
-from repro.fsutil import atomic_write_text  # noqa: E402
-from repro.offline import dataset as dataset_mod  # noqa: E402
-from repro.offline.formats import vd4rl64, vd4rl84  # noqa: E402
-from repro.offline.replay import DatasetError  # noqa: E402
+from repro.config.compose import compose, typed  # noqa: E402
+from repro.data import dataset as dataset_mod  # noqa: E402
+from repro.data.formats import vd4rl64, vd4rl84  # noqa: E402
+from repro.data.offline_replay import DatasetError  # noqa: E402
+from repro.runs.fsutil import atomic_write_text  # noqa: E402
+from repro.train import api  # noqa: E402
 from repro_app.cli import app  # noqa: E402
 
 TINY = ["agent=bc", "task=cheetah_run", "profile=tiny", "seed=2", "runtime.threads=1", "offline.dataset=medium",

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from repro.offline.cli import dataset_app
-from repro.offline.dataset import (
+from repro.data.cli import dataset_app
+from repro.data.dataset import (
     DatasetError,
     check_dataset,
     iter_episodes,

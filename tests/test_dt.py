@@ -14,9 +14,9 @@ import torch
 from typer.testing import CliRunner
 
 from offline_fixtures import make_episode, write_dataset
-from repro import api  # noqa: E402
-from repro.checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
-from repro.config import compose, typed  # noqa: E402
+from repro.config.compose import compose, typed  # noqa: E402
+from repro.data.dataset import load_manifest  # noqa: E402
+from repro.data.offline_replay import load_offline_episodes  # noqa: E402
 from repro.learners import (  # noqa: E402
     LEARNERS,
     EpisodicActor,
@@ -27,12 +27,12 @@ from repro.learners import (  # noqa: E402
     samples_episodes,
 )
 from repro.learners.dt import DTLearner  # noqa: E402
-from repro.offline.dataset import load_manifest  # noqa: E402
-from repro.offline.losses.dt import action_loss  # noqa: E402
-from repro.offline.replay import load_offline_episodes  # noqa: E402
-from repro.offline_trainer import OfflineLogger, OfflineTrainer  # noqa: E402
-from repro.runformat import OFFLINE_EVAL_COLUMNS, RETURN_TARGET_EVAL_COLUMNS, offline_eval_columns  # noqa: E402
-from repro.trainer_base import run_eval_episodes  # noqa: E402
+from repro.learners.losses.dt import action_loss  # noqa: E402
+from repro.runs.checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
+from repro.runs.runformat import OFFLINE_EVAL_COLUMNS, RETURN_TARGET_EVAL_COLUMNS, offline_eval_columns  # noqa: E402
+from repro.train import api  # noqa: E402
+from repro.train.common import run_eval_episodes  # noqa: E402
+from repro.train.offline import OfflineLogger, OfflineTrainer  # noqa: E402
 from repro_app.cli import app  # noqa: E402
 
 OBS = (9, 32, 32)

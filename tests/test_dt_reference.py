@@ -11,9 +11,9 @@ import pytest
 import torch
 from torch import nn
 
-from repro.config import compose, typed
+from repro.config.compose import compose, typed
 from repro.learners import build_learner
-from repro.offline.losses import dt
+from repro.learners.losses import dt
 
 OBS = (9, 16, 16)
 A_DIM = 2
@@ -157,7 +157,7 @@ def test_training_windows_pad_actions_with_minus_10_and_padding_never_reaches_a_
 
 @pytest.mark.parametrize("override", ["agent.dt.activation=swish", "agent.dt.init=xavier"])
 def test_bad_dt_switch_is_one_line_config_error(override: str):
-    from repro.config import ConfigError
+    from repro.config.compose import ConfigError
 
     with pytest.raises(ConfigError, match=override.split("=")[0] + ".* is not one of") as err:
         compose(["agent=dt", "task=cheetah_run", override])

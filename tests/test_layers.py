@@ -23,36 +23,19 @@ PACKAGES = ("repro", "analysis", "paper_figures", "repro_app")
 SCRIPT_DIRS = ("benchmarks",)  # plain scripts, not a package: app layer
 # The layers of ../shared/docs/layout.md (docs/layers.md), lowest first; today's files mapped onto them
 # until the layout issue moves them into one folder per layer.
+# The layers of ../shared/docs/layout.md (docs/layers.md), lowest first: one folder per layer inside repro/.
 LAYERS = ("config/envs", "runs/agent", "data/learners", "train/bench", "launch", "analysis", "paper_figures", "app")
 CONFIG, RUNS, DATA, TRAIN, LAUNCH, ANALYSIS, FIGURES, APP = range(len(LAYERS))
 LAYER_OF = {
-    "repro": CONFIG,  # the package itself (__init__)
+    "repro": CONFIG,  # the package itself (__init__: the version only)
     "repro.config": CONFIG,
-    "repro.schema": CONFIG,
-    "repro.offline.configs": CONFIG,
     "repro.envs": CONFIG,
-    "repro.runformat": RUNS,
-    "repro.rundir": RUNS,
-    "repro.logger": RUNS,
-    "repro.tblog": RUNS,
-    "repro.video": RUNS,
-    "repro.checkpoint": RUNS,
-    "repro.fsutil": RUNS,
+    "repro.runs": RUNS,
     "repro.agent": RUNS,
-    "repro.replay": DATA,
-    "repro.episodes": DATA,
-    "repro.offline": DATA,  # dataset, convert, record, reference, summary, replay, formats, cli
+    "repro.data": DATA,
     "repro.learners": DATA,
-    "repro.offline.losses": DATA,
-    "repro.trainer": TRAIN,
-    "repro.trainer_base": TRAIN,
-    "repro.offline_trainer": TRAIN,
-    "repro.api": TRAIN,
-    "repro.offline.make": TRAIN,  # rolls out recorded policies in the run's environment (repro.api)
-    "repro.offline.make_cli": TRAIN,
+    "repro.train": TRAIN,
     "repro.bench": TRAIN,
-    "repro.bench_data": TRAIN,
-    "repro.bench_offline": TRAIN,
     "repro.launch": LAUNCH,
     "repro.__main__": APP,  # `python -m repro`: the entry shim of the app
     "analysis": ANALYSIS,
@@ -60,16 +43,9 @@ LAYER_OF = {
     "repro_app": APP,
     "benchmarks": APP,
 }
-# Upward imports that exist today, each to be removed by the layout issue (one folder per layer): listed as
-# (importing module, imported module). test_no_module_imports_from_a_higher_layer fails on any other upward
-# import, and on an entry here that no longer exists (so the list only shrinks).
-KNOWN_UPWARD = {
-    ("repro.config", "repro.runformat"),  # is_folder_value: moves to config/compose.py
-    ("repro.config", "repro.agent.objectives"),  # OBJECTIVES: objective names become data in the schema
-    ("repro.config", "repro.learners"),  # LEARNERS, is_offline: learner names become data in the schema
-    ("repro.config", "repro.offline.losses.cql"),  # cql_alpha (Table 6): moves to config/paper_defaults.py
-    ("repro.rundir", "repro.learners.registry"),  # is_offline: read from the config
-}
+# The folders of repro/ (each a package with its own layer); a new top-level module or folder fails
+# test_each_folder_has_its_layer until it is given a layer here.
+REPRO_FOLDERS = {"config", "envs", "runs", "agent", "data", "learners", "train", "bench", "launch", "conf"}
 
 
 @dataclass(frozen=True)
@@ -242,29 +218,24 @@ def import_cycles(root: Path) -> list[str]:
 
 # ---------------------------------------------------------------------------------------------- tests
 
-def upward_pairs(root: Path) -> dict[tuple[str, str], str]:
-    """(importing module, imported module) -> ``file:line`` of each upward import."""
-    return {(imp.source, imp.target): imp.where(root) for imp in all_imports(root)
-            if imp.target and layer_of(imp.target) > layer_of(imp.source)}
-
-
 def test_no_module_imports_from_a_higher_layer():
-    offenders = [line for line in upward_imports(ROOT)
-                 if not any(f"{src} (" in line and f"imports {dst} (" in line for src, dst in KNOWN_UPWARD)]
+    offenders = upward_imports(ROOT)
     assert not offenders, "upward imports:\n" + "\n".join(offenders)
-    gone = KNOWN_UPWARD - set(upward_pairs(ROOT))
-    assert not gone, f"no longer upward, remove from KNOWN_UPWARD: {sorted(gone)}"
 
 
 def test_each_folder_has_its_layer():
-    """Every module has a layer of its own folder's kind: training loops above learners above the run format and
-    the agent above the config (a module moved to the wrong layer in LAYER_OF would let upward imports pass)."""
-    assert layer_of("repro.config") < layer_of("repro.rundir") < layer_of("repro.learners.offline_ac") \
-        < layer_of("repro.api") < layer_of("repro.launch.cli") < layer_of("analysis.load") \
-        < layer_of("paper_figures.catalog") < layer_of("repro_app.cli")
-    assert layer_of("repro.agent.agent") == layer_of("repro.runformat") == RUNS
-    assert layer_of("repro.offline.dataset") == layer_of("repro.replay") == layer_of("repro.offline.losses.cql")
-    assert layer_of("repro.offline.make") == layer_of("repro.trainer") == TRAIN
+    """repro/ holds the layer folders and no loose module; each folder has the layer of layout.md (a folder
+    mapped to the wrong layer in LAYER_OF would let upward imports pass)."""
+    loose = sorted(p.name for p in (ROOT / "repro").iterdir()
+                   if (p.suffix == ".py" and p.name not in ("__init__.py", "__main__.py"))
+                   or (p.is_dir() and p.name not in REPRO_FOLDERS and p.name != "__pycache__"))
+    assert not loose, f"repro/ must hold only the layer folders of layout.md, found {loose}"
+    assert layer_of("repro.config.compose") == layer_of("repro.envs.dmc") == CONFIG
+    assert layer_of("repro.runs.rundir") == layer_of("repro.agent.agent") == RUNS
+    assert layer_of("repro.data.dataset") == layer_of("repro.learners.losses.cql") == DATA
+    assert layer_of("repro.train.api") == layer_of("repro.bench.cli") == TRAIN
+    assert layer_of("repro.launch.cli") == LAUNCH
+    assert layer_of("analysis.load") < layer_of("paper_figures.catalog") < layer_of("repro_app.cli")
     assert set(module_files(ROOT)) and all(isinstance(layer_of(m), int) for m in module_files(ROOT))
 
 
@@ -278,7 +249,7 @@ def test_the_checker_sees_the_import_forms_used_here():
     imports = all_imports(ROOT)
     by_source = {(i.source, i.target, i.in_function) for i in imports}
     assert ("repro_app.cli", "repro.launch.cli", False) in by_source  # from repro.launch import cli as launch_cli
-    assert ("repro.api", "repro.envs", True) in by_source  # function-level import in build_env
+    assert ("repro.train.api", "repro.envs", True) in by_source  # function-level import in build_env
     assert ("paper_figures.catalog", "paper_figures.f10_action_dim", False) in by_source  # from pkg import module
     assert ("repro_app.report", "analysis.claims", False) in by_source  # from module import name
     assert len({i.source for i in imports}) > 50
@@ -293,18 +264,19 @@ def _write(root: Path, rel: str, text: str) -> None:
 def test_checker_reports_upward_and_cyclic_imports_by_file_and_line(tmp_path):
     for pkg in PACKAGES:
         _write(tmp_path, f"{pkg}/__init__.py", "")
-    _write(tmp_path, "repro/config.py", "import os\n\n\ndef compose():\n    from repro_app.report import x\n")
-    _write(tmp_path, "repro_app/report.py", "from repro import config\n")
+    _write(tmp_path, "repro/config/compose.py", "import os\n\n\ndef compose():\n    from repro_app.report import x\n")
+    _write(tmp_path, "repro/config/__init__.py", "")
+    _write(tmp_path, "repro_app/report.py", "from repro.config import compose\n")
     _write(tmp_path, "analysis/load.py", "import importlib\nimportlib.import_module('paper_figures.x')\n")
     _write(tmp_path, "paper_figures/x.py", "from ..analysis import load\n")
     _write(tmp_path, "analysis/dyn.py", "name = 'x'\n__import__(name)\n")
     up = upward_imports(tmp_path)
-    assert any(line.startswith("repro/config.py:5: repro.config (config/envs) imports repro_app.report (app)") and
-               "inside a function" in line for line in up), up
+    assert any(line.startswith("repro/config/compose.py:5: repro.config.compose (config/envs) imports repro_app.report")
+               and "inside a function" in line for line in up), up
     assert any(line.startswith("analysis/load.py:2: analysis.load (analysis) imports paper_figures.x") for line in up)
     assert any(line.startswith("analysis/dyn.py:2:") and "run time" in line for line in up)
     assert len(up) == 3, up
     cycles = import_cycles(tmp_path)
     assert len(cycles) == 2, cycles
-    assert any("repro.config <-> repro_app.report" in c and "repro/config.py:5" in c for c in cycles)
+    assert any("repro.config.compose <-> repro_app.report" in c and "repro/config/compose.py:5" in c for c in cycles)
     assert any("analysis.load <-> paper_figures.x" in c and "paper_figures/x.py:1" in c for c in cycles)

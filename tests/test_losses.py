@@ -13,7 +13,7 @@ from repro.agent.networks import SharedHeads, default_latent_action_dim
 from repro.agent.objectives import AuxBatch, ObjectiveContext
 from repro.agent.objectives.base import info_nce
 from repro.agent.objectives.taco import CURLObjective, RewardObjective, TACOObjective
-from repro.config import compose, typed
+from repro.config.compose import compose, typed
 
 
 def agent_for(overrides, A=4):

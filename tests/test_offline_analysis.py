@@ -20,7 +20,7 @@ from analysis.paper import OFFLINE_TASKS, PaperData  # noqa: E402
 from analysis.scores import final_scores  # noqa: E402
 from analysis.stats import pairwise_poi, poi_interval, probability_of_improvement  # noqa: E402
 from analysis_fixtures import write_run
-from repro.offline.losses.cql import cql_alpha as table6_alpha  # noqa: E402
+from repro.config.paper_defaults import cql_alpha as table6_alpha  # noqa: E402
 
 # its module-scoped runs are made once: every test of this module on one pytest-xdist worker
 pytestmark = pytest.mark.xdist_group("offline_analysis")
@@ -235,7 +235,7 @@ def test_offline_claims_not_enough_data_when_no_run_finished(grid, tmp_path):
 @pytest.mark.slow
 def test_real_tiny_cql_run_loads_with_its_resolved_values(tmp_path):
     from offline_fixtures import write_dataset
-    from repro import api
+    from repro.train import api
 
     root = tmp_path / "runs"
     write_dataset(root / "datasets" / "cheetah_run" / "medium", task="cheetah_run", action_dim=6, best_return=200.0)

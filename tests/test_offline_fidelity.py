@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from helpers import offline_batch, offline_learner
-from repro.config import compose, typed
+from repro.config.compose import compose, typed
 from repro.learners import build_learner, offline_ac
 
 OBS = (9, 84, 84)
@@ -231,7 +231,7 @@ def test_iql_learned_log_std_switch_is_the_jax_actor(monkeypatch):
                                               ("agent.iql.actor_lr_cosine_updates=0", "actor_lr_cosine_updates"),
                                               ("agent.stddev_schedule.step_scale=0", "step_scale")])
 def test_bad_switch_values_are_one_line_config_errors(override: str, needle: str):
-    from repro.config import ConfigError
+    from repro.config.compose import ConfigError
 
     with pytest.raises(ConfigError, match=f"{needle}.*(is not one of|must be)") as err:
         compose(["agent=iql", "task=cheetah_run", "offline.dataset=medium", override])
@@ -248,7 +248,7 @@ def _pre_issue_16_run(tmp_path, overrides: list[str]):
     """A run directory whose config.yaml lacks the keys issue 16 added (as one written before it)."""
     import yaml
 
-    from repro.rundir import CONFIG, write_config
+    from repro.runs.rundir import CONFIG, write_config
 
     cfg = compose(overrides + [f"runtime.results_root={tmp_path}"])
     write_config(tmp_path, cfg)
@@ -271,7 +271,7 @@ def _pre_issue_16_run(tmp_path, overrides: list[str]):
      ["agent.dt.action_pad", "agent.dt.activation", "agent.dt.ff_dropout", "agent.dt.init"]),
 ])
 def test_a_run_written_before_issue_16_is_not_resumed_with_the_new_behaviour(tmp_path, overrides, refused):
-    from repro.rundir import config_diff
+    from repro.runs.rundir import config_diff
 
     cfg = _pre_issue_16_run(tmp_path, overrides)
     assert sorted(d.partition(":")[0] for d in config_diff(tmp_path, cfg)) == refused
@@ -307,7 +307,7 @@ def test_iql_return_range_scaling_is_the_jax_normalize(monkeypatch):
 
 
 def test_iql_reward_scaling_bad_value_is_one_config_line():
-    from repro.config import ConfigError
+    from repro.config.compose import ConfigError
 
     with pytest.raises(ConfigError, match="agent.iql.reward_scaling"):
         compose(["agent=iql", "task=cheetah_run", "agent.iql.reward_scaling=minmax"])
@@ -320,7 +320,7 @@ def test_iql_run_scales_by_its_datasets_return_range_and_records_it(tmp_path):
     import json
 
     from offline_fixtures import write_dataset
-    from repro import api
+    from repro.train import api
 
     folder = tmp_path / "datasets" / "cheetah_run" / "medium"
     write_dataset(folder, task="cheetah_run", action_dim=6, best_return=200.0)

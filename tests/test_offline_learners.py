@@ -9,10 +9,11 @@ import pytest
 import torch
 
 from helpers import offline_batch, offline_learner
-from repro.config import compose, typed
+from repro.config import paper_defaults
+from repro.config.compose import compose, typed
 from repro.learners import offline_ac
-from repro.offline.losses import cql as cql_loss
-from repro.offline.losses import td3bc as td3bc_loss
+from repro.learners.losses import cql as cql_loss
+from repro.learners.losses import td3bc as td3bc_loss
 
 OBS = (9, 84, 84)
 A = 6  # cheetah_run
@@ -185,6 +186,6 @@ def test_state_dict_round_trip_gives_the_same_next_update():
 
 def test_cql_alpha_comes_from_table_6_and_an_override_wins():
     assert typed(compose(["agent=cql", "task=walker_run", "offline.dataset=full-replay"])).agent.cql.alpha == \
-        cql_loss.cql_alpha("walker_run", "full-replay")
+        paper_defaults.cql_alpha("walker_run", "full-replay")
     assert typed(compose(["agent=cql", "task=walker_run", "offline.dataset=medium",
                           "agent.cql.alpha=3.0"])).agent.cql.alpha == 3.0

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import torch
 
-from repro.offline.configs import DTConfig, IQLConfig, TD3BCConfig
-from repro.offline.losses import cql, dt, iql, td3bc
+from repro.config import paper_defaults
+from repro.config.schema import DTConfig, IQLConfig, TD3BCConfig
+from repro.learners.losses import cql, dt, iql, td3bc
 
 F64 = torch.float64
 
@@ -199,16 +200,17 @@ def test_cql_rejects_bad_input():
 
 def test_cql_alpha_table_6():
     # Table 6 of the TACO paper (facts, typed here independently of the packaged CSV)
-    assert cql.cql_alpha("hopper_hop", "full-replay") == 2.0
-    assert cql.cql_alpha("cheetah_run", "medium_replay") == 2.0
-    assert cql.cql_alpha("walker_run", "medium-replay") == 1.0
-    assert cql.cql_alpha("quadruped_run", "full_replay") == 4.0
-    assert all(cql.cql_alpha(t, "medium") == 0.5 for t in ["hopper_hop", "cheetah_run", "walker_run", "quadruped_run"])
+    assert paper_defaults.cql_alpha("hopper_hop", "full-replay") == 2.0
+    assert paper_defaults.cql_alpha("cheetah_run", "medium_replay") == 2.0
+    assert paper_defaults.cql_alpha("walker_run", "medium-replay") == 1.0
+    assert paper_defaults.cql_alpha("quadruped_run", "full_replay") == 4.0
+    tasks = ["hopper_hop", "cheetah_run", "walker_run", "quadruped_run"]
+    assert all(paper_defaults.cql_alpha(t, "medium") == 0.5 for t in tasks)
     with pytest.raises(ValueError) as err:
-        cql.cql_alpha("walker_walk", "medium")
+        paper_defaults.cql_alpha("walker_walk", "medium")
     assert "\n" not in str(err.value) and "walker_walk" in str(err.value)
     with pytest.raises(ValueError):
-        cql.cql_alpha("walker_run", "expert")
+        paper_defaults.cql_alpha("walker_run", "expert")
 
 
 # ---------------------------------------------------------------- IQL (Kostrikov et al. 2022, eqs. 5, 6, 7)

@@ -15,15 +15,15 @@ import yaml
 from typer.testing import CliRunner
 
 from offline_fixtures import make_episode
-from repro.config import config_groups
+from repro.config.compose import config_groups
+from repro.data.dataset import write_dataset
 from repro.launch import local, slurm
 from repro.launch import spec as specs
 from repro.launch.cli import register
 from repro.launch.state import RunRecord, state_dir, write_record
 from repro.launch.status import collect
 from repro.launch.waiting import waiting_lines
-from repro.offline.dataset import write_dataset
-from repro.runformat import run_path
+from repro.runs.runformat import run_path
 
 KINDS = ("medium", "medium-replay", "full-replay")
 LEARNERS = ("td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "bc", "dt")

@@ -17,13 +17,14 @@ from typer.testing import CliRunner
 
 from helpers import kill_when, rows
 from offline_fixtures import action_of, reward_of, write_dataset
-from repro import api, rundir  # noqa: E402
-from repro.config import compose, typed  # noqa: E402
+from repro.config.compose import compose, typed  # noqa: E402
+from repro.data.offline_replay import DatasetError, load_offline_data  # noqa: E402
+from repro.data.reference import PAPER_TACO_RETURN, normalized_score, score_reference  # noqa: E402
 from repro.learners import LEARNERS, Learner, build_learner  # noqa: E402
 from repro.learners.bc import bc_loss  # noqa: E402
-from repro.offline.reference import PAPER_TACO_RETURN, normalized_score, score_reference  # noqa: E402
-from repro.offline.replay import DatasetError, load_offline_data  # noqa: E402
-from repro.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_WALLCLOCK_COLUMNS  # noqa: E402
+from repro.runs import rundir  # noqa: E402
+from repro.runs.runformat import OFFLINE_EVAL_COLUMNS, OFFLINE_WALLCLOCK_COLUMNS  # noqa: E402
+from repro.train import api  # noqa: E402
 from repro_app.cli import app  # noqa: E402
 
 # its module-scoped runs are made once: every test of this module on one pytest-xdist worker
@@ -230,7 +231,7 @@ def test_offline_sigkill_and_resume_matches_uninterrupted_run(reference: Path, t
 def test_resume_refused_when_the_dataset_changed(tmp_path: Path):
     from types import SimpleNamespace
 
-    from repro.offline_trainer import OfflineLogger, OfflineTrainer
+    from repro.train.offline import OfflineLogger, OfflineTrainer
 
     data = _load(write_dataset(tmp_path / "d", frame_shape=(3, 32, 32)), frame_shape=(3, 32, 32))
     env = SimpleNamespace(spec=SimpleNamespace(has_success=False))

@@ -19,8 +19,9 @@ import pytest
 from typer.testing import CliRunner
 
 from offline_fixtures import write_dataset
-from repro import api, rundir  # noqa: E402
-from repro.config import compose  # noqa: E402
+from repro.config.compose import compose  # noqa: E402
+from repro.runs import rundir  # noqa: E402
+from repro.train import api  # noqa: E402
 from repro_app.cli import app  # noqa: E402
 
 OFFLINE = ["agent=bc", "task=cheetah_run", "profile=tiny", "seed=2", "runtime.threads=1", "offline.dataset=medium",
@@ -159,7 +160,7 @@ def test_one_dataset_folder_spelled_several_ways_is_one_run(tmp_path: Path, monk
 
 
 def test_a_second_make_into_one_destination_is_refused(tmp_path: Path):
-    from repro.offline.make import MakeError, _make_lock
+    from repro.train.make_dataset import MakeError, _make_lock
 
     out = tmp_path / "datasets" / "medium"
     with _make_lock(out):

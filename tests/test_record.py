@@ -16,13 +16,13 @@ import typer
 from typer.testing import CliRunner
 
 from helpers import REL, TINY, TINY_TACO, deterministic
-from repro import rundir
 from repro.agent.networks import Actor, Encoder
-from repro.config import compose, typed
-from repro.offline import make as mk
-from repro.offline.dataset import check_dataset
-from repro.offline.make_cli import register
-from repro.offline.record import Recorder, load_snapshot, snapshot_steps
+from repro.config.compose import compose, typed
+from repro.data.dataset import check_dataset
+from repro.data.record import Recorder, load_snapshot, snapshot_steps
+from repro.runs import rundir
+from repro.train import make_dataset as mk
+from repro.train.make_dataset_cli import register
 
 
 def _cli() -> typer.Typer:
@@ -255,7 +255,7 @@ def test_make_each_kind_from_a_recorded_run(tiny_taco: Path, tiny_taco_watched: 
         assert 1e-4 < np.abs(noise).max() and np.abs(noise).max() < 6 * snap["stddev"]  # noisy, around the mean
     # deterministic for a seed; killed at any moment and re-run: complete and the same
     proc = subprocess.Popen([sys.executable, "-c", (
-        "import sys; from repro.offline.make import make; "
+        "import sys; from repro.train.make_dataset import make; "
         f"make({str(recorded)!r}, 'medium', transitions=60, seed=4, out={str(tmp_path / 'm2')!r}, device='cpu')")],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     staging = tmp_path / ".m2.partial" / "episodes"

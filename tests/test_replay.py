@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from repro.replay import ReplayBuffer
+from repro.data.replay import ReplayBuffer
 
 A = 2
 

@@ -15,7 +15,7 @@ from repro.agent.objectives import AuxBatch
 from repro.agent.objectives.atc import ATCObjective
 from repro.agent.objectives.driml import DRIMLObjective, first_action_only
 from repro.agent.objectives.spr import MomentumTarget, SPRObjective, negative_cosine
-from repro.config import CONF_DIR, compose, typed
+from repro.config.compose import CONF_DIR, compose, typed
 
 OBS = (9, 32, 32)  # small frames: the encoder gives 32 x 9 x 9 features
 A = 3

@@ -132,7 +132,7 @@ def test_usr2_requeues_and_resumes_without_duplicate_rows(slurm, tmp_path):
     the same array fails for good (corrupt checkpoint) and `repro status` names its stderr file."""
     from repro.launch import spec as specs
     from repro.launch.state import read_record, state_dir
-    from repro.rundir import write_config
+    from repro.runs.rundir import write_config
 
     sweep = write_sweep(tmp_path, "req", ["reacher_hard"], {"base": [], "broken": []}, 1, frames=400)
     root = tmp_path / "results"

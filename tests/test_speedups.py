@@ -13,7 +13,7 @@ import torch
 
 from helpers import OBS, make_batch
 from repro.agent.agent import Agent
-from repro.config import compose, typed
+from repro.config.compose import compose, typed
 
 LR = 1e-4  # agent.lr of the default (taco) agent
 

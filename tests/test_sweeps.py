@@ -274,7 +274,7 @@ def test_status_reports_each_state(tmp_path):
 
 
 def test_mismatched_run_dir_is_refused_unless_force(tmp_path):
-    from repro.rundir import write_config
+    from repro.runs.rundir import write_config
 
     sweep = write_sweep(tmp_path, "mm", ["reacher_hard"], {"a": []}, 1)
     sel = specs.Selection(sets=(f"runtime.results_root={tmp_path}",))
@@ -364,7 +364,7 @@ def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_
 
 @pytest.mark.slow
 def test_local_launcher_keeps_going_after_a_failure(tmp_path):
-    from repro.rundir import write_config
+    from repro.runs.rundir import write_config
 
     sweep = write_sweep(tmp_path, "fail", ["reacher_hard"], {"a": [], "b": []}, 1)
     root = tmp_path / "results"

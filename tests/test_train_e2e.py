@@ -30,10 +30,11 @@ from helpers import (
     rows,
     train_cmd,
 )
-from repro import api, rundir
-from repro.logger import WALLCLOCK_COLUMNS
-from repro.runformat import CHECKPOINT, DONE, EVAL, TRAIN
-from repro.tblog import TB_DIR, read_scalars
+from repro.runs import rundir
+from repro.runs.logger import WALLCLOCK_COLUMNS
+from repro.runs.runformat import CHECKPOINT, DONE, EVAL, TRAIN
+from repro.runs.tblog import TB_DIR, read_scalars
+from repro.train import api
 
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group(TINY_TACO)]
 

@@ -13,12 +13,12 @@ from typer.testing import CliRunner
 
 from analysis_fixtures import FRAMES, write_run
 from helpers import TINY_TACO, assert_mirrors_csv
-from repro import rundir
 from repro.launch.state import record_launch, state_dir
-from repro.logger import RunLogger
-from repro.runformat import DONE, EVAL
-from repro.tblog import TB_DIR, read_scalars
-from repro.video import count_frames, write_mp4
+from repro.runs import rundir
+from repro.runs.logger import RunLogger
+from repro.runs.runformat import DONE, EVAL
+from repro.runs.tblog import TB_DIR, read_scalars
+from repro.runs.video import count_frames, write_mp4
 from repro_app.cli import app
 
 METRICS = ["critic_loss"]
@@ -65,7 +65,7 @@ def test_mirror_equals_csv_and_a_resume_rebuilds_it_without_repeated_steps(tmp_p
 
 
 def test_offline_mirror_steps_are_updates(tmp_path: Path):
-    from repro.offline_trainer import OfflineLogger
+    from repro.train.offline import OfflineLogger
 
     log = OfflineLogger(tmp_path, ["actor_loss"], echo=lambda s: None, tensorboard=True)
     for update in (0, 1000):
@@ -247,8 +247,8 @@ def test_status_watch_bad_interval_is_one_line(tmp_path: Path):
 
 def test_video_switches_are_not_run_identity(tmp_path):
     """Resuming a run with videos switched on is the same run; any trained-on change still is not."""
-    from repro import rundir
-    from repro.config import compose
+    from repro.config.compose import compose
+    from repro.runs import rundir
 
     base = ["profile=tiny", "task=cheetah_run", f"runtime.results_root={tmp_path}"]
     rundir.write_config(tmp_path, compose(base))

@@ -16,7 +16,7 @@ from repro.agent.aug import RandomShift
 from repro.agent.modules import ModuleSet
 from repro.agent.networks import ActionEncoder, Actor, Critic, Encoder, default_latent_action_dim
 from repro.agent.objectives import OBJECTIVES, AuxBatch, Objective, ObjectiveContext
-from repro.schema import AgentConfig
+from repro.config.schema import AgentConfig
 
 CRITIC_METRICS = ("critic_loss", "critic_q1", "critic_q2", "critic_target_q")
 ACTOR_METRICS = ("actor_loss", "actor_logprob", "actor_ent")

@@ -249,7 +249,7 @@ def _with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) 
 
 
 def _default_results_root() -> Path:
-    from repro.config import ConfigError, compose_base
+    from repro.config.compose import ConfigError, compose_base
 
     try:
         return Path(str(compose_base().runtime.results_root))

@@ -118,7 +118,7 @@ def _start(c: Claim, sdir: Path, env: dict[str, str]) -> _Active:
 
 
 def _finish(a: _Active, sdir: Path, rc: int, report: LaunchReport, say: Callable[[str], None]) -> None:
-    from repro.rundir import run_state
+    from repro.runs.rundir import run_state
 
     key = a.claim.planned.key
     done = run_state(a.claim.planned.run_dir) == "done"

@@ -57,7 +57,7 @@ def _writer(holder: str) -> lock.LockInfo:
 
 def claim(planned: PlannedRun, launcher: str, sweep: str, force: bool) -> Claim:
     """Lock the run, then re-read its state under the lock (another launcher may have finished it)."""
-    from repro.rundir import config_diff, run_state, writer_lock_holder
+    from repro.runs.rundir import config_diff, run_state, writer_lock_holder
 
     info = lock.LockInfo.mine(launcher, sweep)
     path = lock.lock_path(planned.results_root, planned.run_dir)

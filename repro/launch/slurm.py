@@ -131,7 +131,7 @@ class TrainJob(submitit.helpers.Checkpointable):
             os.environ.setdefault("MKL_NUM_THREADS", cpus)
         os.environ.setdefault("MUJOCO_GL", "egl")
         try:
-            from repro.api import train
+            from repro.train.api import train
 
             train(list(job.overrides))
         except Exception as exc:

@@ -13,7 +13,7 @@ from repro.launch import lock
 from repro.launch.slurm_query import FAILED, QUEUED, job_states
 from repro.launch.state import read_record, read_state
 from repro.launch.waiting import DatasetNeed, missing_reason
-from repro.runformat import EVAL, STATE_DONE, STATE_PARTIAL, TRAIN, run_state
+from repro.runs.runformat import EVAL, STATE_DONE, STATE_PARTIAL, TRAIN, run_state
 
 STATUSES = ("done", "running", "queued", "failed", "pending", "waiting")
 

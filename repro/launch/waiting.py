@@ -1,7 +1,7 @@
 """Runs waiting for their offline dataset: found before launch, skipped by both launchers, shown by status.
 
 An offline run (``offline.dataset`` set) can start only once its dataset is complete, i.e. its folder holds
-a valid ``manifest.json`` (repro.offline.dataset.load_manifest). Until then the run is *waiting*: the
+a valid ``manifest.json`` (repro.data.dataset.load_manifest). Until then the run is *waiting*: the
 local launcher does not start it, the SLURM launcher does not submit it, and ``repro status`` says which
 dataset it waits for and how to make it. A dataset made later is picked up by the next launch.
 """
@@ -15,7 +15,7 @@ from typing import Any
 
 from omegaconf import DictConfig
 
-from repro.offline.dataset import DatasetError, dataset_path, is_folder_value, load_manifest
+from repro.data.dataset import DatasetError, dataset_path, is_folder_value, load_manifest
 
 
 @dataclass(frozen=True)

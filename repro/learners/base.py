@@ -14,7 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 import torch
 
-from repro.schema import AgentConfig
+from repro.config.schema import AgentConfig
 
 
 @runtime_checkable

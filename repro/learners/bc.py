@@ -12,7 +12,7 @@ import torch
 from repro.agent.aug import RandomShift
 from repro.agent.modules import ModuleSet
 from repro.agent.networks import Actor, Encoder
-from repro.schema import AgentConfig
+from repro.config.schema import AgentConfig
 
 METRICS = ("bc_loss",)
 

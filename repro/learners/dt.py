@@ -1,5 +1,5 @@
 """Decision Transformer (offline learner ``dt``) on pixels: the model, loss, sampler and optimizer of
-``repro/offline/losses/dt.py`` wired to the learner protocol.
+``repro/learners/losses/dt.py`` wired to the learner protocol.
 
 Training: ``make_sampler`` builds the window sampler from the dataset's episodes (the offline loop then
 skips the replay); each update is AdamW on the masked action MSE, gradients clipped to ``dt.grad_clip``,
@@ -18,8 +18,9 @@ import numpy as np
 import torch
 from torch import nn
 
+from repro.config.schema import AgentConfig
 from repro.learners.base import count_parameters
-from repro.offline.losses.dt import (
+from repro.learners.losses.dt import (
     DecisionTransformer,
     EvalContext,
     SequenceSampler,
@@ -27,7 +28,6 @@ from repro.offline.losses.dt import (
     batch_to_tensors,
     make_optimizer,
 )
-from repro.schema import AgentConfig
 
 METRICS = ("dt_loss", "lr", "grad_norm")  # grad_norm: before clipping; lr: the rate this update used
 

@@ -4,7 +4,7 @@ The networks, the action encoder and the auxiliary objectives are the online age
 with ``agent.objectives`` {taco, curl, reward} and ``agent.action_encoder: true`` the critic sees latent
 actions u(a) and one TACO step follows the critic and actor updates, exactly as online. The BC term of
 TD3+BC and CQL's uniform actions stay in raw action space. Each algorithm's loss is a pure function in
-``repro/offline/losses/``; this file only wires networks to losses and steps the optimizers.
+``repro/learners/losses/``; this file only wires networks to losses and steps the optimizers.
 
 Update order: TD3+BC and CQL as DrQ-v2 (critic with the encoder, actor on sg(h), target, auxiliary);
 IQL as the JAX reference code (value, actor, critic with the encoder, target, auxiliary), the actor's advantage
@@ -23,10 +23,10 @@ from torch import nn
 from repro.agent.agent import Agent, soft_update
 from repro.agent.networks import TruncatedNormal, mlp, orthogonal_init, trunk
 from repro.agent.objectives import Objective
-from repro.offline.losses import cql as cql_loss
-from repro.offline.losses import iql as iql_loss
-from repro.offline.losses import td3bc as td3bc_loss
-from repro.schema import AgentConfig
+from repro.config.schema import AgentConfig
+from repro.learners.losses import cql as cql_loss
+from repro.learners.losses import iql as iql_loss
+from repro.learners.losses import td3bc as td3bc_loss
 
 CRITIC = ("critic_loss", "critic_q1", "critic_q2", "critic_target_q")
 CQL_METRICS = tuple(f"cql_{part}_q{i}" for i in (1, 2)

@@ -7,13 +7,13 @@ config and finds its run directory and state.
 
 One module per job: ``overrides`` (override strings), ``sweepfile`` (one file's fields and checks),
 ``catalog`` (the packaged sweep files), ``groups`` (the sweep against the config groups, with
-repro.config's checks), ``grid`` (expansion), ``plan`` (composition and run-directory state). This
+repro.config.compose's checks), ``grid`` (expansion), ``plan`` (composition and run-directory state). This
 package re-exports their public names, so callers use ``repro.launch.spec`` as one namespace.
 """
 
 from __future__ import annotations
 
-from repro.config import close_matches, config_groups
+from repro.config.compose import close_matches, config_groups
 from repro.launch.spec.catalog import ENV_SWEEPS_DIR, load, load_all, sweep_names, sweeps_dir
 from repro.launch.spec.errors import SweepError
 from repro.launch.spec.grid import Run, Selection, excluded, expand

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from repro.config import close_matches
+from repro.config.compose import close_matches
 from repro.launch.spec.errors import SweepError
 from repro.launch.spec.sweepfile import SweepSpec, load_file
 

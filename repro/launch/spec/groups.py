@@ -1,6 +1,6 @@
 """A sweep against the packaged config groups: options it names that do not exist, bad tasks and --set groups.
 
-The group options, the check of one option and the close-match hints are repro.config's.
+The group options, the check of one option and the close-match hints are repro.config.compose's.
 """
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 
-from repro.config import ConfigError, check_option, config_groups
+from repro.config.compose import ConfigError, check_option, config_groups
 from repro.launch.spec.errors import SweepError
 from repro.launch.spec.overrides import override_key, override_value
 from repro.launch.spec.sweepfile import SweepSpec

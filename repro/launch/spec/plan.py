@@ -9,12 +9,12 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from repro.config import ConfigError, compose, identity
+from repro.config.compose import ConfigError, compose, identity
 from repro.launch.spec.errors import SweepError
 from repro.launch.spec.grid import Run
 from repro.launch.spec.overrides import hydra_quote, merge_overrides
 from repro.launch.waiting import DatasetNeed, dataset_need, missing_reason
-from repro.rundir import config_diff, run_dir, run_state
+from repro.runs.rundir import config_diff, run_dir, run_state
 
 
 @dataclass

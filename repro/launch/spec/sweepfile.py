@@ -9,7 +9,7 @@ from typing import Any
 
 import yaml
 
-from repro.config import NAME_RE, close_matches
+from repro.config.compose import NAME_RE, close_matches
 from repro.launch.spec.errors import SweepError
 from repro.launch.spec.overrides import merge_overrides
 

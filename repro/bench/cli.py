@@ -1,0 +1,219 @@
+"""`repro bench`: time one agent update per algorithm and batch size, and the replay memory overhead.
+
+Only ratios between measurements made in this one run are printed (speed-up path vs plain, one batch
+size vs another, one algorithm vs another at the same batch, an offline learner vs DrQ-v2): a ratio
+against a figure measured on another machine or in another process says nothing. To compare with the
+upstream code, time both side by side on one machine (docs/performance.md). Results are saved as JSON
+under ``{results_root}/bench/`` for the speed tables (T4, T5).
+
+``--offline`` times each offline learner against the online DrQ-v2 update (repro/bench/offline.py);
+``--offline-data`` a dataset's load time, memory and sampling speed against the online buffer
+(repro/bench/data.py).
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import socket
+import statistics
+import time
+from pathlib import Path
+from typing import Optional
+
+import torch
+import typer
+
+from repro.bench.data import run_data_bench
+from repro.bench.offline import OFFLINE_AGENTS, run_offline_bench
+from repro.runs.fsutil import atomic_write_text
+
+
+def _batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(0)
+    u8 = lambda: torch.randint(0, 256, (B, 9, 84, 84), dtype=torch.uint8, generator=g).to(device)  # noqa: E731
+    return {"obs": u8(), "next_obs": u8(), "future_obs": u8(),
+            "action": (torch.rand(B, A, generator=g) * 2 - 1).to(device),
+            "action_seq": (torch.rand(B, K, A, generator=g) * 2 - 1).to(device),
+            "reward": torch.rand(B, 1, generator=g).to(device), "discount": torch.full((B, 1), 0.97, device=device),
+            "reward_ksum": torch.rand(B, 1, generator=g).to(device)}
+
+
+def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
+                device: str = "cpu", speedup: str = "plain", warmup: int = 1) -> dict:
+    """Median wall-clock seconds of one full agent update, over ``repeats`` timed updates after ``warmup``
+    untimed ones (same batch every time)."""
+    from repro.agent.agent import Agent
+    from repro.config.compose import compose, typed
+    from repro.envs import get_task
+
+    flags = {"plain": [], "amp": ["agent.amp=true"], "compile": ["agent.compile=true"]}[speedup]
+    rc = typed(compose([f"agent={algo}", f"task={task}", f"agent.batch_size={batch_size}", *flags]))
+    A = get_task(task).action_dim
+    torch.manual_seed(0)
+    agent = Agent(rc.agent, (9, 84, 84), A, device=device)
+    batch = _batch(batch_size, rc.agent.K, A, device)
+    for _ in range(warmup):
+        agent.update(batch, step=10**6)
+    times = []
+    for _ in range(repeats):
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        agent.update(batch, step=10**6)
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        times.append(time.perf_counter() - t0)
+    seconds = statistics.median(times)
+    # one update every 2 agent steps at action repeat 2 = 4 frames per update (update-bound estimate)
+    fps = rc.train.update_every_steps * rc.env.action_repeat / seconds
+    return {"algo": algo, "batch_size": batch_size, "speedup": speedup, "update_seconds": round(seconds, 4),
+            "fps_estimate": round(fps, 3), "repeats": repeats, "warmup": warmup}
+
+
+def replay_memory_ratio(capacity: int = 100_000, action_dim: int = 12) -> dict:
+    """Bytes held by the replay buffer over the raw bytes of its frames."""
+    from repro.data.replay import ReplayBuffer
+
+    buf = ReplayBuffer(capacity, (3, 84, 84), action_dim, frame_stack=3, nstep=3, K=3, discount=0.99, seed=0)
+    return {"capacity": capacity, "buffer_bytes": buf.nbytes(), "frame_bytes": buf.frame_bytes(),
+            "ratio": round(buf.nbytes() / buf.frame_bytes(), 5)}
+
+
+def hardware(device: str) -> str:
+    if device.startswith("cuda") and torch.cuda.is_available():
+        return torch.cuda.get_device_name(0)
+    from repro.runs.rundir import _cpu_model
+
+    return f"{_cpu_model()} ({torch.get_num_threads()} threads)"
+
+
+def same_run_ratios(plain_seconds: dict[tuple[str, int], float]) -> dict[str, float]:
+    """Ratios of update times measured in one run, keyed ``{algo}_b{batch}_over_{algo}_b{batch}``: each
+    algorithm's batch sizes against its smallest one, TACO against DrQ-v2 at each shared batch size, and
+    TACO B1024 over DrQ-v2 B256 (the paper's own batch sizes)."""
+    ratios: dict[str, float] = {}
+
+    def put(a: tuple[str, int], b: tuple[str, int]) -> None:
+        ratios[f"{a[0]}_b{a[1]}_over_{b[0]}_b{b[1]}"] = round(plain_seconds[a] / plain_seconds[b], 3)
+
+    algos = sorted({a for a, _ in plain_seconds}, reverse=True)  # taco before drqv2: ratios above 1
+    sizes = {a: sorted(b for x, b in plain_seconds if x == a) for a in algos}
+    for a in algos:
+        for b in sizes[a][1:]:
+            put((a, b), (a, sizes[a][0]))
+    for i, a in enumerate(algos):
+        for other in algos[i + 1:]:
+            for b in sorted(set(sizes[a]) & set(sizes[other])):
+                put((a, b), (other, b))
+    if ("taco", 1024) in plain_seconds and ("drqv2", 256) in plain_seconds:
+        put(("taco", 1024), ("drqv2", 256))
+    return ratios
+
+
+def _ratio_text(name: str, value: float) -> str:
+    num, den = (part.replace("_b", " B") for part in name.split("_over_"))
+    return f"{num} / {den} update time: {value:.2f}x (measured in this run)"
+
+
+def run_bench(configs: list[tuple[str, int]], repeats: int, device: str, out_dir: Path,
+              echo=print, speedups: tuple[str, ...] = (), warmup: int = 1) -> dict:
+    """Time every (algo, batch) plain and with each speed-up, print the same-run ratios, write the JSON."""
+    results = []
+    plain_seconds: dict[tuple[str, int], float] = {}
+    for algo, bs, speedup in [(a, b, "plain") for a, b in configs] + [(a, b, s) for s in speedups
+                                                                      for a, b in configs]:
+        row = time_update(algo, bs, repeats=repeats, device=device, speedup=speedup, warmup=warmup)
+        if speedup == "plain":
+            plain_seconds[(algo, bs)] = row["update_seconds"]
+            echo(f"{algo:>6} batch {bs:>5}: {row['update_seconds']:.3f} s/update, ~{row['fps_estimate']:.1f} fps "
+                 f"(update-bound; {warmup} warm-up + {repeats} timed updates, median)")
+        else:
+            row["speedup_vs_plain"] = round(plain_seconds[(algo, bs)] / row["update_seconds"], 3)
+            echo(f"{algo:>6} batch {bs:>5} {speedup}: {row['update_seconds']:.3f} s/update, "
+                 f"{row['speedup_vs_plain']:.2f}x the plain path (measured in this run)")
+        results.append(row)
+    ratios = same_run_ratios(plain_seconds)
+    for name, value in ratios.items():
+        echo(_ratio_text(name, value))
+    memory = replay_memory_ratio()
+    echo(f"replay memory / raw frame bytes: {memory['ratio']:.4f} (target <= 1.10)")
+    report = {"hardware": hardware(device), "device": device, "host": socket.gethostname(),
+              "torch": torch.__version__, "python": platform.python_version(), "results": results,
+              "ratios": ratios, "replay_memory": memory, "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"bench-{socket.gethostname()}-{device.split(':')[0]}.json"
+    atomic_write_text(path, json.dumps(report, indent=2) + "\n")
+    echo(f"wrote {path}")
+    return report
+
+
+def _write_report(out_dir: Path, name: str, report: dict, echo=print) -> Path:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / name
+    atomic_write_text(path, json.dumps(report, indent=2) + "\n")
+    echo(f"wrote {path}")
+    return path
+
+
+def _fail(message: str) -> typer.Exit:
+    typer.echo(f"error: {message}", err=True)
+    return typer.Exit(2)
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def bench(batch: Optional[list[int]] = typer.Option(
+                  None, "--batch", help="Batch sizes (default 256 1024; --offline and --offline-data: 256)."),
+              algo: Optional[list[str]] = typer.Option(None, "--algo", help="taco and/or drqv2 (default both)."),
+              repeats: int = typer.Option(2, "--repeats", "--iters", min=1,
+                                          help="Timed updates per setting (median reported)."),
+              warmup: int = typer.Option(1, min=0, help="Untimed warm-up updates before the timed ones."),
+              device: str = typer.Option("cpu", help="cpu or cuda."),
+              amp: bool = typer.Option(False, "--amp", help="Also time agent.amp=true (ratio to plain)."),
+              compile_: bool = typer.Option(False, "--compile", help="Also time agent.compile=true (ratio to plain)."),
+              offline: bool = typer.Option(False, "--offline", help="Instead: one update of each offline learner "
+                                           "as a ratio to the DrQ-v2 update, measured side by side."),
+              learner: Optional[list[str]] = typer.Option(
+                  None, "--learner", help=f"With --offline: these agent files only ({', '.join(OFFLINE_AGENTS)})."),
+              dt_batch: Optional[int] = typer.Option(
+                  None, "--dt-batch", help="With --offline: batch of learners with their own (default: DT's 64)."),
+              offline_data: bool = typer.Option(False, "--offline-data", help="Instead: load time, memory and "
+                                                "batches/s of a synthetic dataset against the online buffer."),
+              transitions: int = typer.Option(100_000, "--transitions", help="With --offline-data: dataset size."),
+              episode_length: int = typer.Option(500, "--episode-length",
+                                                 help="With --offline-data: transitions per episode."),
+              sample_batches: int = typer.Option(50, "--sample-batches",
+                                                 help="With --offline-data: batches sampled from each buffer."),
+              results_root: Path = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).")):
+        """Time one update of TACO and DrQ-v2 at batch 256 and 1024; print same-run ratios and replay memory.
+        With --offline: each offline learner against DrQ-v2; with --offline-data: dataset load and sampling."""
+        if device.startswith("cuda") and not torch.cuda.is_available():
+            raise _fail("--device cuda but no CUDA device is available")
+        for a in algo or []:
+            if a not in ("taco", "drqv2"):
+                raise _fail(f"unknown algo '{a}' (taco, drqv2)")
+        if any(b < 1 for b in batch or []):
+            raise _fail("--batch must be >= 1")
+        for name in learner or []:
+            if name not in OFFLINE_AGENTS:
+                raise _fail(f"unknown offline learner '{name}' ({', '.join(OFFLINE_AGENTS)})")
+        if dt_batch is not None and dt_batch < 1:
+            raise _fail("--dt-batch must be >= 1")
+        if transitions < 1 or sample_batches < 1 or episode_length < 3:
+            raise _fail("--transitions and --sample-batches must be >= 1, --episode-length >= 3")
+        out_dir, host, dev = results_root / "bench", socket.gethostname(), device.split(":")[0]
+        meta = {"hardware": hardware(device), "device": device, "host": host, "torch": torch.__version__,
+                "python": platform.python_version(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+        if offline:
+            report = run_offline_bench((batch or [256])[0], repeats, warmup, device, learner or OFFLINE_AGENTS,
+                                       echo=typer.echo, own_batch=dt_batch)
+            _write_report(out_dir, f"bench-offline-{host}-{dev}.json", {**meta, **report}, typer.echo)
+        if offline_data:
+            data = run_data_bench(transitions, (batch or [256])[0], sample_batches, episode_length, echo=typer.echo)
+            _write_report(out_dir, f"bench-offline-data-{host}.json", {**meta, **data}, typer.echo)
+        if offline or offline_data:
+            return
+        configs = [(a, b) for a in (algo or ["taco", "drqv2"]) for b in (batch or [256, 1024])]
+        speedups = tuple(name for name, on in (("amp", amp), ("compile", compile_)) if on)
+        run_bench(configs, repeats, device, out_dir, echo=typer.echo, speedups=speedups, warmup=warmup)

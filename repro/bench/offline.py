@@ -1,0 +1,145 @@
+"""Time one update of each offline learner against the online DrQ-v2 update, side by side in one run.
+
+Every learner is built through the learner registry (``repro.learners.registry``) from its packaged agent
+file, on the same device, and fed a batch drawn the way its training loop draws one: single transitions
+from a ReplayBuffer (``learner.sample_options``), or windows from the learner's own sampler for a sequence
+learner (Decision Transformer, ``make_sampler``), at that learner's own batch size. The same synthetic
+episodes feed every learner; each gets the same untimed warm-up updates and the same number of timed
+updates (median reported). Only ratios to the DrQ-v2 update measured in this run are printed.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import torch
+
+from repro.config.compose import ConfigError, compose, config_groups, typed
+from repro.config.schema import AgentConfig
+from repro.data.replay import ReplayBuffer
+from repro.envs import get_task
+from repro.learners.registry import LEARNERS, build_learner
+
+OFFLINE_AGENTS = ("bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "dt")  # agent files (repro/conf/agent)
+REFERENCE = "drqv2"  # the online update every ratio is taken against
+FRAME_SHAPE = (3, 84, 84)
+DATASET_KIND = "medium"  # offline.dataset of the timed offline learners (not read: the batches are synthetic)
+STEP = 10**6  # update step passed to learners (past every schedule's warm-up, as repro.bench.cli does online)
+
+
+def synthetic_episodes(n_episodes: int = 4, length: int = 100, action_dim: int = 6,
+                       seed: int = 0) -> list[dict[str, np.ndarray]]:
+    """Episodes in the dataset contract's arrays (random frames, actions in [-1, 1], rewards in [0, 1])."""
+    rng = np.random.default_rng(seed)
+    return [{"frames": rng.integers(0, 256, (length + 1, *FRAME_SHAPE), dtype=np.uint8),
+             "actions": rng.uniform(-1, 1, (length, action_dim)).astype(np.float32),
+             "rewards": rng.uniform(0, 1, length).astype(np.float32),
+             "discounts": np.ones(length, dtype=np.float32), "ep_id": np.array(i)} for i in range(n_episodes)]
+
+
+def fill_buffer(episodes: Sequence[Mapping[str, np.ndarray]], cfg: AgentConfig, frame_stack: int, seed: int,
+                device: str) -> ReplayBuffer:
+    """A ReplayBuffer holding ``episodes``, filled as the online loop fills it."""
+    capacity = sum(len(ep["frames"]) for ep in episodes)
+    action_dim = int(episodes[0]["actions"].shape[1])
+    buf = ReplayBuffer(capacity, FRAME_SHAPE, action_dim, frame_stack, cfg.nstep, cfg.K, cfg.discount,
+                       seed=seed, device=device)
+    for ep in episodes:
+        buf.start_episode(ep["frames"][0])
+        for t in range(len(ep["actions"])):
+            buf.add(ep["actions"][t], float(ep["rewards"][t]), float(ep["discounts"][t]), ep["frames"][t + 1])
+        buf.end_episode()
+    return buf
+
+
+def own_batch_size(cfg: AgentConfig) -> int | None:
+    """A learner's own batch size when its config section has one (DT: ``agent.dt.batch_size``), else None."""
+    section = getattr(cfg, cfg.learner, None)
+    size = getattr(section, "batch_size", None)
+    return int(size) if isinstance(size, int) else None
+
+
+def available(agent: str) -> str | None:
+    """None when ``agent`` can be built here, else why not (one line)."""
+    if agent not in config_groups()["agent"]:
+        return f"no agent file repro/conf/agent/{agent}.yaml"
+    try:
+        learner = str(compose([f"agent={agent}"]).agent.learner)
+    except ConfigError as exc:  # the config refuses an agent file whose learner is not registered
+        return str(exc).strip().splitlines()[0]
+    if learner not in LEARNERS:
+        return f"learner '{learner}' is not registered in repro/learners/registry.py"
+    return None
+
+
+def _sync(device: str) -> None:
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
+
+
+def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapping[str, np.ndarray]],
+                 repeats: int, warmup: int, device: str, own_batch: int | None = None) -> dict[str, Any]:
+    """Median seconds of one update of ``agent`` (built from its agent file through the registry) at
+    ``batch_size``, or, for a learner with its own batch size (DT), at that one (``own_batch`` replaces it)."""
+    overrides = [f"agent={agent}", f"task={task}", f"agent.batch_size={batch_size}"]
+    if agent in OFFLINE_AGENTS:  # a dataset kind resolves what depends on it (CQL's Table 6 alpha)
+        overrides.append(f"offline.dataset={DATASET_KIND}")
+    rc = typed(compose(overrides))
+    own = own_batch_size(rc.agent)  # DT samples its own number of windows whatever agent.batch_size says
+    if own is not None and own_batch is not None:
+        own = own_batch
+    size = own or batch_size
+    action_dim = get_task(task).action_dim
+    frame_stack = rc.env.frame_stack
+    obs_shape = (FRAME_SHAPE[0] * frame_stack, *FRAME_SHAPE[1:])
+    torch.manual_seed(0)
+    learner = build_learner(rc.agent, obs_shape, action_dim, device=device)
+    make_sampler: Callable[..., Any] | None = getattr(learner, "make_sampler", None)
+    if make_sampler is not None:
+        sampler = make_sampler(episodes, seed=0)
+        batch: Any = sampler.sample(size)
+    else:
+        buf = fill_buffer(episodes, rc.agent, frame_stack, seed=0, device=device)
+        batch = buf.sample(size, **learner.sample_options)
+    learner.train(True)
+    for _ in range(warmup):
+        learner.update(batch, STEP)
+    times = []
+    for _ in range(repeats):
+        _sync(device)
+        t0 = time.perf_counter()
+        learner.update(batch, STEP)
+        _sync(device)
+        times.append(time.perf_counter() - t0)
+    return {"agent": agent, "learner": rc.agent.learner, "batch_size": size, "own_batch": own is not None,
+            "update_seconds": statistics.median(times), "repeats": repeats, "warmup": warmup}
+
+
+def run_offline_bench(batch_size: int, repeats: int, warmup: int, device: str, agents: Sequence[str] = OFFLINE_AGENTS,
+                      task: str = "cheetah_run", echo: Callable[[str], None] = print,
+                      own_batch: int | None = None) -> dict[str, Any]:
+    """Time DrQ-v2 and each available offline learner; print each one's ratio to DrQ-v2 measured here.
+    ``own_batch`` replaces the batch size of learners that have their own (DT's 64)."""
+    episodes = synthetic_episodes(action_dim=get_task(task).action_dim)
+    ref = time_learner(REFERENCE, batch_size, task, episodes, repeats, warmup, device)
+    echo(f"{REFERENCE} (online) batch {ref['batch_size']}: {ref['update_seconds']:.4f} s/update "
+         f"({warmup} warm-up + {repeats} timed updates, median, {device})")
+    rows, ratios, skipped = [ref], {}, {}
+    for agent in agents:
+        why = available(agent)
+        if why:
+            skipped[agent] = why
+            echo(f"{agent}: skipped ({why})")
+            continue
+        row = time_learner(agent, batch_size, task, episodes, repeats, warmup, device, own_batch)
+        row["over_drqv2"] = row["update_seconds"] / ref["update_seconds"]
+        rows.append(row)
+        ratios[f"{agent}_b{row['batch_size']}_over_{REFERENCE}_b{ref['batch_size']}"] = round(row["over_drqv2"], 3)
+        own = " (its own batch size)" if row["own_batch"] else ""
+        echo(f"{agent} B{row['batch_size']}{own} / {REFERENCE} B{ref['batch_size']} update time: "
+             f"{row['over_drqv2']:.2f}x (measured in this run)")
+    return {"task": task, "device": device, "results": rows, "ratios": ratios, "skipped": skipped}

@@ -1,0 +1,238 @@
+"""Compose the packaged Hydra config (compose API) and validate it against the typed schema."""
+
+from __future__ import annotations
+
+import difflib
+import os
+import re
+from collections.abc import Iterable
+from pathlib import Path
+from typing import cast
+
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from repro.config.schema import RunConfig
+from repro.runs.runformat import is_folder_value
+
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
+VALID_CHOICES = {
+    "agent.latent_action_rounding": ("upstream", "paper"),
+    "agent.reward_target": ("nstep", "ksum"),
+    "replay.device": ("cpu", "cuda", "auto"),
+    "runtime.device": ("cpu", "cuda", "auto"),
+    "train.video_every": ("all", "last"),
+    "agent.iql.value_for_targets": ("after", "before"),
+    "agent.iql.reward_scaling": ("none", "return_range"),
+    "agent.dt.activation": ("relu", "gelu", "gelu_new"),
+    "agent.dt.init": ("gpt2", "torch"),
+}
+
+
+class ConfigError(ValueError):
+    """A config problem, explained in one line."""
+
+
+def group_options(group: str) -> list[str]:
+    """Names of the YAML files in a config group (e.g. ``task`` or ``agent``)."""
+    return sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
+
+
+def config_groups() -> dict[str, list[str]]:
+    """Every config group of the packaged config -> its option names."""
+    return {d.name: group_options(d.name) for d in sorted(CONF_DIR.iterdir()) if d.is_dir()}
+
+
+def close_matches(name: str, options: Iterable[str]) -> str:
+    """`` Did you mean: a, b?`` or `` Known: ...`` (options in the order given) for an error line; empty when
+    there are no options."""
+    options = list(dict.fromkeys(options))
+    matches = difflib.get_close_matches(name, options, n=3, cutoff=0.5)
+    if matches:
+        return f" Did you mean: {', '.join(matches)}?"
+    return f" Known: {', '.join(options)}." if options else ""
+
+
+def check_option(group: str, value: str, where: str = "") -> None:
+    """Raise ConfigError when ``value`` is not an option of config ``group``; ``where`` is added after the value
+    (e.g. `` in --set task=x``)."""
+    options = group_options(group)
+    if value not in options:
+        raise ConfigError(f"unknown {group} '{value}'{where}." + close_matches(value, options))
+
+
+def _check_group_overrides(overrides: list[str]) -> None:
+    for ov in overrides:
+        key, sep, value = ov.partition("=")
+        if not sep:
+            raise ConfigError(f"override '{ov}' is not key=value.")
+        key = key.lstrip("+~")
+        if key in ("agent", "task", "profile"):
+            check_option(key, value)
+
+
+def _check_keys(overrides: list[str], cfg: DictConfig) -> None:
+    for ov in overrides:
+        key = ov.partition("=")[0]
+        if key.startswith(("+", "~")) or key in ("agent", "task", "profile"):
+            continue
+        if OmegaConf.select(cfg, key, default="__missing__") == "__missing__":
+            parent, _, leaf = key.rpartition(".")
+            node = OmegaConf.select(cfg, parent) if parent else cfg
+            siblings = list(node.keys()) if isinstance(node, DictConfig) else []
+            raise ConfigError(f"unknown config key '{key}'." + close_matches(leaf, [str(s) for s in siblings]))
+
+
+def compose(overrides: list[str] | tuple[str, ...] = ()) -> DictConfig:
+    """Resolve the config for ``overrides`` (Hydra syntax); raise ConfigError with one line on bad input."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import HydraException
+
+    overrides = list(overrides)
+    _check_group_overrides(overrides)
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            raw = hydra_compose(config_name="config", overrides=overrides)
+    except (HydraException, OmegaConfBaseException) as exc:
+        # Hydra's messages are multi-line; keep the first line and name close keys when possible.
+        first = str(exc).strip().splitlines()[0]
+        for ov in overrides:
+            key = ov.partition("=")[0].lstrip("+~")
+            if f"'{key}'" in first or key in first:
+                base = compose_base()
+                try:
+                    _check_keys([ov], base)
+                except ConfigError as err:
+                    raise ConfigError(str(err)) from None
+        raise ConfigError(first) from None
+    finally:
+        GlobalHydra.instance().clear()
+    return validate(raw)
+
+
+_BASE: DictConfig | None = None
+
+
+def compose_base() -> DictConfig:
+    """The config with no overrides (cached), for key suggestions."""
+    global _BASE
+    if _BASE is None:
+        _BASE = compose([])
+    return _BASE
+
+
+def validate(raw: DictConfig) -> DictConfig:
+    """Resolve interpolations, check types against the schema and value choices."""
+    try:
+        OmegaConf.resolve(raw)
+        cfg = cast(DictConfig, OmegaConf.merge(OmegaConf.structured(RunConfig), raw))  # dict merged into dict
+    except OmegaConfBaseException as exc:
+        key = getattr(exc, "full_key", None)
+        first = str(exc).strip().splitlines()[0]
+        raise ConfigError(f"{key}: {first}" if key else first) from None
+    for key, choices in VALID_CHOICES.items():
+        value = OmegaConf.select(cfg, key)
+        if value not in choices:
+            raise ConfigError(f"{key}={value} is not one of {', '.join(choices)}.")
+    for key in ("experiment", "variant", "task.name", "agent.name"):
+        value = str(OmegaConf.select(cfg, key))
+        if not NAME_RE.match(value):
+            raise ConfigError(f"{key}='{value}' may only contain letters, digits, '_', '.' and '-'.")
+    positive = ("agent.K", "agent.batch_size", "agent.nstep", "agent.stddev_schedule.step_scale",
+                "env.action_repeat", "env.frame_stack",
+                "train.frames", "train.eval_every_frames", "train.update_every_steps", "replay.capacity")
+    for key in positive:
+        if OmegaConf.select(cfg, key) < 1:
+            raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
+    if cfg.seed < 0:
+        raise ConfigError(f"seed must be >= 0 (got {cfg.seed}).")
+    if cfg.env.distracting_dims < 0 or cfg.train.eval_episodes < 0:
+        raise ConfigError("env.distracting_dims and train.eval_episodes must be >= 0.")
+    if cfg.train.video_size < 16 or cfg.train.video_size % 2:
+        raise ConfigError(f"train.video_size must be an even number >= 16 (got {cfg.train.video_size}).")
+    from repro.agent.objectives import OBJECTIVES
+
+    for name in cfg.agent.objectives:
+        if name not in OBJECTIVES:
+            raise ConfigError(f"unknown objective '{name}'." + close_matches(str(name), sorted(OBJECTIVES)))
+    _check_learner(cfg)
+    return cfg
+
+
+def _check_learner(cfg: DictConfig) -> None:
+    """``agent.learner`` is registered; ``offline.*`` is consistent with it."""
+    from repro.learners import LEARNERS, is_offline
+
+    learner = str(cfg.agent.learner)
+    if learner not in LEARNERS:
+        raise ConfigError(f"unknown agent.learner '{learner}'." + close_matches(learner, sorted(LEARNERS)))
+    dataset = cfg.offline.dataset
+    if not is_offline(learner):
+        if dataset is not None:
+            raise ConfigError(f"offline.dataset is read by offline learners only (agent.learner={learner} "
+                              "trains online); pick an offline agent, e.g. agent=bc.")
+        return
+    if dataset is not None and is_folder_value(str(dataset)):
+        # A folder is identity (the run directory's dataset tag): one folder, one spelling. ds/x, ds/x/, ./ds/x
+        # and a symlink to it all become its absolute real path (an absolute real path is kept as written).
+        dataset = cfg.offline.dataset = os.path.realpath(os.path.expanduser(str(dataset)))
+    if dataset is not None and not is_folder_value(str(dataset)) and not NAME_RE.match(str(dataset)):
+        raise ConfigError(f"offline.dataset='{dataset}': a dataset kind may only contain letters, digits, '_', '.' "
+                          "and '-' (a folder needs a '/', e.g. ./my_dataset).")
+    for key in ("offline.updates", "offline.eval_every_updates", "offline.checkpoint_every_updates",
+                "offline.log_every_updates"):
+        if OmegaConf.select(cfg, key) < 1:
+            raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
+    if cfg.offline.eval_episodes < 0:
+        raise ConfigError(f"offline.eval_episodes must be >= 0 (got {cfg.offline.eval_episodes}).")
+    cosine = cfg.agent.iql.actor_lr_cosine_updates
+    if cosine is not None and cosine < 1:
+        raise ConfigError(f"agent.iql.actor_lr_cosine_updates must be null or >= 1 (got {cosine}).")
+    if learner == "cql" and cfg.agent.cql.alpha is None and dataset is not None:
+        cfg.agent.cql.alpha = _table6_alpha(str(cfg.task.name), str(dataset))
+
+
+def _table6_alpha(task: str, dataset: str) -> float:
+    """CQL's alpha from the paper's Table 6 for a dataset kind; a folder or an unlisted pair needs agent.cql.alpha."""
+    from repro.config.paper_defaults import cql_alpha
+
+    if is_folder_value(dataset):
+        raise ConfigError(f"agent.cql.alpha: Table 6 gives alpha per task and dataset kind, not for the folder "
+                          f"'{dataset}'; set agent.cql.alpha (one of 0.5, 1, 2, 4, 8 in the paper).")
+    try:
+        return float(cql_alpha(task, dataset))
+    except ValueError:
+        raise ConfigError(f"agent.cql.alpha: Table 6 has no value for task {task} and dataset {dataset}; "
+                          "set agent.cql.alpha.") from None
+
+
+def typed(cfg: DictConfig) -> RunConfig:
+    """The config as typed dataclasses."""
+    return OmegaConf.to_object(cfg)  # type: ignore[return-value]
+
+
+# Keys outside ``runtime`` that change no logged number (what is watched, not what is trained): a run resumed
+# with another value is the same run.
+NON_IDENTITY_KEYS = ("train.save_video", "train.video_every", "train.video_size")
+
+
+def drop_non_identity(data: dict) -> dict:
+    """``data`` (a config as plain containers) without ``runtime`` and :data:`NON_IDENTITY_KEYS`, in place."""
+    data.pop("runtime", None)
+    for key in NON_IDENTITY_KEYS:
+        section, _, leaf = key.partition(".")
+        node = data.get(section)
+        if isinstance(node, dict):
+            node.pop(leaf, None)
+    return data
+
+
+def identity(cfg: DictConfig) -> dict:
+    """The part of the config that defines a run (everything but ``runtime`` and the video switches)."""
+    data = OmegaConf.to_container(cfg, resolve=True)
+    assert isinstance(data, dict)
+    return drop_non_identity(data)

@@ -1,0 +1,192 @@
+"""Typed schema of the run config: code reads these dataclasses, never raw strings."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+
+@dataclass
+class StdSchedule:
+    start: float = 1.0
+    end: float = 0.1
+    duration: int = 500_000
+    # the schedule counts step_scale x the step it is called with: 1 online (agent steps); 2 offline, where it
+    # is called with the update count and V-D4RL evaluates it at its loop step (update_every_steps 2: 2u)
+    step_scale: int = 1
+
+    def __call__(self, step: int) -> float:
+        """Linear interpolation from ``start`` to ``end`` over ``duration`` schedule steps, at schedule step
+        ``step_scale * step``."""
+        mix = min(max(self.step_scale * step / max(self.duration, 1), 0.0), 1.0)
+        return (1.0 - mix) * self.start + mix * self.end
+
+
+@dataclass
+class CQLConfig:
+    """CQL's conservative regulariser (Kumar et al. 2020, continuous form); used by learner ``cql``."""
+
+    alpha: Optional[float] = None  # None: the paper's Table 6 value for the run's task and dataset
+    n_samples: int = 10
+    temperature: float = 1.0
+    importance_sampling: bool = False
+    include_data_in_logsumexp: bool = True  # V-D4RL's no-importance-sampling form (ignored with importance sampling)
+    clip_policy_samples: bool = True  # V-D4RL: policy samples drawn with sample(clip=stddev_clip)
+
+
+@dataclass
+class TD3BCConfig:
+    """TD3+BC's actor loss (Fujimoto & Gu 2021, eq. 5; V-D4RL's DrQ+BC on the DrQ-v2 backbone)."""
+
+    alpha: float = 2.5  # paper section 5.2: 2.5 (no difference in [2, 3])
+    # "min": lambda and the Q term from min(Q1, Q2) (V-D4RL's DrQ+BC); "q1": from Q1 only (original paper)
+    lambda_from: str = "min"
+
+
+@dataclass
+class IQLConfig:
+    """Implicit Q-learning (Kostrikov et al. 2022)."""
+
+    expectile: float = 0.7  # paper (TACO appendix): 0.7
+    beta: float = 0.1  # inverse temperature; the TACO paper's 0.1; the IQL reference MuJoCo config uses 3
+    max_weight: float = 100.0  # exp(beta * adv) is clipped here (IQL reference code)
+    # which V the actor's advantage and the critic's target use: "after" the value step (the JAX code's
+    # learner.py, the default) or "before" it (CORL's iql.py)
+    value_for_targets: str = "after"
+    # None: constant actor learning rate (DrQ-v2); N: cosine decay of the actor's rate to 0 over N updates
+    # (the JAX code's opt_decay_schedule "cosine" with max_steps = N)
+    actor_lr_cosine_updates: Optional[int] = None
+    # False: the DrQ-v2 actor's scheduled std in log pi (DrQ-v2); True: a learned state-independent log-std
+    # (the JAX actor: NormalTanhPolicy(state_dependent_std=False, log_std_min=-5), zeros at start)
+    learned_log_std: bool = False
+    # "none": the dataset's rewards as they are (DrQ-v2 / V-D4RL); "return_range": rewards x 1000 / (best - worst
+    # episode return of the dataset), the JAX code's normalize() of locomotion datasets (train_offline.py)
+    reward_scaling: str = "none"
+
+
+@dataclass
+class DTConfig:
+    """Decision Transformer (Chen et al. 2021, the gym setting of github kzl/decision-transformer)."""
+
+    context: int = 20
+    embed_dim: int = 128
+    n_layers: int = 3
+    n_heads: int = 1
+    dropout: float = 0.1
+    lr: float = 1e-4
+    weight_decay: float = 1e-4
+    warmup_steps: int = 10_000
+    grad_clip: float = 0.25
+    batch_size: int = 64
+    rtg_scale: float = 1e-3  # returns-to-go are multiplied by this (1/1000)
+    max_timestep: int = 1000  # size of the learned timestep embedding; episodes must be shorter
+    activation: str = "relu"  # feed-forward activation (Chen et al.'s --activation_function default); CORL: gelu
+    init: str = "gpt2"  # "gpt2": N(0, 0.02) body weights (GPT2PreTrainedModel); "torch": torch's layer defaults
+    ff_dropout: bool = False  # a dropout after the activation (torch's TransformerEncoderLayer); GPT-2: none
+    action_pad: float = -10.0  # value of padded action slots in training windows (Chen et al.'s get_batch)
+
+
+@dataclass
+class AgentConfig:
+    name: str = "taco"
+    learner: str = "actor_critic"
+    lr: float = 1e-4
+    feature_dim: int = 50
+    hidden_dim: int = 1024
+    batch_size: int = 1024
+    K: int = 3
+    nstep: int = 3
+    discount: float = 0.99
+    critic_target_tau: float = 0.01
+    stddev_clip: float = 0.3
+    stddev_schedule: StdSchedule = field(default_factory=StdSchedule)
+    action_encoder: bool = True
+    latent_action_dim: Optional[int] = None
+    latent_action_rounding: str = "upstream"
+    action_hidden_dim: int = 64
+    reward_target: str = "nstep"
+    objectives: dict[str, float] = field(default_factory=dict)
+    objective_params: dict[str, Any] = field(default_factory=dict)
+    compile: bool = False
+    amp: bool = False
+    cql: CQLConfig = field(default_factory=CQLConfig)
+    td3bc: TD3BCConfig = field(default_factory=TD3BCConfig)
+    iql: IQLConfig = field(default_factory=IQLConfig)
+    dt: DTConfig = field(default_factory=DTConfig)
+
+
+@dataclass
+class TaskConfig:
+    name: str = "cheetah_run"
+    suite: str = "dmc"
+    preset: str = "medium"
+    std_duration: int = 500_000
+    frames: int = 3_100_000
+    drqv2_batch_size: int = 256
+
+
+@dataclass
+class EnvConfig:
+    action_repeat: int = 2
+    frame_stack: int = 3
+    image_size: int = 84
+    distracting_dims: int = 0
+    max_episode_frames: Optional[int] = None
+    camera: Optional[Any] = None
+
+
+@dataclass
+class TrainConfig:
+    frames: int = 3_100_000
+    seed_frames: int = 4000
+    explore_steps: int = 2000
+    update_every_steps: int = 2
+    eval_every_frames: int = 10_000
+    eval_episodes: int = 10
+    checkpoint_every_episodes: int = 1
+    save_frames: bool = True
+    save_video: bool = False
+    video_every: str = "all"
+    video_size: int = 256
+
+
+@dataclass
+class ReplayConfig:
+    capacity: int = 1_000_000
+    device: str = "cpu"
+
+
+@dataclass
+class OfflineConfig:
+    """Offline training (a fixed dataset, no environment interaction but evaluation)."""
+
+    dataset: Optional[str] = None
+    updates: int = 100_000
+    eval_every_updates: int = 10_000
+    eval_episodes: int = 10
+    checkpoint_every_updates: int = 5_000
+    log_every_updates: int = 1_000
+
+
+@dataclass
+class RuntimeConfig:
+    results_root: str = "runs"
+    device: str = "auto"
+    progress: Any = "auto"
+    threads: Optional[int] = None
+    record: bool = False
+    tensorboard: bool = False
+
+
+@dataclass
+class RunConfig:
+    experiment: str = "default"
+    variant: str = "base"
+    seed: int = 1
+    agent: AgentConfig = field(default_factory=AgentConfig)
+    task: TaskConfig = field(default_factory=TaskConfig)
+    env: EnvConfig = field(default_factory=EnvConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
+    offline: OfflineConfig = field(default_factory=OfflineConfig)
+    runtime: RuntimeConfig = field(default_factory=RuntimeConfig)

@@ -1,0 +1,130 @@
+"""Append-only CSV logs whose byte offsets are stored in checkpoints, so a resume truncates them exactly."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from repro.runs.fsutil import named_os_error
+from repro.runs.runformat import EVAL, EVAL_COLUMNS, TRAIN, TRAIN_COLUMNS, WALLCLOCK_COLUMNS, train_columns
+from repro.runs.tblog import TensorBoardMirror
+
+__all__ = ["CsvLog", "RunLogger", "format_row", "header_line", "EVAL_COLUMNS", "TRAIN_COLUMNS", "WALLCLOCK_COLUMNS"]
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return str(int(value))
+    if isinstance(value, float):
+        return "" if math.isnan(value) else repr(value)
+    return str(value)
+
+
+def header_line(columns: Sequence[str]) -> str:
+    """The header line (with its newline) of a CSV log with these columns."""
+    return ",".join(columns) + "\n"
+
+
+def format_row(columns: Sequence[str], row: dict[str, Any]) -> str:
+    """One CSV line (with its newline) of ``row`` under the header ``columns``: None and NaN empty, bools 0/1,
+    floats in full precision (repr)."""
+    unknown = set(row) - set(columns)
+    if unknown:
+        raise KeyError(f"unknown columns {sorted(unknown)}")
+    return ",".join(_fmt(row.get(c)) for c in columns) + "\n"
+
+
+class CsvLog:
+    """One CSV file with a fixed header; each row is flushed and fsynced as soon as it is written."""
+
+    def __init__(self, path: str | os.PathLike, columns: Sequence[str], offset: int | None = None):
+        """Open ``path`` for appending. ``offset`` (from a checkpoint) truncates rows written after it;
+        ``None`` starts the file afresh."""
+        self.path = Path(path)
+        self.columns = list(columns)
+        header = header_line(self.columns)
+        if offset is None or not self.path.exists():
+            self.path.write_text(header)
+        else:
+            with open(self.path, "r+b") as f:
+                existing = f.readline().decode()
+                if existing != header:
+                    raise ValueError(f"{self.path}: header differs from the run's columns")
+                f.truncate(max(offset, len(header.encode())))
+        self._f = open(self.path, "ab")
+
+    def write(self, row: dict[str, Any]) -> None:
+        try:
+            line = format_row(self.columns, row)
+        except KeyError as exc:
+            raise KeyError(f"{self.path.name}: {exc.args[0]}") from None
+        try:
+            self._f.write(line.encode())
+            self._f.flush()
+            os.fsync(self._f.fileno())
+        except OSError as exc:  # a full disk: a torn row is cut again by the resume's truncation
+            raise named_os_error(exc, self.path) from None
+
+    def offset(self) -> int:
+        return self._f.tell()
+
+    def close(self) -> None:
+        self._f.close()
+
+
+class CsvPairLogger:
+    """A run's ``eval.csv`` and ``train.csv`` (opened at the checkpoint's offsets) and, with ``tensorboard``
+    (runtime.tensorboard), TensorBoard scalars at ``step_column`` (repro/runs/tblog.py), rebuilt from the CSVs once
+    they are truncated to the checkpoint, so a resumed run never holds a point twice. Subclasses say what an
+    evaluation prints."""
+
+    def __init__(self, run_dir: str | os.PathLike, eval_columns: Sequence[str], train_cols: Sequence[str],
+                 offsets: dict[str, int] | None, echo: Callable[[str], None], tensorboard: bool, step_column: str):
+        run_dir = Path(run_dir)
+        offsets = offsets or {}
+        self.eval = CsvLog(run_dir / EVAL, eval_columns, offsets.get("eval"))
+        self.train = CsvLog(run_dir / TRAIN, train_cols, offsets.get("train"))
+        self.echo = echo
+        self.tb: TensorBoardMirror | None = None
+        if tensorboard:
+            self.tb = TensorBoardMirror(run_dir, step_column=step_column)
+            self.tb.rebuild({"eval": self.eval.path, "train": self.train.path})
+
+    def offsets(self) -> dict[str, int]:
+        return {"eval": self.eval.offset(), "train": self.train.offset()}
+
+    def _write_eval(self, row: dict[str, Any]) -> None:
+        self.eval.write(row)
+        if self.tb is not None:
+            self.tb.add_row("eval", row)
+
+    def log_train(self, row: dict[str, Any]) -> None:
+        self.train.write(row)
+        if self.tb is not None:
+            self.tb.add_row("train", row)
+
+    def close(self) -> None:
+        self.eval.close()
+        self.train.close()
+        if self.tb is not None:
+            self.tb.close()
+
+
+class RunLogger(CsvPairLogger):
+    """The online run's logs: columns from repro.runs.runformat, TensorBoard step = frame."""
+
+    def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
+                 offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print,
+                 tensorboard: bool = False):
+        super().__init__(run_dir, EVAL_COLUMNS, train_columns(metric_names), offsets, echo, tensorboard, "frame")
+
+    def log_eval(self, row: dict[str, Any]) -> None:
+        self._write_eval(row)
+        success = "" if row.get("success") is None else f"  success {row['success']:.2f}"
+        self.echo(f"eval  frame {row['frame']:>9}  return {row['episode_reward']:8.2f}"
+                  f" ± {row['episode_reward_std']:.2f}{success}")

@@ -1,0 +1,96 @@
+"""Evaluation videos: MP4 (H.264) through the ffmpeg binary that the ``imageio-ffmpeg`` wheel ships.
+
+Frames are collected in memory during one evaluation episode and written atomically (a temporary file in the
+same folder, then a rename), so a killed run never leaves a torn video under its final name.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from repro.runs.runformat import VIDEOS as VIDEO_DIR
+
+__all__ = ["VIDEO_DIR", "VIDEO_EVERY", "EvalVideos", "count_frames", "video_name", "write_mp4"]
+
+VIDEO_EVERY = ("all", "last")
+
+
+def video_name(index: int, unit: str = "frame") -> str:
+    """``frame_000010000.mp4`` (online: the training frame of the evaluation; offline runs: ``update_...``),
+    so a resumed run that repeats an evaluation overwrites its video with the same content."""
+    return f"{unit}_{index:09d}.mp4"
+
+
+@dataclass(frozen=True)
+class EvalVideos:
+    """Where and when a training loop writes evaluation videos (``train.save_video``)."""
+
+    folder: Path  # {run}/videos
+    size: int  # train.video_size
+    every: str = "all"  # train.video_every: all | last
+    unit: str = "frame"  # "frame" (online) or "update" (offline runs)
+    fps: int = 30
+
+    def __post_init__(self) -> None:
+        if self.every not in VIDEO_EVERY:
+            raise ValueError(f"video_every must be one of {', '.join(VIDEO_EVERY)} (got {self.every!r})")
+
+    def wanted(self, final: bool) -> bool:
+        """Whether the evaluation (``final``: the last one of the run) gets a video."""
+        return self.every == "all" or final
+
+    def save(self, index: int, frames: np.ndarray | list[np.ndarray]) -> Path:
+        return write_mp4(self.folder / video_name(index, self.unit), frames, fps=self.fps)
+
+
+def write_mp4(path: str | os.PathLike, frames: np.ndarray | list[np.ndarray], fps: int = 30) -> Path:
+    """Encode (T, H, W, 3) uint8 frames to ``path`` (H.264, yuv420p, so that every player opens it)."""
+    import imageio_ffmpeg
+
+    frames = np.asarray(frames)
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
+        raise ValueError(f"expected (T, H, W, 3) uint8 frames, got {frames.shape} {frames.dtype}")
+    if len(frames) == 0:
+        raise ValueError("no frames to write")
+    if frames.shape[1] % 2 or frames.shape[2] % 2:
+        raise ValueError(f"H.264 (yuv420p) needs an even height and width, got {frames.shape[1:3]}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    height, width = frames.shape[1:3]
+    writer = imageio_ffmpeg.write_frames(str(tmp), (width, height), fps=fps, codec="libx264",
+                                         pix_fmt_out="yuv420p", macro_block_size=1,
+                                         output_params=["-loglevel", "error"])
+    try:
+        writer.send(None)  # start the encoder
+        try:
+            for frame in frames:
+                writer.send(np.ascontiguousarray(frame))
+        finally:
+            writer.close()
+        with open(tmp, "rb") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def count_frames(path: str | os.PathLike) -> int:
+    """Decode ``path`` and count its frames (for tests and `repro` checks)."""
+    import imageio_ffmpeg
+
+    reader = imageio_ffmpeg.read_frames(str(path))
+    meta = next(reader)
+    size = meta["size"][0] * meta["size"][1] * 3
+    n = 0
+    for chunk in reader:
+        if len(chunk) != size:
+            raise ValueError(f"{path}: a frame of {len(chunk)} bytes, expected {size}")
+        n += 1
+    return n

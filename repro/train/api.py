@@ -1,0 +1,361 @@
+"""Build a run from its config and train it: the one place where env, agent, buffer and logger are made."""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, cast
+
+import torch
+from omegaconf import DictConfig
+
+from repro.config.compose import compose, typed
+from repro.config.schema import RunConfig
+from repro.data.episodes import EpisodeStore
+from repro.data.offline_replay import (
+    DatasetError,
+    OfflineData,
+    load_offline_data,
+    load_offline_episodes,
+    resolve_dataset,
+)
+from repro.data.record import Recorder
+from repro.data.reference import score_reference
+from repro.data.replay import ReplayBuffer
+from repro.learners import (
+    Learner,
+    OnlineLearner,
+    ReturnConditioned,
+    SequenceLearner,
+    build_learner,
+    is_offline,
+    samples_episodes,
+)
+from repro.runs import rundir
+from repro.runs.checkpoint import load_checkpoint, save_checkpoint
+from repro.runs.fsutil import remove_torn_temporaries
+from repro.runs.logger import RunLogger
+from repro.runs.video import VIDEO_DIR, EvalVideos
+from repro.train.offline import BatchSource, OfflineLogger, OfflineTrainer, check_resume_dataset
+from repro.train.online import Trainer
+
+
+class CheckpointError(ValueError):
+    """A run's checkpoint that cannot be read (one line)."""
+
+
+class DeviceError(ValueError):
+    """A device name that is unknown or not present on this machine (one line)."""
+
+
+def resolve_device(name: str, key: str = "device") -> str:
+    """``auto`` -> cuda when available, else cpu; ``cpu``/``cuda``/``cuda:N`` as given when present.
+
+    Raises :class:`DeviceError` (one line, naming ``key``) for another name or a CUDA device this machine
+    lacks, before anything is written."""
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cpu":
+        return name
+    if name == "cuda" or (name.startswith("cuda:") and name[5:].isdigit()):
+        if not torch.cuda.is_available():
+            raise DeviceError(f"{key}={name}: this machine has no CUDA device (torch sees none); use cpu or auto")
+        if ":" in name and int(name[5:]) >= torch.cuda.device_count():
+            raise DeviceError(f"{key}={name}: this machine has {torch.cuda.device_count()} CUDA device(s)")
+        return name
+    raise DeviceError(f"{key}={name}: unknown device; one of auto, cpu, cuda, cuda:N")
+
+
+def build_env(rc: RunConfig, seed: int):
+    from repro.envs import make_env
+
+    e = rc.env
+    return make_env(rc.task.name, seed=seed, action_repeat=e.action_repeat, frame_stack=e.frame_stack,
+                    image_size=e.image_size, distracting_dims=e.distracting_dims,
+                    max_episode_frames=e.max_episode_frames, camera=e.camera)
+
+
+def build_agent(rc: RunConfig, obs_shape: tuple[int, int, int], action_dim: int, device: str) -> Learner:
+    """The learner named by ``agent.learner`` (the online Agent by default), seeded by the run's seed."""
+    torch.manual_seed(rc.seed)
+    return build_learner(rc.agent, obs_shape, action_dim, device, explore_steps=rc.train.explore_steps)
+
+
+def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress: bool | None = None) -> Path:
+    """Train (or resume, or skip if done) the run described by ``cfg``; return its run directory.
+
+    Everything that can refuse the run is checked before anything is written (the config against the run
+    directory's, the devices, the dataset, a checkpoint's dataset), so a refusal leaves the run directory
+    byte-identical. The run directory then has one writer: its writer lock is taken before the first write
+    and the state is read again under it (RunLocked when another process holds it)."""
+    rc = typed(cfg)
+    path = rundir.run_dir(cfg)
+    _refuse_other_config(path, cfg)
+    if rundir.run_state(path) == "done":
+        echo(f"already done: {path}")
+        return path
+    device = resolve_device(rc.runtime.device, "runtime.device")
+    resolve_device(rc.replay.device, "replay.device")
+    holder = rundir.writer_lock_holder(path)  # refuse a running run before reading a large dataset for nothing
+    if holder is not None:
+        raise rundir.RunLocked(rundir.locked_message(path, holder))
+    # An offline run reads and checks its whole dataset before anything is written.
+    data = _load_dataset(rc) if is_offline(rc.agent.learner) else None
+    state = _load_state(path, data)
+    created = not path.exists()
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        lock = rundir.acquire_writer_lock(path)
+    except BaseException:
+        if created:
+            _remove_empty(path)
+        raise
+    with lock:
+        # Under the lock: another writer may have finished, started or changed the run since the checks above.
+        _refuse_other_config(path, cfg)
+        if rundir.run_state(path) == "done":
+            echo(f"already done: {path}")
+            return path
+        if (state is None) != (not (path / rundir.CHECKPOINT).exists()) or (
+                state is not None and _checkpoint_changed(path, state)):
+            state = _load_state(path, data)
+        remove_torn_temporaries(path)
+        remove_torn_temporaries(path / rundir.REPLAY)
+        resuming = state is not None
+        if not (path / rundir.CONFIG).exists():
+            rundir.write_config(path, cfg)
+        if rc.runtime.threads:
+            torch.set_num_threads(int(rc.runtime.threads))
+        rundir.write_meta(path, device, resumed=resuming)
+        if data is not None:
+            _train_offline(rc, path, data, device, state, echo, progress)
+        else:
+            _train_online(rc, path, device, state, echo, progress)
+    return path
+
+
+def _refuse_other_config(path: Path, cfg: DictConfig) -> None:
+    diff = rundir.config_diff(path, cfg)
+    if diff:
+        raise rundir.RunDirMismatch(f"{path} holds a run with another config ({diff[0]}"
+                                    f"{f' and {len(diff) - 1} more' if len(diff) > 1 else ''}); "
+                                    "use another experiment/variant name or move it away.")
+
+
+def _load_state(path: Path, data: OfflineData | None) -> dict | None:
+    """The run's checkpoint (None without one), refused (DatasetError) when it was trained on another dataset."""
+    file = path / rundir.CHECKPOINT
+    if not file.exists():
+        return None
+    try:
+        state = load_checkpoint(file)
+    except (OSError, RuntimeError, ValueError, EOFError) as exc:
+        raise CheckpointError(f"{file} cannot be read ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+                              "); move the run directory away to start it afresh") from None
+    if data is not None:
+        check_resume_dataset(state, data.digest)
+    state["_mtime_ns"] = file.stat().st_mtime_ns
+    return state
+
+
+def _checkpoint_changed(path: Path, state: dict) -> bool:
+    try:
+        return (path / rundir.CHECKPOINT).stat().st_mtime_ns != state.get("_mtime_ns")
+    except FileNotFoundError:
+        return True
+
+
+def _remove_empty(path: Path) -> None:
+    """Remove ``path`` and the lock file in it when nothing else was written (a refused first start)."""
+    try:
+        if {p.name for p in path.iterdir()} <= {rundir.WRITER_LOCK}:
+            (path / rundir.WRITER_LOCK).unlink(missing_ok=True)
+            path.rmdir()
+    except OSError:
+        pass
+
+
+def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, echo: Callable[[str], None],
+                  progress: bool | None) -> None:
+    ckpt_file = path / rundir.CHECKPOINT
+    env = build_env(rc, rc.seed)
+    eval_env = build_env(rc, rc.seed + 10_000)
+    try:
+        spec = env.spec
+        agent = cast(OnlineLearner, build_agent(rc, spec.obs_shape, spec.action_dim, device))  # not is_offline
+        rundir.write_resolved(path, rundir.resolved_values(rc, agent))
+        replay_device = resolve_device(rc.replay.device)
+        buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
+                              rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device)
+        episodes = EpisodeStore(path / "replay")
+        if state is None:
+            episodes.prune(set())
+        recorder = Recorder.open(path, rc.agent, spec.obs_shape, spec.action_dim, state) if rc.runtime.record else None
+        logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo,
+                           tensorboard=rc.runtime.tensorboard)
+        bar = _progress(rc, progress)
+        trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
+                          lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
+                          save_frames=lambda frames: _save_frames(path / "frames.npz", frames), recorder=recorder,
+                          videos=eval_videos(rc, path, "frame"))
+        if state is not None:
+            trainer.restore(state)
+            episodes.prune({rec[0] for rec in state["buffer"]["episodes"]})
+            echo(f"resumed {path} at frame {trainer.frame}")
+        try:
+            counters = trainer.run()
+        finally:
+            if bar:
+                bar.close()
+            logger.close()
+        rundir.write_done(path, {"frame": counters.step * rc.env.action_repeat, "step": counters.step,
+                                 "episode": counters.episode, "total_time": round(trainer.total_time(), 3),
+                                 "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+    finally:
+        env.close()
+        eval_env.close()
+
+
+def eval_videos(rc: RunConfig, path: Path, unit: str) -> EvalVideos | None:
+    """train.save_video: where (``{run}/videos``), how large and how often the loop writes evaluation videos."""
+    if not rc.train.save_video:
+        return None
+    return EvalVideos(path / VIDEO_DIR, rc.train.video_size, rc.train.video_every, unit=unit)
+
+
+def _load_dataset(rc: RunConfig) -> OfflineData:
+    """Resolve ``offline.dataset`` and load it into a replay sized to it (DatasetError: one line)."""
+    if rc.offline.dataset is None:
+        raise DatasetError(f"agent.learner={rc.agent.learner} trains from a dataset: set offline.dataset="
+                           "medium|medium-replay|full-replay (under the results root) or a dataset folder.")
+    directory = resolve_dataset(rc.offline.dataset, rc.runtime.results_root, rc.task.name)
+    if samples_episodes(rc.agent.learner):  # the learner samples its own windows: episodes, no replay
+        return load_offline_episodes(directory, task=rc.task.name, action_dim=run_action_dim(rc),
+                                     frame_shape=(3, rc.env.image_size, rc.env.image_size),
+                                     max_length=rc.agent.dt.max_timestep)
+    return load_offline_data(directory, task=rc.task.name, action_dim=run_action_dim(rc),
+                             frame_shape=(3, rc.env.image_size, rc.env.image_size), frame_stack=rc.env.frame_stack,
+                             nstep=rc.agent.nstep, K=rc.agent.K, discount=rc.agent.discount, seed=rc.seed,
+                             device=resolve_device(rc.replay.device))
+
+
+def run_action_dim(rc: RunConfig) -> int:
+    """|A| of the run's environment without building it (the task's plus any distracting dimensions)."""
+    from repro.envs import get_task
+
+    return get_task(rc.task.name).action_dim + rc.env.distracting_dims
+
+
+def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, state: dict | None,
+                   echo: Callable[[str], None], progress: bool | None) -> None:
+    ckpt_file = path / rundir.CHECKPOINT
+    eval_env = build_env(rc, rc.seed + 10_000)
+    try:
+        spec = eval_env.spec
+        learner = build_agent(rc, spec.obs_shape, spec.action_dim, device)
+        set_returns = getattr(learner, "set_dataset_returns", None)
+        if set_returns is not None:  # IQL's optional reward scaling reads the dataset's episode returns
+            set_returns([float(r) for r in data.manifest.returns])
+        values = rundir.resolved_values(rc, learner)
+        values.update({"dataset_dir": str(data.directory), "dataset_kind": data.manifest.kind,
+                       "dataset_manifest_sha256": data.digest})
+        rundir.write_resolved(path, values)
+        logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo,
+                               return_conditioned=isinstance(learner, ReturnConditioned),
+                               tensorboard=rc.runtime.tensorboard)
+        bar = _progress(rc, progress, total=rc.offline.updates, unit="updates/s")
+        trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner,
+                                 _batch_source(learner, data, rc.seed), logger, lambda s: save_checkpoint(ckpt_file, s),
+                                 reference=score_reference(rc.task.name, data.manifest.source),
+                                 dataset_digest=data.digest, progress=bar.update if bar else None,
+                                 dataset_best_return=data.best_return, videos=eval_videos(rc, path, "update"))
+        if state is not None:
+            trainer.restore(state)
+            echo(f"resumed {path} at update {trainer.update}")
+        try:
+            updates = trainer.run()
+        finally:
+            if bar:
+                bar.close()
+            logger.close()
+        rundir.write_done(path, {"update": updates, "dataset": str(data.directory), "dataset_sha256": data.digest,
+                                 "total_time": round(trainer.total_time(), 3),
+                                 "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+    finally:
+        eval_env.close()
+
+
+def _batch_source(learner: Learner, data: OfflineData, seed: int) -> BatchSource:
+    """The replay loaded from the dataset, or a SequenceLearner's sampler over its episodes."""
+    if isinstance(learner, SequenceLearner):
+        if data.episodes is None:
+            raise DatasetError(f"{data.directory}: loaded as a replay, but this learner samples episode windows")
+        return learner.make_sampler(data.episodes, seed)
+    if data.buffer is None:
+        raise DatasetError(f"{data.directory}: loaded as episodes, but this learner samples a replay")
+    return data.buffer
+
+
+def _save_frames(path: Path, frames) -> None:
+    """Frames of one evaluation episode, uint8 (T, H, W, 3), compressed and written atomically."""
+    import io
+
+    import numpy as np
+
+    from repro.runs.fsutil import atomic_write
+
+    def write(f) -> None:
+        buf = io.BytesIO()
+        np.savez_compressed(buf, frames=frames)
+        f.write(buf.getvalue())
+
+    atomic_write(path, write)
+
+
+def train(overrides: list[str], echo: Callable[[str], None] = print, progress: bool | None = False) -> Path:
+    """Compose the config from Hydra ``overrides`` and train it (resumable)."""
+    return train_config(compose(overrides), echo=echo, progress=progress)
+
+
+class _Progress:
+    """A rich progress bar: frames (offline: updates), their rate, last eval return, ETA."""
+
+    def __init__(self, total_frames: int, start_frame: int, label: str, unit: str = "fps"):
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        self._p = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                           TextColumn(f"{{task.fields[fps]}} {unit}"), TextColumn("eval {task.fields[ret]}"),
+                           TimeElapsedColumn(), TimeRemainingColumn(), transient=False)
+        self._p.start()
+        self._task = self._p.add_task(label, total=total_frames, completed=start_frame, fps="-", ret="-")
+        self._t, self._f = time.time(), start_frame
+
+    def update(self, frame: int, last_eval: float | None) -> None:
+        now = time.time()
+        fps = (frame - self._f) / max(now - self._t, 1e-9)
+        fields: dict[str, Any] = {"ret": f"{last_eval:.1f}" if last_eval is not None else "-"}
+        if now - self._t > 2.0:
+            fields["fps"] = f"{fps:.0f}"
+            self._t, self._f = now, frame
+        self._p.update(self._task, completed=frame, **fields)
+
+    def close(self) -> None:
+        self._p.stop()
+
+
+def _progress(rc: RunConfig, forced: bool | None, total: int | None = None, unit: str = "fps") -> _Progress | None:
+    setting = rc.runtime.progress if forced is None else forced
+    enabled = sys.stderr.isatty() if setting == "auto" else bool(setting)
+    if not enabled:
+        return None
+    return _Progress(rc.train.frames if total is None else total, 0, f"{rc.agent.name} {rc.task.name} s{rc.seed}",
+                     unit=unit)
