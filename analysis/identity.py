@@ -27,19 +27,6 @@ ALGO_LABELS: dict[str, str] = {
 }
 OFFLINE_ALGOS = frozenset({"td3bc", "cql", "iql", "bc", "dt"})
 
-# True action dimensions of DMC domains (fallback when repro.envs is not importable).
-_DMC_ACTION_DIMS: dict[str, int] = {
-    "quadruped": 12,
-    "hopper": 4,
-    "walker": 6,
-    "cheetah": 6,
-    "finger": 2,
-    "acrobot": 1,
-    "reacher": 2,
-    "manipulator": 5,
-    "cartpole": 1,
-}
-
 # Names the paper prints that a plain title-casing would get wrong.
 _TASK_NAMES: dict[str, str] = {
     "reach_duplo": "Reach Duplo",
@@ -99,12 +86,8 @@ def normalize_dataset(name: Any) -> str | None:
 
 
 def action_dim(task: str) -> int | None:
-    """True action dimension of ``task`` (without distracting dimensions), or None if unknown."""
-    try:
-        from repro.envs import get_task  # cheap: a static table, no simulator import
+    """True action dimension of ``task`` (without distracting dimensions) from the task table, or None if unknown."""
+    from repro.envs import TASKS  # cheap: a static table, no simulator import
 
-        return int(get_task(task).action_dim)
-    except (ImportError, KeyError, AttributeError):
-        pass
-    domain = str(task).split("_", 1)[0]
-    return _DMC_ACTION_DIMS.get(domain)
+    info = TASKS.get(str(task))
+    return int(info.action_dim) if info is not None else None

@@ -12,14 +12,12 @@ from paper_figures.registry import ArtifactResult, register
 LABELS = ["K=1", "K=3", "DrQ-v2"]
 
 
-def default_k(task: str) -> int:
-    """The K the paper's Table 1 uses: 1 on quadruped_run and walker_run, 3 elsewhere (Appendix B)."""
-    try:
-        from repro.envs import get_task
+def default_k(task: str) -> int | None:
+    """The K the paper's Table 1 uses for ``task`` (Appendix B), from the task table; None for an unknown task."""
+    from repro.envs import TASKS
 
-        return int(get_task(task).default_K)
-    except (ImportError, KeyError, AttributeError):
-        return 1 if task in ("quadruped_run", "walker_run") else 3
+    info = TASKS.get(task)
+    return int(info.default_K) if info is not None else None
 
 
 @register("F8", "Prediction horizon K", "figure", "fig:step_size")
