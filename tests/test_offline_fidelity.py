@@ -13,7 +13,8 @@ import torch
 
 from helpers import offline_batch, offline_learner
 from repro.config.compose import compose, typed
-from repro.learners import build_learner, offline_ac
+from repro.learners import backbone as offline_ac
+from repro.learners import build_learner
 
 OBS = (9, 84, 84)
 A = 6  # cheetah_run

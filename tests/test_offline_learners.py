@@ -11,7 +11,7 @@ import torch
 from helpers import offline_batch, offline_learner
 from repro.config import paper_defaults
 from repro.config.compose import compose, typed
-from repro.learners import offline_ac
+from repro.learners import backbone as offline_ac
 from repro.learners.losses import cql as cql_loss
 from repro.learners.losses import td3bc as td3bc_loss
 
