@@ -134,7 +134,7 @@ def write_run(
     run.mkdir(parents=True, exist_ok=True)
     rundir.write_config(run, cfg)
     if resolved:
-        # what an offline learner adds (repro/learners/offline_ac.py ``resolved``): the alpha its config resolved
+        # what an offline learner adds (repro/learners/cql.py ``resolved``): the alpha its config resolved
         learner_fields = {"cql_alpha": float(cfg.agent.cql.alpha)} if str(cfg.agent.learner) == "cql" else {}
         rundir.write_resolved(run, resolved_values or resolved_for(cfg, learner_fields))
     meta = {"git_sha": "abc1234", "git_dirty": False, "versions": {"torch": "2.13.0"}, "host": "testhost",

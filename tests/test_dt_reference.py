@@ -17,6 +17,20 @@ from repro.learners.losses import dt
 
 OBS = (9, 16, 16)
 A_DIM = 2
+# Chen et al.'s gym model (gym/experiment.py: K 20, embed_dim 128, n_layer 3, n_head 1, dropout 0.1, max_ep_len
+# 1000, activation_function relu; GPT-2's initialisation, no dropout after the activation), written out here
+GYM = {"context": 20, "embed_dim": 128, "n_layers": 3, "n_heads": 1, "dropout": 0.1, "max_timestep": 1000,
+       "activation": "relu", "init": "gpt2", "ff_dropout": False}
+
+
+def model_of(**over: object) -> dt.DecisionTransformer:
+    """The gym model with ``over`` replacing some of its values."""
+    return dt.DecisionTransformer(OBS, A_DIM, **{**GYM, **over})
+
+
+def sampler_of(episodes: list[dict[str, np.ndarray]], context: int) -> dt.SequenceSampler:
+    """A window sampler as the gym code's get_batch (frame stacks of 3, returns-to-go / 1000, actions padded: -10)."""
+    return dt.SequenceSampler(episodes, context=context, frame_stack=3, rtg_scale=1e-3, seed=0, action_pad=-10.0)
 
 
 def gpt2_block_params(e: int) -> int:
@@ -50,7 +64,7 @@ def test_paper_size_model_has_the_gpt2_layout_and_parameter_count():
 
 def test_default_initialisation_is_gpt2s_on_the_body():
     torch.manual_seed(0)
-    model = dt.DecisionTransformer(OBS, A_DIM, embed_dim=128, n_layers=3, n_heads=1)
+    model = model_of()
     for block in model.transformer.h:
         for w in (block.attn.in_proj_weight, block.attn.out_proj.weight, block.mlp.c_fc.weight,
                   block.mlp.c_proj.weight):
@@ -60,11 +74,11 @@ def test_default_initialisation_is_gpt2s_on_the_body():
         for ln in (block.ln_1, block.ln_2):
             assert bool((ln.weight == 1).all()) and not ln.bias.detach().any()
     torch.manual_seed(0)
-    legacy = dt.DecisionTransformer(OBS, A_DIM, embed_dim=128, n_layers=3, n_heads=1, init="torch")
+    legacy = model_of(init="torch")
     xavier = math.sqrt(2.0 / (128 + 3 * 128)) / math.sqrt(1.0)  # xavier_uniform std of the (3E, E) in_proj
     assert legacy.transformer.h[0].attn.in_proj_weight.std().item() == pytest.approx(xavier, rel=0.05)
     with pytest.raises(ValueError, match="dt.init"):
-        dt.DecisionTransformer(OBS, A_DIM, init="xavier")
+        model_of(init="xavier")
 
 
 def _layer_norm(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float = 1e-5) -> np.ndarray:
@@ -102,8 +116,7 @@ def gpt2_reference(x: np.ndarray, body, n_heads: int, act) -> np.ndarray:
 @pytest.mark.parametrize("activation", ["relu", "gelu"])
 def test_body_equals_gpt2_equations_in_float64(activation: str):
     torch.manual_seed(1)
-    model = dt.DecisionTransformer(OBS, A_DIM, context=4, embed_dim=16, n_layers=2, n_heads=2,
-                                   activation=activation).double().eval()
+    model = model_of(context=4, embed_dim=16, n_layers=2, n_heads=2, activation=activation).double().eval()
     with torch.no_grad():  # random LayerNorm affine parameters, so they are exercised too
         for m in model.transformer.modules():
             if isinstance(m, nn.LayerNorm):
@@ -120,11 +133,11 @@ def test_body_equals_gpt2_equations_in_float64(activation: str):
 
 
 def test_corl_and_torch_layer_switches():
-    model = dt.DecisionTransformer(OBS, A_DIM, embed_dim=16, n_layers=1, activation="gelu", ff_dropout=True)
+    model = model_of(embed_dim=16, n_layers=1, activation="gelu", ff_dropout=True)
     mlp = model.transformer.h[0].mlp
     assert [type(m) for m in mlp.children()] == [nn.Linear, nn.GELU, nn.Dropout, nn.Linear, nn.Dropout]
     with pytest.raises(ValueError, match="dt.activation"):
-        dt.DecisionTransformer(OBS, A_DIM, activation="swish")
+        model_of(activation="swish")
 
 
 def _episode(n: int, seed: int = 0) -> dict[str, np.ndarray]:
@@ -135,13 +148,13 @@ def _episode(n: int, seed: int = 0) -> dict[str, np.ndarray]:
 
 
 def test_training_windows_pad_actions_with_minus_10_and_padding_never_reaches_a_real_step():
-    sampler = dt.SequenceSampler([_episode(6)], context=5, frame_stack=3)
+    sampler = sampler_of([_episode(6)], context=5)
     w = sampler.window(0, 3)  # 3 real steps, 2 padded on the left
     assert w["mask"].tolist() == [False, False, True, True, True]
     assert (w["actions"][:2] == -10.0).all() and not w["rtg"][:2].any() and not w["timesteps"][:2].any()
     assert not w["frames"][:2].any()
     torch.manual_seed(0)
-    model = dt.DecisionTransformer(OBS, A_DIM, context=5, embed_dim=16, n_layers=2, n_heads=2).double().eval()
+    model = model_of(context=5, embed_dim=16, n_layers=2, n_heads=2).double().eval()
 
     def predict(window: dict[str, np.ndarray]) -> torch.Tensor:
         x = dt.batch_to_tensors({k: v[None] for k, v in window.items()})
@@ -151,7 +164,7 @@ def test_training_windows_pad_actions_with_minus_10_and_padding_never_reaches_a_
     zero_pad = dict(w, actions=np.where(w["mask"][:, None], w["actions"], 0.0).astype(np.float32))
     assert torch.equal(predict(w)[2:], predict(zero_pad)[2:])  # the -10 (or 0) pad is masked out
     # no position embedding: the same 3 steps unpadded give the same predictions (only timesteps position them)
-    short = dt.SequenceSampler([_episode(6)], context=3, frame_stack=3).window(0, 3)
+    short = sampler_of([_episode(6)], context=3).window(0, 3)
     torch.testing.assert_close(predict(short), predict(w)[2:], rtol=1e-12, atol=1e-12)
 
 

@@ -13,7 +13,9 @@ import torch
 
 from helpers import offline_batch, offline_learner
 from repro.config.compose import compose, typed
-from repro.learners import build_learner, offline_ac
+from repro.learners import build_learner
+from repro.learners.losses import cql as cql_loss
+from repro.learners.losses import iql as iql_loss
 
 OBS = (9, 84, 84)
 A = 6  # cheetah_run
@@ -43,13 +45,13 @@ def test_cql_policy_samples_lie_within_stddev_clip_of_the_mean(agent: str, monke
         last.weight.zero_()
         last.bias.zero_()
     seen = {}
-    real = offline_ac.cql_loss.critic_regularisers
+    real = cql_loss.critic_regularisers
 
     def spy(critic, h, q_data, uniform, policy, next_policy, *a, **k):
         seen.update(policy=policy.clone(), next_policy=next_policy.clone())
         return real(critic, h, q_data, uniform, policy, next_policy, *a, **k)
 
-    monkeypatch.setattr(offline_ac.cql_loss, "critic_regularisers", spy)
+    monkeypatch.setattr(cql_loss, "critic_regularisers", spy)
     lrn.update(batch(), 0)
     assert lrn.stddev(0) == 1.0 and lrn.cfg.stddev_clip == 0.3
     samples = torch.cat([seen["policy"].flatten(), seen["next_policy"].flatten()])
@@ -64,7 +66,7 @@ def test_cql_regulariser_equals_vd4rl_equation_with_the_data_q_in_the_logsumexp(
     R = w * (T * mean_b logsumexp([Q_rand, Q(a_data), Q_next, Q_curr] / T) - mean_b Q(a_data)), in float64."""
     lrn = learner("cql")
     seen: dict = {}
-    real = offline_ac.cql_loss.critic_regularisers
+    real = cql_loss.critic_regularisers
 
     def spy(critic, h, q_data, uniform, policy, next_policy, alpha, temperature, **k):
         b, n, a = uniform.shape
@@ -75,7 +77,7 @@ def test_cql_regulariser_equals_vd4rl_equation_with_the_data_q_in_the_logsumexp(
                     q_samples=[[qs[j][i].double().reshape(b, n) for j in range(3)] for i in range(2)])
         return real(critic, h, q_data, uniform, policy, next_policy, alpha, temperature, **k)
 
-    monkeypatch.setattr(offline_ac.cql_loss, "critic_regularisers", spy)
+    monkeypatch.setattr(cql_loss, "critic_regularisers", spy)
     metrics = lrn.update(batch(), 0)
     T, w = seen["T"], seen["alpha"]
     for i in range(2):
@@ -124,7 +126,7 @@ def _iql_values_used(lrn, monkeypatch) -> dict:
     """Run one update, recording the V the actor's advantage and the critic's target were given and every
     input the value network saw."""
     seen: dict = {"inputs": []}
-    real_actor, real_target = offline_ac.iql_loss.actor_loss, offline_ac.iql_loss.critic_target
+    real_actor, real_target = iql_loss.actor_loss, iql_loss.critic_target
 
     def actor_spy(log_prob, tq1, tq2, v, **k):
         seen["actor_v"] = v.detach().clone()
@@ -134,8 +136,8 @@ def _iql_values_used(lrn, monkeypatch) -> dict:
         seen["next_v"] = next_v.detach().clone()
         return real_target(reward, discount, next_v)
 
-    monkeypatch.setattr(offline_ac.iql_loss, "actor_loss", actor_spy)
-    monkeypatch.setattr(offline_ac.iql_loss, "critic_target", target_spy)
+    monkeypatch.setattr(iql_loss, "actor_loss", actor_spy)
+    monkeypatch.setattr(iql_loss, "critic_target", target_spy)
     seen["value_before"] = copy.deepcopy(lrn.value)  # before the hook, so the copy records nothing
     hook = lrn.value.register_forward_hook(lambda m, inp, out: seen["inputs"].append(inp[0].detach().clone()))
     lrn.update(batch(), 0)
@@ -205,13 +207,13 @@ def test_iql_learned_log_std_switch_is_the_jax_actor(monkeypatch):
     assert dict(lrn.parameter_counts())["log_std"] == A and "log_std" in lrn.state_dict()["modules"]
     actor_before = copy.deepcopy(lrn.actor)
     seen: dict = {}
-    real_actor = offline_ac.iql_loss.actor_loss
+    real_actor = iql_loss.actor_loss
 
     def actor_spy(log_prob, tq1, tq2, v, **k):
         seen["log_prob"] = log_prob.detach().clone()
         return real_actor(log_prob, tq1, tq2, v, **k)
 
-    monkeypatch.setattr(offline_ac.iql_loss, "actor_loss", actor_spy)
+    monkeypatch.setattr(iql_loss, "actor_loss", actor_spy)
     inputs: list[torch.Tensor] = []
     hook = lrn.value.register_forward_hook(lambda m, inp, out: inputs.append(inp[0].detach().clone()))
     b = batch()
@@ -280,13 +282,13 @@ def test_a_run_written_before_issue_16_is_not_resumed_with_the_new_behaviour(tmp
 # ----------------------------------------------------------------------------- IQL reward scaling (JAX code)
 def _critic_reward(lrn, b, monkeypatch) -> torch.Tensor:
     seen = {}
-    real = offline_ac.iql_loss.critic_target
+    real = iql_loss.critic_target
 
     def spy(reward, discount, next_v):
         seen["reward"] = reward.detach().clone()
         return real(reward, discount, next_v)
 
-    monkeypatch.setattr(offline_ac.iql_loss, "critic_target", spy)
+    monkeypatch.setattr(iql_loss, "critic_target", spy)
     lrn.update(b, 0)
     return seen["reward"]
 

@@ -11,8 +11,8 @@ import torch
 from helpers import offline_batch, offline_learner
 from repro.config import paper_defaults
 from repro.config.compose import compose, typed
-from repro.learners import offline_ac
 from repro.learners.losses import cql as cql_loss
+from repro.learners.losses import iql as iql_loss
 from repro.learners.losses import td3bc as td3bc_loss
 
 OBS = (9, 84, 84)
@@ -71,7 +71,7 @@ def test_td3bc_bc_term_in_raw_action_space_against_the_dataset_action(agent: str
                     lambda_from=lambda_from, q1=q1.detach().clone())
         return real(q1, q2, policy_action, data_action, alpha=alpha, lambda_from=lambda_from)
 
-    monkeypatch.setattr(offline_ac.td3bc_loss, "actor_loss", spy)
+    monkeypatch.setattr(td3bc_loss, "actor_loss", spy)
     lrn.update(b, 0)
     assert seen["policy"].shape == (8, A) and seen["policy"].abs().max() <= 1.0
     assert torch.equal(seen["data"], b["action"])  # the BC target is the raw dataset action
@@ -103,7 +103,7 @@ def test_cql_uniform_actions_raw_policy_samples_detached_and_encoded_for_the_cri
         seen["q_heads"] = len(q)
         return real(critic, h, q_data, uniform, policy, next_policy, alpha, temperature, **kw)
 
-    monkeypatch.setattr(offline_ac.cql_loss, "critic_regularisers", spy)
+    monkeypatch.setattr(cql_loss, "critic_regularisers", spy)
     metrics = lrn.update(b, 0)
     assert seen["uniform"].shape == (8, 4, A) and seen["uniform"].abs().max() <= 1.0
     assert not seen["policy"].requires_grad and not seen["next_policy"].requires_grad
@@ -129,15 +129,15 @@ def test_cql_policy_samples_do_not_train_the_actor(monkeypatch):
 def test_iql_order_value_then_actor_then_critic_and_target_from_v(monkeypatch):
     lrn = learner("iql")
     order: list[str] = []
-    for name in ("_iql_value", "_iql_actor"):
+    for name in ("_update_value", "_update_actor_awr"):
         real = getattr(lrn, name)
         monkeypatch.setattr(lrn, name, lambda *a, _r=real, _n=name, **k: (order.append(_n), _r(*a, **k))[1])
-    real_critic = offline_ac.iql_loss.critic_loss
-    monkeypatch.setattr(offline_ac.iql_loss, "critic_loss",
+    real_critic = iql_loss.critic_loss
+    monkeypatch.setattr(iql_loss, "critic_loss",
                         lambda *a, **k: (order.append("critic"), real_critic(*a, **k))[1])
     v_before = params(lrn.value)
     lrn.update(batch(lrn), 0)
-    assert order == ["_iql_value", "_iql_actor", "critic"]
+    assert order == ["_update_value", "_update_actor_awr", "critic"]
     assert changed(v_before, lrn.value)
     assert "value" in dict(lrn.parameter_counts()) and "value" in lrn.state_dict()["optimizers"]
 
@@ -151,14 +151,14 @@ def test_iql_critic_target_is_r_plus_discount_v_next(monkeypatch):
     with torch.no_grad():
         next_h = lrn.encoder(b["next_obs"].float())
     seen = {}
-    real = offline_ac.iql_loss.critic_target
+    real = iql_loss.critic_target
 
     def spy(reward, discount, next_v):
         seen["target"] = real(reward, discount, next_v)
         seen["next_v"] = next_v
         return seen["target"]
 
-    monkeypatch.setattr(offline_ac.iql_loss, "critic_target", spy)
+    monkeypatch.setattr(iql_loss, "critic_target", spy)
     lrn.update(b, 0)
     with torch.no_grad():  # V is not stepped after the value step: its weights now are the ones the target used
         expected_v = lrn.value(next_h)

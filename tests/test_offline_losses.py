@@ -3,6 +3,7 @@ code under test), gradient paths, and the Decision Transformer's masks and seque
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import math
 
@@ -11,7 +12,7 @@ import pytest
 import torch
 
 from repro.config import paper_defaults
-from repro.config.schema import DTConfig, IQLConfig, TD3BCConfig
+from repro.config.schema import CQLConfig, DTConfig, IQLConfig, TD3BCConfig
 from repro.learners.losses import cql, dt, iql, td3bc
 
 F64 = torch.float64
@@ -51,7 +52,7 @@ def test_td3bc_known_answer(lambda_from):
 
 def test_td3bc_lambda_detached_and_no_grad_into_data_actions():
     q1, q2, pi, a = leaf(Q1), leaf(Q2), leaf(PI), leaf(DATA_A)
-    loss, m = td3bc.actor_loss(q1, q2, pi, a)
+    loss, m = td3bc.actor_loss(q1, q2, pi, a, alpha=2.5, lambda_from="min")
     loss.backward()
     n, lam = 3, m["actor_lambda"]
     # lambda a constant: d loss / d Q_b = -lambda / B for the head that is the min, 0 for the other
@@ -64,9 +65,9 @@ def test_td3bc_lambda_detached_and_no_grad_into_data_actions():
 
 def test_td3bc_rejects_bad_input():
     with pytest.raises(ValueError, match="shape mismatch"):
-        td3bc.actor_loss(t64(Q1), t64(Q2).flatten(), t64(PI), t64(DATA_A))
+        td3bc.actor_loss(t64(Q1), t64(Q2).flatten(), t64(PI), t64(DATA_A), alpha=2.5, lambda_from="min")
     with pytest.raises(ValueError, match="lambda_from"):
-        td3bc.actor_loss(t64(Q1), t64(Q2), t64(PI), t64(DATA_A), lambda_from="q2")
+        td3bc.actor_loss(t64(Q1), t64(Q2), t64(PI), t64(DATA_A), alpha=2.5, lambda_from="q2")
 
 
 # ---------------------------------------------------------------- CQL (Kumar et al. 2020, eq. 4 / appendix F)
@@ -97,7 +98,7 @@ def cql_reference(qd, qu, qp, qnp, alpha, temp, is_=False, lp=None, lnp=None, ac
 @pytest.mark.parametrize("temp", [1.0, 0.5])
 @pytest.mark.parametrize("mode", ["plain", "is", "with_data"])
 def test_cql_regulariser_known_answer(temp, mode):
-    kw = {}
+    kw: dict = {"importance_sampling": False}
     if mode == "is":
         kw = {
             "importance_sampling": True,
@@ -143,7 +144,8 @@ def test_cql_critic_regularisers_match_per_state_evaluation():
     w, v = critic.w.tolist(), critic.v.tolist()
     data_a = torch.rand(B, A, generator=gen, dtype=F64)
     q_data = critic(h, data_a)
-    regs, metrics = cql.critic_regularisers(critic, h, q_data, *acts, alpha=1.5, temperature=1.0)
+    regs, metrics = cql.critic_regularisers(critic, h, q_data, *acts, alpha=1.5, temperature=1.0,
+                                            importance_sampling=False, include_data_in_logsumexp=False)
     for i in range(2):
         def q(b, act, i=i):
             return sum(h[b, r].item() * w[i][r] for r in range(R)) + sum(act[k] * v[i][k] for k in range(A))
@@ -169,10 +171,11 @@ def test_cql_policy_samples_carry_no_gradient(importance_sampling):
     log_prob = actor(h).sum(-1, keepdim=True).expand(B, N) + 0.0  # depends on the actor, must be cut too
     critic = LinearCritic()
     q_data = critic(h, torch.zeros(B, A, dtype=F64))
-    kw = {"importance_sampling": True, "log_prob_policy": log_prob, "log_prob_next_policy": log_prob} \
-        if importance_sampling else {}
+    kw = {"log_prob_policy": log_prob, "log_prob_next_policy": log_prob} if importance_sampling else {}
     regs, _ = cql.critic_regularisers(critic, h, q_data, cql.uniform_actions(B, N, A, like=h), policy,
-                                      next_policy, alpha=1.0, **kw)
+                                      next_policy, alpha=1.0, temperature=1.0,
+                                      importance_sampling=importance_sampling, include_data_in_logsumexp=False,
+                                      **kw)
     sum(regs).backward()
     assert actor.weight.grad is None and actor.bias.grad is None
     assert critic.v.grad is not None and critic.v.grad.abs().sum() > 0
@@ -182,7 +185,8 @@ def test_cql_policy_samples_carry_no_gradient(importance_sampling):
 def test_cql_regulariser_gradient_is_softmax_minus_data():
     """d R / d x_bj = alpha softmax_j(x_b / T) / B and d R / d Q(data)_b = -alpha / B."""
     qd, qu, qp, qnp = leaf(QD), leaf(QU), leaf(QP), leaf(QNP)
-    reg, _ = cql.regulariser(qd, qu, qp, qnp, alpha=2.0, temperature=0.5)
+    reg, _ = cql.regulariser(qd, qu, qp, qnp, alpha=2.0, temperature=0.5, importance_sampling=False,
+                             include_data_in_logsumexp=False)
     reg.backward()
     for b in range(2):
         xs = QU[b] + QP[b] + QNP[b]
@@ -193,9 +197,11 @@ def test_cql_regulariser_gradient_is_softmax_minus_data():
 
 def test_cql_rejects_bad_input():
     with pytest.raises(ValueError, match="importance sampling needs"):
-        cql.regulariser(t64(QD), t64(QU), t64(QP), t64(QNP), 1.0, importance_sampling=True)
+        cql.regulariser(t64(QD), t64(QU), t64(QP), t64(QNP), 1.0, 1.0, importance_sampling=True,
+                        include_data_in_logsumexp=False)
     with pytest.raises(ValueError, match="q_data must be"):
-        cql.regulariser(t64(QD).unsqueeze(1), t64(QU), t64(QP), t64(QNP), 1.0)
+        cql.regulariser(t64(QD).unsqueeze(1), t64(QU), t64(QP), t64(QNP), 1.0, 1.0, importance_sampling=False,
+                        include_data_in_logsumexp=False)
 
 
 def test_cql_alpha_table_6():
@@ -252,7 +258,7 @@ def test_iql_critic_target_and_loss():
 def test_iql_actor_loss_known_answer_clip_and_gradient(beta):
     tq1, tq2, v = leaf(TQ1 + [20.0]), leaf(TQ2 + [25.0]), leaf(V + [0.0])  # last: exp(beta * 20) > 100 at beta 3
     log_prob = leaf([-1.0, -2.5, 0.3, -0.7, -1.2])
-    loss, _ = iql.actor_loss(log_prob, tq1, tq2, v, beta=beta)
+    loss, _ = iql.actor_loss(log_prob, tq1, tq2, v, beta=beta, max_weight=100.0)
     advs = [min(a, b) - c for a, b, c in zip(tq1.tolist(), tq2.tolist(), v.tolist())]
     ws = [min(math.exp(beta * adv), 100.0) for adv in advs]
     assert (ws[-1] == 100.0) == (beta == 3.0)
@@ -271,7 +277,8 @@ A_DIM = 2
 def tiny_dt(context: int = 5) -> dt.DecisionTransformer:
     torch.manual_seed(0)
     model = dt.DecisionTransformer(OBS, A_DIM, context=context, embed_dim=16, n_layers=2, n_heads=2,
-                                   dropout=0.1, max_timestep=50).double()
+                                   dropout=0.1, max_timestep=50, activation="relu", init="gpt2",
+                                   ff_dropout=False).double()
     return model.eval()
 
 
@@ -391,7 +398,7 @@ def tagged_episodes(lengths):
 def test_sequence_sampler_windows_never_cross_and_pad_left():
     lengths, K, fs = [7, 3, 12], 5, 3
     eps = tagged_episodes(lengths)
-    sampler = dt.SequenceSampler(eps, context=K, frame_stack=fs, rtg_scale=1e-3, seed=0)
+    sampler = dt.SequenceSampler(eps, context=K, frame_stack=fs, rtg_scale=1e-3, seed=0, action_pad=-10.0)
     batch = sampler.sample(400)
     assert batch["frames"].shape == (400, K, 3 * fs, 4, 4) and batch["frames"].dtype == np.uint8
     starts_seen = set()
@@ -419,34 +426,41 @@ def test_sequence_sampler_windows_never_cross_and_pad_left():
 
 def test_sequence_sampler_state_and_bad_episodes():
     eps = tagged_episodes([6, 4])
-    a = dt.SequenceSampler(eps, context=3, seed=5)
+    kw = {"context": 3, "frame_stack": 3, "rtg_scale": 1e-3, "action_pad": -10.0}
+    a = dt.SequenceSampler(eps, seed=5, **kw)
     a.sample(3)
-    b = dt.SequenceSampler(eps, context=3, seed=99)
+    b = dt.SequenceSampler(eps, seed=99, **kw)
     b.load_state_dict(a.state_dict())
     assert np.array_equal(a.sample(8)["start"], b.sample(8)["start"])
     bad = dict(eps[0], frames=eps[0]["frames"][:-1])  # frames must be T+1
     with pytest.raises(ValueError, match="episode 0"):
-        dt.SequenceSampler([bad])
+        dt.SequenceSampler([bad], seed=0, **kw)
     with pytest.raises(ValueError, match="no episodes"):
-        dt.SequenceSampler([])
+        dt.SequenceSampler([], seed=0, **kw)
     with pytest.raises(ValueError, match="timestep embedding"):
-        dt.SequenceSampler(eps, max_timestep=5)
-    dt.SequenceSampler(eps, max_timestep=6)
+        dt.SequenceSampler(eps, seed=0, max_timestep=5, **kw)
+    dt.SequenceSampler(eps, seed=0, max_timestep=6, **kw)
 
 
-def test_config_defaults_match_the_functions():
+def test_config_values_have_one_source_the_loss_functions_repeat_none():
+    """A config value (agent.td3bc, agent.cql, agent.iql, agent.dt) is a required argument of the function that
+    uses it, never a keyword default beside the YAML's: a default here could drift from the config unseen."""
     def defaults(fn):
         return {k: p.default for k, p in inspect.signature(fn).parameters.items() if p.default is not p.empty}
 
-    cfg = DTConfig()
-    model = defaults(dt.DecisionTransformer.__init__)
-    assert {k: getattr(cfg, k) for k in model} == model
-    assert defaults(dt.make_optimizer) == {"lr": cfg.lr, "weight_decay": cfg.weight_decay,
-                                           "warmup_steps": cfg.warmup_steps}
-    assert dt.GRAD_CLIP == cfg.grad_clip and defaults(dt.SequenceSampler.__init__)["rtg_scale"] == cfg.rtg_scale
-    assert defaults(td3bc.actor_loss) == {"alpha": TD3BCConfig().alpha, "lambda_from": TD3BCConfig().lambda_from}
-    assert defaults(iql.value_loss)["expectile"] == IQLConfig().expectile
-    assert defaults(iql.actor_loss) == {"beta": IQLConfig().beta, "max_weight": IQLConfig().max_weight}
+    def config_fields(*configs):
+        return {f.name for c in configs for f in dataclasses.fields(c)}
+
+    config_names = config_fields(TD3BCConfig, CQLConfig, IQLConfig, DTConfig) | {"frame_stack", "seed"}
+    functions = [td3bc.actor_loss, cql.regulariser, cql.critic_regularisers, iql.value_loss, iql.actor_loss,
+                 dt.DecisionTransformer.__init__, dt.SequenceSampler.__init__, dt.EvalContext.__init__,
+                 dt.make_optimizer, dt.GPT2Stack.__init__]
+    repeated = {fn.__qualname__: sorted(set(defaults(fn)) & config_names) for fn in functions}
+    # the sampler's max_timestep=None switches its length check off; it is not the config's value (1000)
+    assert repeated == {fn.__qualname__: (["max_timestep"] if fn is dt.SequenceSampler.__init__ else [])
+                        for fn in functions}
+    assert defaults(dt.SequenceSampler.__init__)["max_timestep"] is None
+    assert not hasattr(dt, "GRAD_CLIP")  # the clip is agent.dt.grad_clip alone
 
 
 def test_eval_context_history():
@@ -468,10 +482,10 @@ def test_eval_context_history():
         ctx.inputs(obs[4], 2)
 
 
-def test_dt_optimizer_warmup_and_defaults():
+def test_dt_optimizer_warmup_and_weight_decay():
     model = torch.nn.Linear(2, 2)
     opt, sched = dt.make_optimizer(model, lr=1e-4, weight_decay=1e-4, warmup_steps=10)
-    assert opt.param_groups[0]["weight_decay"] == 1e-4 and dt.GRAD_CLIP == 0.25
+    assert opt.param_groups[0]["weight_decay"] == 1e-4
     lrs = []
     for _ in range(12):
         lrs.append(opt.param_groups[0]["lr"])
@@ -484,7 +498,7 @@ def test_dt_sampler_batch_feeds_the_model():
     eps = tagged_episodes([8, 3])
     for ep in eps:
         ep["frames"] = np.repeat(np.repeat(ep["frames"], 4, axis=2), 4, axis=3)  # 16x16
-    sampler = dt.SequenceSampler(eps, context=5, frame_stack=3)
+    sampler = dt.SequenceSampler(eps, context=5, frame_stack=3, rtg_scale=1e-3, seed=0, action_pad=-10.0)
     model = tiny_dt()
     b = dt.batch_to_tensors(sampler.sample(4))
     pred = model(b["frames"], b["actions"], b["rtg"], b["timesteps"], b["mask"])

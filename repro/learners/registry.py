@@ -10,8 +10,10 @@ from repro.agent.agent import Agent
 from repro.config.schema import AgentConfig
 from repro.learners.base import Learner
 from repro.learners.bc import BCLearner
+from repro.learners.cql import CQL
 from repro.learners.dt import DTLearner
-from repro.learners.offline_ac import CQL, IQL, TD3BC
+from repro.learners.iql import IQL
+from repro.learners.td3bc import TD3BC
 
 LearnerFactory = Callable[..., Learner]  # (cfg, obs_shape, action_dim, device=, explore_steps=) -> Learner
 

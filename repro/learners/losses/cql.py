@@ -4,16 +4,17 @@ For one critic head Q and a batch of encoded states h_b (b = 1..B):
 
     R = alpha * ( T * mean_b logsumexp_j (x_bj / T)  -  mean_b Q(h_b, u(a_b)) )
 
-where a_b is the dataset action, T the temperature (1), and the x_bj (j = 1..3N) are Q at
+where a_b is the dataset action, T the temperature (1 in V-D4RL), and the x_bj (j = 1..3N) are Q at
 N uniform actions on [-1, 1]^|A|, N policy samples drawn at h_b, and N policy samples drawn at h'_b (the
 next state) but evaluated at h_b. With ``importance_sampling=True`` (the original CQL's "min_q_version 3")
 each x has its sampling log-density subtracted: log(2^-|A|) for the uniform actions and the policy's
-log-probability for the policy samples. Default off, as in V-D4RL's pixel CQL (conglu1997/v-d4rl,
-``drqbc/cql.py``: ``cql_importance_sample=False``). Without importance sampling V-D4RL (and the original
-CQL's "min_q_version 2") also put the data action's Q inside the logsumexp; that is
-``include_data_in_logsumexp=True`` here; the learner's default (``agent.cql.include_data_in_logsumexp``,
-true) follows V-D4RL, this function's default (False) is the three sample sets only. V-D4RL draws the policy
-samples with their noise clipped to ``stddev_clip`` (the learner's ``agent.cql.clip_policy_samples``).
+log-probability for the policy samples. Off in the config (``agent.cql.importance_sampling``), as in
+V-D4RL's pixel CQL (conglu1997/v-d4rl, ``drqbc/cql.py``: ``cql_importance_sample=False``). Without importance
+sampling V-D4RL (and the original CQL's "min_q_version 2") also put the data action's Q inside the logsumexp; that is
+``include_data_in_logsumexp=True`` here (``agent.cql.include_data_in_logsumexp``, true as V-D4RL); False is
+the three sample sets only. V-D4RL draws the policy samples with their noise clipped to ``stddev_clip`` (the
+learner's ``agent.cql.clip_policy_samples``). alpha, T and both switches come from the config (``agent.cql``):
+no defaults here.
 
 Policy samples carry no gradient (CQL issue 5: otherwise the regulariser trains the policy). The caller
 must pass them detached (drawn under ``torch.no_grad()``); ``critic_regularisers`` detaches them and their
@@ -44,11 +45,10 @@ def uniform_actions(batch: int, n: int, action_dim: int, like: torch.Tensor,
 
 
 def regulariser(q_data: torch.Tensor, q_uniform: torch.Tensor, q_policy: torch.Tensor,
-                q_next_policy: torch.Tensor, alpha: float, temperature: float = 1.0, *,
-                importance_sampling: bool = False, action_dim: int | None = None,
+                q_next_policy: torch.Tensor, alpha: float, temperature: float, *,
+                importance_sampling: bool, include_data_in_logsumexp: bool, action_dim: int | None = None,
                 log_prob_policy: torch.Tensor | None = None,
-                log_prob_next_policy: torch.Tensor | None = None,
-                include_data_in_logsumexp: bool = False) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+                log_prob_next_policy: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """The alpha-weighted regulariser of one critic head, and its parts (detached).
 
     ``q_data``: (B,) Q at the dataset actions. ``q_uniform``, ``q_policy``, ``q_next_policy``: (B, N) Q at
@@ -84,10 +84,9 @@ def regulariser(q_data: torch.Tensor, q_uniform: torch.Tensor, q_policy: torch.T
 def critic_regularisers(critic: Callable[[torch.Tensor, torch.Tensor], Sequence[torch.Tensor]],
                         h: torch.Tensor, q_data: Sequence[torch.Tensor], uniform: torch.Tensor,
                         policy: torch.Tensor, next_policy: torch.Tensor, alpha: float,
-                        temperature: float = 1.0, *, importance_sampling: bool = False,
+                        temperature: float, *, importance_sampling: bool, include_data_in_logsumexp: bool,
                         log_prob_policy: torch.Tensor | None = None,
                         log_prob_next_policy: torch.Tensor | None = None,
-                        include_data_in_logsumexp: bool = False,
                         ) -> tuple[tuple[torch.Tensor, ...], dict[str, float]]:
     """The regulariser of every critic head, and metrics named per head (``cql_reg_q1`` ...).
 

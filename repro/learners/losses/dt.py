@@ -28,9 +28,6 @@ from torch import nn
 
 from repro.agent.networks import Encoder
 
-GRAD_CLIP = 0.25  # the caller clips: torch.nn.utils.clip_grad_norm_(model.parameters(), GRAD_CLIP)
-
-
 ACTIVATIONS = ("relu", "gelu", "gelu_new")  # GPT2Config.activation_function values (Chen et al.'s default: relu)
 INITS = ("gpt2", "torch")
 GPT2_INIT_STD = 0.02  # GPT2Config.initializer_range
@@ -51,7 +48,7 @@ class GPT2MLP(nn.Module):
     """c_fc, activation, c_proj, dropout (GPT-2's MLP). ``ff_dropout`` adds a dropout right after the
     activation, as torch's TransformerEncoderLayer has (GPT-2 has none there)."""
 
-    def __init__(self, embed_dim: int, act: str, dropout: float, ff_dropout: bool = False):
+    def __init__(self, embed_dim: int, act: str, dropout: float, ff_dropout: bool):
         super().__init__()
         self.c_fc = nn.Linear(embed_dim, 4 * embed_dim)
         self.act = activation(act)
@@ -70,7 +67,7 @@ class GPT2Block(nn.Module):
     the output projection (GPT-2's c_proj); ``resid_dropout`` after it (resid_pdrop).
     """
 
-    def __init__(self, embed_dim: int, n_heads: int, dropout: float, act: str, ff_dropout: bool = False):
+    def __init__(self, embed_dim: int, n_heads: int, dropout: float, act: str, ff_dropout: bool):
         super().__init__()
         self.ln_1 = nn.LayerNorm(embed_dim)
         self.attn = nn.MultiheadAttention(embed_dim, n_heads, dropout=dropout, batch_first=True)
@@ -90,7 +87,7 @@ class GPT2Stack(nn.Module):
     embedding dropout (GPT-2's ``drop``) is the model's ``embed_drop``."""
 
     def __init__(self, embed_dim: int, n_layers: int, n_heads: int, dropout: float, act: str,
-                 ff_dropout: bool = False):
+                 ff_dropout: bool):
         super().__init__()
         self.h = nn.ModuleList([GPT2Block(embed_dim, n_heads, dropout, act, ff_dropout) for _ in range(n_layers)])
         self.ln_f = nn.LayerNorm(embed_dim)
@@ -121,14 +118,16 @@ def gpt2_init(module: nn.Module) -> None:
 class DecisionTransformer(nn.Module):
     """(frames, actions, returns-to-go, timesteps, mask) windows -> predicted actions, (B, K, A).
 
-    Defaults as Chen et al.'s gym code: ReLU feed-forward (``--activation_function relu``), GPT-2 blocks
-    (pre-LayerNorm, final LayerNorm, no dropout after the activation) with GPT-2's initialisation of the
-    body. ``activation="gelu"`` is CORL's; ``init="torch"`` and ``ff_dropout=True`` give the earlier torch-layer model.
+    Every size and switch comes from the config (``agent.dt``, whose values are Chen et al.'s gym code's):
+    ``activation="relu"`` (``--activation_function relu``), GPT-2 blocks (pre-LayerNorm, final LayerNorm,
+    ``ff_dropout=False``: no dropout after the activation) with GPT-2's initialisation of the body
+    (``init="gpt2"``). ``activation="gelu"`` is CORL's; ``init="torch"`` and ``ff_dropout=True`` give the
+    earlier torch-layer model.
     """
 
-    def __init__(self, obs_shape: tuple[int, int, int], action_dim: int, context: int = 20,
-                 embed_dim: int = 128, n_layers: int = 3, n_heads: int = 1, dropout: float = 0.1,
-                 max_timestep: int = 1000, activation: str = "relu", init: str = "gpt2", ff_dropout: bool = False):
+    def __init__(self, obs_shape: tuple[int, int, int], action_dim: int, *, context: int, embed_dim: int,
+                 n_layers: int, n_heads: int, dropout: float, max_timestep: int, activation: str, init: str,
+                 ff_dropout: bool):
         super().__init__()
         if init not in INITS:
             raise ValueError(f"dt.init must be one of {', '.join(INITS)}; got {init!r}")
@@ -230,9 +229,8 @@ class SequenceSampler:
     model's), an episode too long for the timestep embedding is a one-line ValueError here.
     """
 
-    def __init__(self, episodes: Iterable[Mapping[str, np.ndarray]], context: int = 20, frame_stack: int = 3,
-                 rtg_scale: float = 1e-3, seed: int = 0, max_timestep: int | None = None,
-                 action_pad: float = -10.0):
+    def __init__(self, episodes: Iterable[Mapping[str, np.ndarray]], *, context: int, frame_stack: int,
+                 rtg_scale: float, seed: int, action_pad: float, max_timestep: int | None = None):
         self.context, self.frame_stack, self.rtg_scale = context, frame_stack, rtg_scale
         self.action_pad = float(action_pad)
         self.frames: list[np.ndarray] = []
@@ -294,7 +292,7 @@ class EvalContext:
     ``record(action, reward)`` stores the action taken and decrements the return-to-go by the scaled reward.
     """
 
-    def __init__(self, target_return: float, context: int = 20, rtg_scale: float = 1e-3):
+    def __init__(self, target_return: float, *, context: int, rtg_scale: float):
         self.context, self.rtg_scale = context, rtg_scale
         self.obs: list[np.ndarray] = []
         self.actions: list[np.ndarray] = []
@@ -326,10 +324,10 @@ class LinearWarmup:
         return min((step + 1) / self.warmup_steps, 1.0)
 
 
-def make_optimizer(model: nn.Module, lr: float = 1e-4, weight_decay: float = 1e-4, warmup_steps: int = 10_000,
+def make_optimizer(model: nn.Module, *, lr: float, weight_decay: float, warmup_steps: int,
                    ) -> tuple[torch.optim.AdamW, torch.optim.lr_scheduler.LambdaLR]:
     """AdamW over all parameters with a linear warm-up; call ``scheduler.step()`` after each update and
-    clip gradients to ``GRAD_CLIP`` before ``optimizer.step()``."""
+    clip gradients (to ``agent.dt.grad_clip``) before ``optimizer.step()``."""
     optimizer = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=weight_decay)
     return optimizer, torch.optim.lr_scheduler.LambdaLR(optimizer, LinearWarmup(warmup_steps))
 

@@ -1,17 +1,18 @@
 """Implicit Q-learning (Kostrikov et al. 2022): expectile value, critic target from V(s'), AWR actor.
 
     d          = min_i Qtarget_i(s, a) - V(s)
-    value loss = mean |tau - 1(d < 0)| d^2                          (tau = 0.7, the expectile)
+    value loss = mean |tau - 1(d < 0)| d^2                          (tau: the expectile, the paper's 0.7)
     target     = r + discount * V(s')                               (discount from the batch: gamma^n x not-done)
     critic     = sum_i mean (Q_i(s, a) - target)^2
-    actor loss = -mean min(exp(beta * adv), 100) * log pi(a | s),   adv = min_i Qtarget_i(s, a) - V(s)
+    actor loss = -mean min(exp(beta * adv), max_weight) * log pi(a | s),   adv = min_i Qtarget_i(s, a) - V(s)
 
 Everything that is a target is detached here: the target critic's Q values, V(s') in the critic target,
 and the advantage weight (the actor's loss reaches only log pi). beta is an inverse temperature: 0.1 is
 the TACO paper's value and the reference code's ``Learner`` default; the reference MuJoCo config
 (ikostrikov/implicit_q_learning, ``configs/mujoco_config.py``) uses temperature 3, i.e. beta = 3.
 The JAX reference order is value, actor, critic, the actor and the critic using V after the value step; the
-learner owns the order and the optimizer steps.
+learner owns the order and the optimizer steps. tau, beta and max_weight come from the config (``agent.iql``):
+no defaults here.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from repro.learners.losses._checks import same_shape
 
 
 def value_loss(target_q1: torch.Tensor, target_q2: torch.Tensor, v: torch.Tensor,
-               expectile: float = 0.7) -> tuple[torch.Tensor, dict[str, float]]:
+               expectile: float) -> tuple[torch.Tensor, dict[str, float]]:
     """Expectile regression of V(s) onto min_i Qtarget_i(s, a); the target critic gets no gradient."""
     same_shape(target_q1=target_q1, target_q2=target_q2, v=v)
     if not 0.0 < expectile < 1.0:
@@ -51,7 +52,7 @@ def critic_loss(q1: torch.Tensor, q2: torch.Tensor, target: torch.Tensor) -> tup
 
 
 def actor_loss(log_prob: torch.Tensor, target_q1: torch.Tensor, target_q2: torch.Tensor, v: torch.Tensor,
-               beta: float = 0.1, max_weight: float = 100.0) -> tuple[torch.Tensor, dict[str, float]]:
+               beta: float, max_weight: float) -> tuple[torch.Tensor, dict[str, float]]:
     """Advantage-weighted regression: -mean min(exp(beta * adv), max_weight) * log pi(a|s).
 
     ``log_prob``: log pi(a|s) of the dataset action, summed over action dimensions, same shape as ``v``.

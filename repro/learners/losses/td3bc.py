@@ -4,8 +4,9 @@
     lambda = alpha / mean_b |Q(sg(h_b), u(a~_b))|   (a constant: no gradient flows through it)
 
 with a~ the clipped-noise policy sample and a the dataset action (the BC term stays in raw action space).
-``lambda_from="min"`` (default, V-D4RL's DrQ+BC) takes Q = min(Q1, Q2); ``lambda_from="q1"`` is the
-original paper's form, where both lambda and the Q term come from Q1 alone.
+``lambda_from="min"`` (V-D4RL's DrQ+BC) takes Q = min(Q1, Q2); ``lambda_from="q1"`` is the original paper's
+form, where both lambda and the Q term come from Q1 alone. Both values come from the config
+(``agent.td3bc.alpha``, ``agent.td3bc.lambda_from``): no defaults here.
 
 The learner computes the Q values (the critic, the encoder's detach and the action encoder are its job)
 and steps the optimizer; this module only turns tensors into a loss.
@@ -22,7 +23,7 @@ LAMBDA_FROM = ("min", "q1")
 
 
 def actor_loss(q1: torch.Tensor, q2: torch.Tensor, policy_action: torch.Tensor, data_action: torch.Tensor,
-               alpha: float = 2.5, lambda_from: str = "min") -> tuple[torch.Tensor, dict[str, float]]:
+               alpha: float, lambda_from: str) -> tuple[torch.Tensor, dict[str, float]]:
     """TD3+BC actor loss and its metrics.
 
     ``q1``, ``q2``: the critic's heads at (sg(h), u(policy_action)), same shape (e.g. (B, 1)).
