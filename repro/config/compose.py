@@ -13,7 +13,6 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from repro.config.schema import RunConfig
-from repro.runs.runformat import is_folder_value
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -32,6 +31,11 @@ VALID_CHOICES = {
 
 class ConfigError(ValueError):
     """A config problem, explained in one line."""
+
+
+def is_folder_value(value: str) -> bool:
+    """An ``offline.dataset`` value naming a folder (has a '/', starts with '~', or is '.'/'..'), not a kind."""
+    return "/" in value or value.startswith("~") or value in (".", "..")
 
 
 def group_options(group: str) -> list[str]:
