@@ -2,8 +2,72 @@
 
 from __future__ import annotations
 
+import dataclasses
+import enum
+import typing
 from dataclasses import dataclass, field
 from typing import Any, Optional
+
+
+class Choice(str, enum.Enum):
+    """A closed set of allowed values of one config field.
+
+    A member is a ``str`` equal to its value, and prints, formats and serialises (JSON, config.yaml) as that
+    value. Its name is its value too: OmegaConf reads and writes an Enum field by member name, so a member
+    named otherwise would change the YAML.
+    """
+
+    def __str__(self) -> str:
+        return str(self.value)
+
+    def __format__(self, spec: str) -> str:
+        return str(self.value).__format__(spec)
+
+    @classmethod
+    def values(cls) -> tuple[str, ...]:
+        """The allowed values, in declaration order."""
+        return tuple(str(m.value) for m in cls)
+
+
+class LearnerName(Choice):
+    """``agent.learner``: the keys of the learner registry (repro/learners/registry.py checks it at import)."""
+
+    actor_critic = "actor_critic"  # DrQ-v2 / TACO and the representation ablations (online)
+    bc = "bc"  # behaviour cloning (offline)
+    td3bc = "td3bc"  # TD3+BC on the DrQ-v2 backbone (offline)
+    cql = "cql"  # CQL on the DrQ-v2 backbone (offline)
+    iql = "iql"  # IQL on the DrQ-v2 backbone (offline)
+    dt = "dt"  # Decision Transformer on pixels (offline)
+
+
+# The learners that train online (in an environment); every other learner trains from offline.dataset.
+ONLINE_LEARNERS = frozenset({LearnerName.actor_critic})
+
+
+def is_offline(learner: str) -> bool:
+    """Whether ``learner`` (an ``agent.learner`` value) trains from a fixed dataset (offline.dataset)."""
+    return learner not in ONLINE_LEARNERS
+
+
+class ObjectiveName(Choice):
+    """The keys of ``agent.objectives``: the auxiliary objectives (repro/agent/objectives/ checks them at import)."""
+
+    taco = "taco"  # InfoNCE of (z_t, u_t..u_{t+K-1}) against z_{t+K}
+    curl = "curl"  # InfoNCE between two augmentations of one observation
+    reward = "reward"  # regression of the reward from (z_t, u_t..u_{t+K-1})
+    spr = "spr"  # SPR: predict the momentum encoder's future latents (negative cosine)
+    atc = "atc"  # ATC: augmented temporal contrast, no actions
+    driml = "driml"  # DRIML: InfoNCE of (z_t, a_t) against z_{t+K}
+
+
+def check_registry(what: str, keys: Any, names: type[Choice]) -> None:
+    """Raise ValueError (one line) unless the ``keys`` of a registry are exactly the values of ``names``."""
+    keys, allowed = {str(k) for k in keys}, set(names.values())
+    if keys != allowed:
+        missing, extra = sorted(allowed - keys), sorted(keys - allowed)
+        raise ValueError(f"the {what} registry must hold exactly the names of {names.__name__} in "
+                         f"repro/config/schema.py; missing: {', '.join(missing) or '-'}; not in the schema: "
+                         f"{', '.join(extra) or '-'}")
 
 
 @dataclass
@@ -89,7 +153,7 @@ class DTConfig:
 @dataclass
 class AgentConfig:
     name: str = "taco"
-    learner: str = "actor_critic"
+    learner: LearnerName = LearnerName.actor_critic
     lr: float = 1e-4
     feature_dim: int = 50
     hidden_dim: int = 1024
@@ -190,3 +254,17 @@ class RunConfig:
     replay: ReplayConfig = field(default_factory=ReplayConfig)
     offline: OfflineConfig = field(default_factory=OfflineConfig)
     runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
+
+
+def choice_fields(section: type = RunConfig, prefix: str = "") -> dict[str, type[Choice]]:
+    """Dotted config key -> its :class:`Choice` Enum, for every field of ``section`` (and of its sub-sections)
+    typed with one."""
+    hints = typing.get_type_hints(section)
+    out: dict[str, type[Choice]] = {}
+    for f in dataclasses.fields(section):
+        kind = hints[f.name]
+        if isinstance(kind, type) and issubclass(kind, Choice):
+            out[prefix + f.name] = kind
+        elif isinstance(kind, type) and dataclasses.is_dataclass(kind):
+            out.update(choice_fields(kind, f"{prefix}{f.name}."))
+    return out

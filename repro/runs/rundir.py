@@ -21,8 +21,8 @@ import yaml
 from omegaconf import DictConfig, OmegaConf
 
 from repro.config.compose import drop_non_identity, identity
+from repro.config.schema import Choice, RunConfig, is_offline
 from repro.runs.fsutil import atomic_write_text, named_os_error
-from repro.learners.registry import is_offline
 from repro.runs.runformat import (
     CHECKPOINT,
     CONFIG,
@@ -35,7 +35,6 @@ from repro.runs.runformat import (
     run_path,
     run_state,
 )
-from repro.config.schema import RunConfig
 
 __all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "REPLAY", "RESOLVED", "WRITER_LOCK", "RunDirMismatch",
            "RunLocked", "WriterLock", "acquire_writer_lock", "config_diff", "config_matches", "lock_holder",
@@ -118,7 +117,9 @@ def _added_at_default(diff: str) -> bool:
         return False
     default = OmegaConf.select(OmegaConf.structured(RunConfig), key, default="<no default>")
     if isinstance(default, DictConfig):
-        default = OmegaConf.to_container(default, resolve=True)
+        default = OmegaConf.to_container(default, resolve=True, enum_to_str=True)
+    elif isinstance(default, Choice):  # as identity() has it: the plain value
+        default = default.value
     return repr(default) == new
 
 
