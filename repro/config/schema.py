@@ -60,6 +60,87 @@ class ObjectiveName(Choice):
     driml = "driml"  # DRIML: InfoNCE of (z_t, a_t) against z_{t+K}
 
 
+class LatentRounding(Choice):
+    """``agent.latent_action_rounding``: the latent action size when ``latent_action_dim`` is null."""
+
+    upstream = "upstream"  # int(1.25 |A|) + 1 (the TACO code)
+    paper = "paper"  # ceil(1.25 |A|) (the paper's text)
+
+
+class RewardTarget(Choice):
+    """``agent.reward_target``: what the reward objective regresses."""
+
+    nstep = "nstep"  # the n-step discounted return (upstream)
+    ksum = "ksum"  # the sum of the K rewards (paper)
+
+
+class Device(Choice):
+    """``replay.device`` and ``runtime.device``."""
+
+    cpu = "cpu"
+    cuda = "cuda"
+    auto = "auto"  # cuda when available, else cpu
+
+
+class VideoEvery(Choice):
+    """``train.video_every``: which evaluations get a video."""
+
+    all = "all"  # every evaluation
+    last = "last"  # the final evaluation only
+
+
+class LambdaFrom(Choice):
+    """``agent.td3bc.lambda_from``: the Q that TD3+BC's lambda and actor term use."""
+
+    min = "min"  # min(Q1, Q2) (V-D4RL's DrQ+BC)
+    q1 = "q1"  # Q1 only (the original TD3+BC paper)
+
+
+class ValueForTargets(Choice):
+    """``agent.iql.value_for_targets``: which V IQL's actor advantage and critic target use."""
+
+    after = "after"  # V after the value step (the JAX code's learner.py)
+    before = "before"  # V before it (CORL's iql.py)
+
+
+class RewardScaling(Choice):
+    """``agent.iql.reward_scaling``."""
+
+    none = "none"  # the dataset's rewards as they are (DrQ-v2 / V-D4RL)
+    return_range = "return_range"  # x 1000 / (best - worst episode return of the dataset) (the JAX code)
+
+
+class DTActivation(Choice):
+    """``agent.dt.activation``: the feed-forward activation, by its GPT2Config name."""
+
+    relu = "relu"  # Chen et al.'s --activation_function default
+    gelu = "gelu"  # erf GELU (CORL)
+    gelu_new = "gelu_new"  # tanh-approximated GELU
+
+
+class DTInit(Choice):
+    """``agent.dt.init``: the initialisation of the transformer body."""
+
+    gpt2 = "gpt2"  # N(0, 0.02) weights, zero biases (GPT2PreTrainedModel)
+    torch = "torch"  # torch's layer defaults
+
+
+class Suite(Choice):
+    """``task.suite``: the simulator suite of the task."""
+
+    dmc = "dmc"  # dm_control.suite
+    manipulation = "manipulation"  # dm_control.manipulation
+    metaworld = "metaworld"  # Meta-world
+
+
+class Preset(Choice):
+    """``task.preset``: DrQ-v2's difficulty preset (conf/preset/), which sets the exploration schedule."""
+
+    easy = "easy"
+    medium = "medium"
+    hard = "hard"
+
+
 def check_registry(what: str, keys: Any, names: type[Choice]) -> None:
     """Raise ValueError (one line) unless the ``keys`` of a registry are exactly the values of ``names``."""
     keys, allowed = {str(k) for k in keys}, set(names.values())
@@ -104,7 +185,7 @@ class TD3BCConfig:
 
     alpha: float = 2.5  # paper section 5.2: 2.5 (no difference in [2, 3])
     # "min": lambda and the Q term from min(Q1, Q2) (V-D4RL's DrQ+BC); "q1": from Q1 only (original paper)
-    lambda_from: str = "min"
+    lambda_from: LambdaFrom = LambdaFrom.min
 
 
 @dataclass
@@ -116,7 +197,7 @@ class IQLConfig:
     max_weight: float = 100.0  # exp(beta * adv) is clipped here (IQL reference code)
     # which V the actor's advantage and the critic's target use: "after" the value step (the JAX code's
     # learner.py, the default) or "before" it (CORL's iql.py)
-    value_for_targets: str = "after"
+    value_for_targets: ValueForTargets = ValueForTargets.after
     # None: constant actor learning rate (DrQ-v2); N: cosine decay of the actor's rate to 0 over N updates
     # (the JAX code's opt_decay_schedule "cosine" with max_steps = N)
     actor_lr_cosine_updates: Optional[int] = None
@@ -125,7 +206,7 @@ class IQLConfig:
     learned_log_std: bool = False
     # "none": the dataset's rewards as they are (DrQ-v2 / V-D4RL); "return_range": rewards x 1000 / (best - worst
     # episode return of the dataset), the JAX code's normalize() of locomotion datasets (train_offline.py)
-    reward_scaling: str = "none"
+    reward_scaling: RewardScaling = RewardScaling.none
 
 
 @dataclass
@@ -144,8 +225,8 @@ class DTConfig:
     batch_size: int = 64
     rtg_scale: float = 1e-3  # returns-to-go are multiplied by this (1/1000)
     max_timestep: int = 1000  # size of the learned timestep embedding; episodes must be shorter
-    activation: str = "relu"  # feed-forward activation (Chen et al.'s --activation_function default); CORL: gelu
-    init: str = "gpt2"  # "gpt2": N(0, 0.02) body weights (GPT2PreTrainedModel); "torch": torch's layer defaults
+    activation: DTActivation = DTActivation.relu  # feed-forward activation (Chen et al.'s default); CORL: gelu
+    init: DTInit = DTInit.gpt2  # "gpt2": N(0, 0.02) body weights (GPT2PreTrainedModel); "torch": torch's defaults
     ff_dropout: bool = False  # a dropout after the activation (torch's TransformerEncoderLayer); GPT-2: none
     action_pad: float = -10.0  # value of padded action slots in training windows (Chen et al.'s get_batch)
 
@@ -166,9 +247,9 @@ class AgentConfig:
     stddev_schedule: StdSchedule = field(default_factory=StdSchedule)
     action_encoder: bool = True
     latent_action_dim: Optional[int] = None
-    latent_action_rounding: str = "upstream"
+    latent_action_rounding: LatentRounding = LatentRounding.upstream
     action_hidden_dim: int = 64
-    reward_target: str = "nstep"
+    reward_target: RewardTarget = RewardTarget.nstep
     objectives: dict[str, float] = field(default_factory=dict)
     objective_params: dict[str, Any] = field(default_factory=dict)
     compile: bool = False
@@ -182,8 +263,8 @@ class AgentConfig:
 @dataclass
 class TaskConfig:
     name: str = "cheetah_run"
-    suite: str = "dmc"
-    preset: str = "medium"
+    suite: Suite = Suite.dmc
+    preset: Preset = Preset.medium
     std_duration: int = 500_000
     frames: int = 3_100_000
     drqv2_batch_size: int = 256
@@ -210,14 +291,14 @@ class TrainConfig:
     checkpoint_every_episodes: int = 1
     save_frames: bool = True
     save_video: bool = False
-    video_every: str = "all"
+    video_every: VideoEvery = VideoEvery.all
     video_size: int = 256
 
 
 @dataclass
 class ReplayConfig:
     capacity: int = 1_000_000
-    device: str = "cpu"
+    device: Device = Device.cpu
 
 
 @dataclass
@@ -235,7 +316,7 @@ class OfflineConfig:
 @dataclass
 class RuntimeConfig:
     results_root: str = "runs"
-    device: str = "auto"
+    device: Device = Device.auto
     progress: Any = "auto"
     threads: Optional[int] = None
     record: bool = False
