@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import importlib
 
+import pandas as pd
 import pytest
+from omegaconf import OmegaConf
 
 from repro.config import schema
 from repro.config.schema import LearnerName, ObjectiveName, check_registry, is_offline
@@ -53,3 +55,30 @@ def test_every_choice_member_is_named_by_its_value():
     for enum in {*fields.values(), ObjectiveName}:
         assert all(m.name == m.value for m in enum), enum
         assert all(str(m) == f"{m}" == m.value for m in enum), enum
+
+
+AGENT_OF_SECTION = {"iql": "iql", "dt": "dt", "td3bc": "td3bc", "learner": "bc"}
+
+
+@pytest.mark.parametrize("key", sorted(schema.choice_fields()))
+def test_a_value_outside_a_choice_is_one_config_error_line_naming_the_allowed_values(key: str):
+    """Every Enum-typed field, task.suite and td3bc.lambda_from included (no check read them before the Enums)."""
+    from repro.config.compose import ConfigError, compose
+
+    parts = key.split(".")
+    agent = AGENT_OF_SECTION.get(parts[1], "taco") if parts[0] == "agent" and len(parts) > 1 else "taco"
+    allowed = schema.choice_fields()[key].values()
+    with pytest.raises(ConfigError) as err:
+        compose([f"agent={agent}", f"{key}=nonsense"])
+    assert str(err.value) == f"{key}=nonsense is not one of {', '.join(allowed)}."
+    ok = compose([f"agent={agent}", "offline.dataset=medium", f"{key}={allowed[-1]}"] if agent != "taco"
+                 else [f"{key}={allowed[-1]}"])
+    assert str(OmegaConf.select(ok, key)) == allowed[-1] and key + ": " + allowed[-1] in _yaml_lines(ok)
+
+
+def _yaml_lines(cfg) -> str:
+    """``section.key: value`` lines of the config.yaml text a run writes for ``cfg``."""
+    import yaml
+
+    flat = pd.json_normalize(yaml.safe_load(OmegaConf.to_yaml(cfg, resolve=True))).iloc[0].to_dict()
+    return "\n".join(f"{k}: {v}" for k, v in flat.items())
