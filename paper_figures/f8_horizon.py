@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 from analysis import select
 from analysis.context import Context
 from analysis.identity import task_display
@@ -12,14 +14,16 @@ from paper_figures.registry import ArtifactResult, register
 LABELS = ["K=1", "K=3", "DrQ-v2"]
 
 
-def default_k(task: str) -> int:
-    """The K the paper's Table 1 uses: 1 on quadruped_run and walker_run, 3 elsewhere (Appendix B)."""
-    try:
-        from repro.envs import get_task
+@functools.cache
+def default_k(task: str) -> int | None:
+    """The K the paper's Table 1 uses, as the task's config file sets it (repro/conf/task/<task>.yaml: 1 on
+    quadruped_run and walker_run, 3 elsewhere, Appendix B); None for a task without a config file."""
+    from repro.config.compose import ConfigError, compose
 
-        return int(get_task(task).default_K)
-    except (ImportError, KeyError, AttributeError):
-        return 1 if task in ("quadruped_run", "walker_run") else 3
+    try:
+        return int(compose([f"task={task}"]).agent.K)
+    except ConfigError:
+        return None
 
 
 @register("F8", "Prediction horizon K", "figure", "fig:step_size")
