@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
+import typing
 
 import pandas as pd
 import pytest
@@ -82,3 +84,33 @@ def _yaml_lines(cfg) -> str:
 
     flat = pd.json_normalize(yaml.safe_load(OmegaConf.to_yaml(cfg, resolve=True))).iloc[0].to_dict()
     return "\n".join(f"{k}: {v}" for k, v in flat.items())
+
+
+def _sections(section: type = schema.RunConfig):
+    yield section
+    for f in dataclasses.fields(section):
+        kind = typing.get_type_hints(section)[f.name]
+        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+            yield from _sections(kind)
+
+
+def test_the_schema_gives_types_only_and_the_yaml_every_value():
+    """One source for each default: no dataclass default repeats a YAML value, and every agent's config is
+    complete from the packaged YAML alone."""
+    from repro.config.compose import compose, config_groups
+
+    with_default = [f"{s.__name__}.{f.name}" for s in _sections() for f in dataclasses.fields(s)
+                    if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING]
+    assert not with_default, with_default
+    for agent in config_groups()["agent"]:
+        cfg = compose([f"agent={agent}", "offline.dataset=medium", "agent.cql.alpha=1.0"]
+                      if agent not in ("taco", "drqv2", "spr", "atc", "driml", "curl") else [f"agent={agent}"])
+        assert not OmegaConf.missing_keys(cfg), agent
+
+
+def test_a_value_dropped_from_the_yaml_is_one_config_error_line():
+    from repro.config.compose import ConfigError, compose
+
+    with pytest.raises(ConfigError, match=r"^no value for agent\.cql\.n_samples \(") as err:
+        compose(["~agent.cql.n_samples=10"])  # Hydra deletes the key (at this value)
+    assert "\n" not in str(err.value)

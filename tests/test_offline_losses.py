@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from repro.config import paper_defaults
-from repro.config.schema import DTConfig, IQLConfig, TD3BCConfig
+from repro.config.compose import compose, typed
 from repro.learners.losses import cql, dt, iql, td3bc
 
 F64 = torch.float64
@@ -438,15 +438,16 @@ def test_config_defaults_match_the_functions():
     def defaults(fn):
         return {k: p.default for k, p in inspect.signature(fn).parameters.items() if p.default is not p.empty}
 
-    cfg = DTConfig()
+    agent = typed(compose(["agent=dt"])).agent  # the defaults are the packaged YAML's (the schema has types only)
+    cfg = agent.dt
     model = defaults(dt.DecisionTransformer.__init__)
     assert {k: getattr(cfg, k) for k in model} == model
     assert defaults(dt.make_optimizer) == {"lr": cfg.lr, "weight_decay": cfg.weight_decay,
                                            "warmup_steps": cfg.warmup_steps}
     assert dt.GRAD_CLIP == cfg.grad_clip and defaults(dt.SequenceSampler.__init__)["rtg_scale"] == cfg.rtg_scale
-    assert defaults(td3bc.actor_loss) == {"alpha": TD3BCConfig().alpha, "lambda_from": TD3BCConfig().lambda_from}
-    assert defaults(iql.value_loss)["expectile"] == IQLConfig().expectile
-    assert defaults(iql.actor_loss) == {"beta": IQLConfig().beta, "max_weight": IQLConfig().max_weight}
+    assert defaults(td3bc.actor_loss) == {"alpha": agent.td3bc.alpha, "lambda_from": agent.td3bc.lambda_from}
+    assert defaults(iql.value_loss)["expectile"] == agent.iql.expectile
+    assert defaults(iql.actor_loss) == {"beta": agent.iql.beta, "max_weight": agent.iql.max_weight}
 
 
 def test_eval_context_history():

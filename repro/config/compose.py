@@ -132,6 +132,10 @@ def validate(raw: DictConfig) -> DictConfig:
             raise ConfigError(f"{key}={value} is not one of {', '.join(allowed.values())}.") from None
         first = str(exc).strip().splitlines()[0]
         raise ConfigError(f"{key}: {first}" if key else first) from None
+    missing = sorted(OmegaConf.missing_keys(cfg))  # the schema has types only: the YAML gives every value
+    if missing:
+        raise ConfigError(f"no value for {', '.join(missing)} (the packaged YAML under repro/conf/ gives every "
+                          "field one; a config file or override must not drop it).")
     for key in ("experiment", "variant", "task.name", "agent.name"):
         value = str(OmegaConf.select(cfg, key))
         if not NAME_RE.match(value):

@@ -20,7 +20,7 @@ from typing import Any
 import yaml
 from omegaconf import DictConfig, OmegaConf
 
-from repro.config.compose import drop_non_identity, identity
+from repro.config.compose import compose_base, drop_non_identity, identity
 from repro.config.schema import Choice, RunConfig, is_offline
 from repro.runs.fsutil import atomic_write_text, named_os_error
 from repro.runs.runformat import (
@@ -115,7 +115,10 @@ def _added_at_default(diff: str) -> bool:
     old, _, new = change.partition(" -> ")
     if old != repr("<absent>"):
         return False
-    default = OmegaConf.select(OmegaConf.structured(RunConfig), key, default="<no default>")
+    if key.startswith(("agent.objectives.", "agent.objective_params.")):
+        return False  # a name in a free mapping, not a field a newer version added
+    # The default is the packaged YAML's value (the schema has types only): the config with no overrides.
+    default = OmegaConf.select(compose_base(), key, default="<no default>")
     if isinstance(default, DictConfig):
         default = OmegaConf.to_container(default, resolve=True, enum_to_str=True)
     elif isinstance(default, Choice):  # as identity() has it: the plain value
