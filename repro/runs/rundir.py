@@ -21,7 +21,7 @@ import yaml
 from omegaconf import DictConfig, OmegaConf
 
 from repro.config.compose import compose_base, drop_non_identity, identity
-from repro.config.schema import Choice, RunConfig, is_offline
+from repro.config.schema import Choice, LearnerName, RunConfig, is_offline
 from repro.runs.fsutil import atomic_write_text, named_os_error
 from repro.runs.runformat import (
     CHECKPOINT,
@@ -86,14 +86,16 @@ def config_diff(path: str | Path, cfg: DictConfig) -> list[str]:
 # Keys that came with a change of behaviour (issue 16): a run of these learners written before the key existed
 # behaved as the value here, not as the new default, so it is not the same run and is not resumed; for any
 # other learner the key changes nothing.
-ADDED_WITH_OLD_BEHAVIOUR: dict[str, tuple[tuple[str, ...], object]] = {
-    "agent.stddev_schedule.step_scale": (("td3bc", "cql", "iql"), 1),
-    "agent.cql.clip_policy_samples": (("cql",), False),
-    "agent.iql.value_for_targets": (("iql",), "actor before, critic after the value step"),
-    "agent.dt.activation": (("dt",), "gelu"),
-    "agent.dt.init": (("dt",), "torch"),
-    "agent.dt.ff_dropout": (("dt",), True),
-    "agent.dt.action_pad": (("dt",), 0.0),
+# The old behaviours are plain values (compared with the saved run's YAML text), not Enum members.
+_L = LearnerName
+ADDED_WITH_OLD_BEHAVIOUR: dict[str, tuple[tuple[LearnerName, ...], object]] = {
+    "agent.stddev_schedule.step_scale": ((_L.td3bc, _L.cql, _L.iql), 1),
+    "agent.cql.clip_policy_samples": ((_L.cql,), False),
+    "agent.iql.value_for_targets": ((_L.iql,), "actor before, critic after the value step"),
+    "agent.dt.activation": ((_L.dt,), "gelu"),
+    "agent.dt.init": ((_L.dt,), "torch"),
+    "agent.dt.ff_dropout": ((_L.dt,), True),
+    "agent.dt.action_pad": ((_L.dt,), 0.0),
 }
 
 
