@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 from analysis import select
 from analysis.context import Context
 from analysis.identity import task_display
@@ -12,12 +14,16 @@ from paper_figures.registry import ArtifactResult, register
 LABELS = ["K=1", "K=3", "DrQ-v2"]
 
 
+@functools.cache
 def default_k(task: str) -> int | None:
-    """The K the paper's Table 1 uses for ``task`` (Appendix B), from the task table; None for an unknown task."""
-    from repro.envs import TASKS
+    """The K the paper's Table 1 uses, as the task's config file sets it (repro/conf/task/<task>.yaml: 1 on
+    quadruped_run and walker_run, 3 elsewhere, Appendix B); None for a task without a config file."""
+    from repro.config.compose import ConfigError, compose
 
-    info = TASKS.get(task)
-    return int(info.default_K) if info is not None else None
+    try:
+        return int(compose([f"task={task}"]).agent.K)
+    except ConfigError:
+        return None
 
 
 @register("F8", "Prediction horizon K", "figure", "fig:step_size")

@@ -101,7 +101,7 @@ def test_an_unregistered_learner_is_skipped_with_its_reason(monkeypatch):
     from repro.bench.offline import LEARNERS
 
     monkeypatch.delitem(LEARNERS, "iql")
-    assert "unknown agent.learner 'iql'" in available("iql") and "\n" not in available("iql")
+    assert "learner 'iql' is not registered" in available("iql") and "\n" not in available("iql")
     assert available("td3bc") is None
     assert "no agent file" in available("nonexistent_agent")
     said: list[str] = []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -14,6 +15,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from repro.envs import (  # noqa: E402
     TASKS,
     DistractingActionDims,
+    TaskInfo,
     TimeLimit,
     UnknownTaskError,
     get_task,
@@ -35,13 +37,25 @@ def _actions(n: int, dim: int, seed: int = 0) -> list[np.ndarray]:
 def test_registry_table() -> None:
     assert len(TASKS) == 16
     assert get_task("quadruped_run").camera == 2 and get_task("walker_run").camera == 0
-    assert get_task("quadruped_run").default_K == 1 and get_task("walker_run").default_K == 1
-    assert get_task("hopper_hop").default_K == 3
-    assert get_task("walker_run").nstep == 1 and get_task("cheetah_run").nstep == 3
-    assert get_task("manipulator_bring_ball").preset == "hard"
     assert get_task("reach_duplo").camera == "front_close"
     assert get_task("stick-pull").task == "stick-pull-v3"
     assert {t.suite for t in TASKS.values()} == {"dmc", "manipulation", "metaworld"}
+
+
+def test_task_files_are_the_one_source_of_the_paper_settings() -> None:
+    """Preset, K and nstep come from conf/task/<name>.yaml (the registry holds simulator facts only); every
+    registry task has a task file of its suite and the other way round."""
+    from repro.config.compose import compose, group_options
+
+    assert set(group_options("task")) == set(TASKS)
+    settings = {}
+    for name, info in TASKS.items():
+        cfg = compose([f"task={name}"])
+        assert cfg.task.suite == info.suite, name
+        settings[name] = (str(cfg.task.preset), cfg.agent.K, cfg.agent.nstep)
+    assert settings["quadruped_run"] == ("medium", 1, 3) and settings["walker_run"] == ("medium", 1, 1)
+    assert settings["hopper_hop"] == ("medium", 3, 3) and settings["manipulator_bring_ball"] == ("hard", 3, 3)
+    assert not {f.name for f in dataclasses.fields(TaskInfo)} & {"preset", "default_K", "K", "nstep"}
 
 
 def test_get_task_typo_gives_close_matches() -> None:

@@ -21,8 +21,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("repro", "analysis", "paper_figures", "repro_app")
 SCRIPT_DIRS = ("benchmarks",)  # plain scripts, not a package: app layer
-# The layers of ../shared/docs/layout.md (docs/layers.md), lowest first; today's files mapped onto them
-# until the layout issue moves them into one folder per layer.
 # The layers of ../shared/docs/layout.md (docs/layers.md), lowest first: one folder per layer inside repro/.
 LAYERS = ("config/envs", "runs/agent", "data/learners", "train/bench", "launch", "analysis", "paper_figures", "app")
 CONFIG, RUNS, DATA, TRAIN, LAUNCH, ANALYSIS, FIGURES, APP = range(len(LAYERS))

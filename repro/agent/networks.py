@@ -7,6 +7,8 @@ import math
 import torch
 from torch import nn
 
+from repro.config.schema import LatentRounding
+
 
 def orthogonal_init(module: nn.Module) -> None:
     """Orthogonal weights and zero biases; convolutions use the ReLU gain (as upstream)."""
@@ -108,8 +110,8 @@ class Critic(nn.Module):
 
 
 def default_latent_action_dim(action_dim: int, rounding: str) -> int:
-    """Latent action size: upstream ``int(1.25|A|) + 1``, paper ``ceil(1.25|A|)``."""
-    if rounding == "paper":
+    """Latent action size: upstream ``int(1.25|A|) + 1``, paper ``ceil(1.25|A|)`` (a :class:`LatentRounding`)."""
+    if rounding == LatentRounding.paper:
         return math.ceil(1.25 * action_dim)
     return int(1.25 * action_dim) + 1
 

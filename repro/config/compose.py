@@ -12,26 +12,19 @@ from typing import cast
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from repro.config.schema import RunConfig
-from repro.runs.runformat import is_folder_value
+from repro.config.schema import LearnerName, ObjectiveName, RunConfig, choice_fields, is_offline
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
-VALID_CHOICES = {
-    "agent.latent_action_rounding": ("upstream", "paper"),
-    "agent.reward_target": ("nstep", "ksum"),
-    "replay.device": ("cpu", "cuda", "auto"),
-    "runtime.device": ("cpu", "cuda", "auto"),
-    "train.video_every": ("all", "last"),
-    "agent.iql.value_for_targets": ("after", "before"),
-    "agent.iql.reward_scaling": ("none", "return_range"),
-    "agent.dt.activation": ("relu", "gelu", "gelu_new"),
-    "agent.dt.init": ("gpt2", "torch"),
-}
 
 
 class ConfigError(ValueError):
     """A config problem, explained in one line."""
+
+
+def is_folder_value(value: str) -> bool:
+    """An ``offline.dataset`` value naming a folder (has a '/', starts with '~', or is '.'/'..'), not a kind."""
+    return "/" in value or value.startswith("~") or value in (".", "..")
 
 
 def group_options(group: str) -> list[str]:
@@ -126,18 +119,23 @@ def compose_base() -> DictConfig:
 
 
 def validate(raw: DictConfig) -> DictConfig:
-    """Resolve interpolations, check types against the schema and value choices."""
+    """Resolve interpolations, check types against the schema (a closed set of values is a :class:`Choice`
+    Enum there) and the values' ranges."""
     try:
         OmegaConf.resolve(raw)
         cfg = cast(DictConfig, OmegaConf.merge(OmegaConf.structured(RunConfig), raw))  # dict merged into dict
     except OmegaConfBaseException as exc:
         key = getattr(exc, "full_key", None)
+        allowed = choice_fields().get(str(key))
+        if key and allowed is not None:  # OmegaConf's own message names Enum members, not the values to write
+            value = OmegaConf.select(raw, str(key), default=None)
+            raise ConfigError(f"{key}={value} is not one of {', '.join(allowed.values())}.") from None
         first = str(exc).strip().splitlines()[0]
         raise ConfigError(f"{key}: {first}" if key else first) from None
-    for key, choices in VALID_CHOICES.items():
-        value = OmegaConf.select(cfg, key)
-        if value not in choices:
-            raise ConfigError(f"{key}={value} is not one of {', '.join(choices)}.")
+    missing = sorted(OmegaConf.missing_keys(cfg))  # the schema has types only: the YAML gives every value
+    if missing:
+        raise ConfigError(f"no value for {', '.join(missing)} (the packaged YAML under repro/conf/ gives every "
+                          "field one; a config file or override must not drop it).")
     for key in ("experiment", "variant", "task.name", "agent.name"):
         value = str(OmegaConf.select(cfg, key))
         if not NAME_RE.match(value):
@@ -154,22 +152,16 @@ def validate(raw: DictConfig) -> DictConfig:
         raise ConfigError("env.distracting_dims and train.eval_episodes must be >= 0.")
     if cfg.train.video_size < 16 or cfg.train.video_size % 2:
         raise ConfigError(f"train.video_size must be an even number >= 16 (got {cfg.train.video_size}).")
-    from repro.agent.objectives import OBJECTIVES
-
     for name in cfg.agent.objectives:
-        if name not in OBJECTIVES:
-            raise ConfigError(f"unknown objective '{name}'." + close_matches(str(name), sorted(OBJECTIVES)))
+        if name not in ObjectiveName.values():
+            raise ConfigError(f"unknown objective '{name}'." + close_matches(str(name), sorted(ObjectiveName.values())))
     _check_learner(cfg)
     return cfg
 
 
 def _check_learner(cfg: DictConfig) -> None:
-    """``agent.learner`` is registered; ``offline.*`` is consistent with it."""
-    from repro.learners import LEARNERS, is_offline
-
+    """``offline.*`` is consistent with ``agent.learner`` (a :class:`LearnerName`, checked by the schema)."""
     learner = str(cfg.agent.learner)
-    if learner not in LEARNERS:
-        raise ConfigError(f"unknown agent.learner '{learner}'." + close_matches(learner, sorted(LEARNERS)))
     dataset = cfg.offline.dataset
     if not is_offline(learner):
         if dataset is not None:
@@ -192,7 +184,7 @@ def _check_learner(cfg: DictConfig) -> None:
     cosine = cfg.agent.iql.actor_lr_cosine_updates
     if cosine is not None and cosine < 1:
         raise ConfigError(f"agent.iql.actor_lr_cosine_updates must be null or >= 1 (got {cosine}).")
-    if learner == "cql" and cfg.agent.cql.alpha is None and dataset is not None:
+    if learner == LearnerName.cql and cfg.agent.cql.alpha is None and dataset is not None:
         cfg.agent.cql.alpha = _table6_alpha(str(cfg.task.name), str(dataset))
 
 
@@ -233,6 +225,6 @@ def drop_non_identity(data: dict) -> dict:
 
 def identity(cfg: DictConfig) -> dict:
     """The part of the config that defines a run (everything but ``runtime`` and the video switches)."""
-    data = OmegaConf.to_container(cfg, resolve=True)
+    data = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)  # a Choice's name is its value
     assert isinstance(data, dict)
     return drop_non_identity(data)

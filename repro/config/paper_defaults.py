@@ -1,7 +1,8 @@
-"""Values the paper gives per task or per dataset, read by the config when a run leaves them unset.
+"""Values the paper gives per task or per dataset: Table 6's CQL alpha (read by the config when a run leaves
+it unset) and Table 1's online returns (the offline score's reference, repro/data/reference.py).
 
-Each table is one packaged CSV under ``repro/config/data/``, the only copy: the analysis reads the same file
-through this module.
+Each table is one packaged CSV under ``repro/config/data/``, the only copy: the analysis (analysis/paper.py)
+reads the same files through this module's paths.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pathlib import Path
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 ALPHA_TABLE = DATA_DIR / "cql_alpha.csv"  # Table 6: CQL's alpha per task and dataset kind
+ONLINE_TABLE = DATA_DIR / "online_rl_table.csv"  # Table 1: mean and std return at 1M frames per task and method
 
 
 def _dataset_key(dataset: str) -> str:
@@ -37,3 +39,9 @@ def cql_alpha(task: str, dataset: str) -> float:
         raise ValueError(f"no Table 6 CQL alpha for task={task!r} dataset={dataset!r} (known tasks: "
                          f"{', '.join(tasks)}; datasets: {', '.join(kinds)}); set agent.cql.alpha")
     return table[key]
+
+
+def online_means(method: str) -> dict[str, float]:
+    """Table 1's mean return at 1M frames of ``method`` (as printed, e.g. ``TACO``) per task, in the table's order."""
+    with ONLINE_TABLE.open(newline="") as f:
+        return {row["task"]: float(row["mean"]) for row in csv.DictReader(f) if row["method"] == method}

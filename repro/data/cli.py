@@ -11,9 +11,9 @@ from typing import NoReturn, Optional
 
 import typer
 
-from repro.config.compose import ConfigError, compose_base
+from repro.config.compose import ConfigError, compose_base, is_folder_value
 from repro.data.convert import default_import_name, export_dataset, import_dataset
-from repro.data.dataset import MANIFEST, DatasetError, check_dataset, dataset_path, is_folder_value, load_manifest
+from repro.data.dataset import MANIFEST, DatasetError, check_dataset, dataset_path, load_manifest
 from repro.data.formats import FORMATS
 from repro.data.summary import plot_returns, summarize
 from repro.runs.fsutil import FULL, write_error_message

@@ -29,8 +29,8 @@ from typing import Any, Union
 import numpy as np
 
 from repro import __version__
+from repro.config.compose import is_folder_value
 from repro.runs.fsutil import atomic_write, atomic_write_text
-from repro.runs.runformat import is_folder_value
 
 FORMAT = 1
 MANIFEST = "manifest.json"

@@ -1,7 +1,7 @@
 """Reference returns for the normalised offline score: 100 x return / best online TACO return on the task.
 
-The paper's Table 1 TACO means at 1M frames (tab:online_table; the same numbers as
-analysis/paper_data/online_rl_table.csv, kept here because core code does not read analysis data).
+The paper's Table 1 TACO means at 1M frames (tab:online_table), read from the one packaged copy of Table 1
+(repro/config/data/online_rl_table.csv, which the analysis reads too).
 A dataset whose manifest knows its source run's best evaluation return (``source.best_return``) is
 normalised by that instead; which one was used is the eval.csv column ``score_reference``.
 """
@@ -11,11 +11,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
-PAPER_TACO_RETURN: dict[str, float] = {
-    "quadruped_run": 541.0, "hopper_hop": 261.0, "walker_run": 637.0, "quadruped_walk": 793.0,
-    "cheetah_run": 821.0, "finger_turn_hard": 632.0, "acrobot_swingup": 241.0, "reacher_hard": 883.0,
-    "reach_duplo": 234.0,
-}
+from repro.config.paper_defaults import online_means
+
+PAPER_TACO_RETURN: dict[str, float] = online_means("TACO")
 
 
 def score_reference(task: str, source: dict[str, Any] | None) -> tuple[float | None, str]:

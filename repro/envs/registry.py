@@ -1,7 +1,9 @@
-"""Static table of every task this project runs, with the per-task settings of the paper.
+"""Static table of every task this project runs: what the simulator needs to build it.
 
 Nothing here imports a simulator: the table is plain data so that configs, sweeps and the CLI can
 validate task names cheaply. ``tests/test_envs.py`` checks ``action_dim`` against the real environments.
+The per-task training settings of the paper (preset, K, nstep, frame budget) live in the task's config file,
+``repro/conf/task/<name>.yaml``, their one source.
 """
 
 from __future__ import annotations
@@ -23,9 +25,6 @@ class TaskInfo:
         task: the name the suite loads (``"run"``, ``"reach_duplo_vision"``, ``"hammer-v3"``).
         action_dim: the true action dimension of the environment.
         camera: the render camera (id or name).
-        preset: difficulty preset ("easy" / "medium" / "hard"), which sets the exploration-std schedule.
-        default_K: TACO's prediction horizon K for this task (paper Appendix B).
-        nstep: the n of the n-step return (1 for walker tasks, 3 otherwise, as upstream).
         notes: free text.
     """
 
@@ -35,9 +34,6 @@ class TaskInfo:
     task: str
     action_dim: int
     camera: int | str
-    preset: str
-    default_K: int
-    nstep: int
     notes: str = ""
 
 
@@ -54,7 +50,7 @@ class UnknownTaskError(KeyError):
         return f"unknown task {self.name!r}{hint} (known: {', '.join(sorted(TASKS))})"
 
 
-def _dmc(name: str, action_dim: int, *, preset: str = "medium", notes: str = "") -> TaskInfo:
+def _dmc(name: str, action_dim: int, *, notes: str = "") -> TaskInfo:
     """A ``dm_control.suite`` task named ``<domain>_<task>``."""
     domain, task = name.split("_", 1)
     return TaskInfo(
@@ -64,9 +60,6 @@ def _dmc(name: str, action_dim: int, *, preset: str = "medium", notes: str = "")
         task=task,
         action_dim=action_dim,
         camera=2 if domain == "quadruped" else 0,
-        preset=preset,
-        default_K=1 if name in ("quadruped_run", "walker_run") else 3,
-        nstep=1 if domain == "walker" else 3,
         notes=notes,
     )
 
@@ -80,9 +73,6 @@ def _metaworld(name: str) -> TaskInfo:
         task=f"{name}-v3",
         action_dim=4,
         camera="corner2",
-        preset="medium",
-        default_K=3,
-        nstep=3,
         notes="MT1 train tasks; success in info['success']",
     )
 
@@ -103,9 +93,6 @@ _ALL: list[TaskInfo] = [
         task="bring_ball",
         action_dim=5,
         camera=0,
-        preset="hard",
-        default_K=3,
-        nstep=3,
         notes="frame budget 30.1M upstream",
     ),
     TaskInfo(
@@ -115,9 +102,6 @@ _ALL: list[TaskInfo] = [
         task="reach_duplo_vision",
         action_dim=9,
         camera="front_close",
-        preset="medium",
-        default_K=3,
-        nstep=3,
         notes="Jaco arm (6 joints + 3 fingers); 10 s episodes (250 control steps)",
     ),
     *(

@@ -15,7 +15,8 @@ from typing import Any
 
 from omegaconf import DictConfig
 
-from repro.data.dataset import DatasetError, dataset_path, is_folder_value, load_manifest
+from repro.config.compose import is_folder_value
+from repro.data.dataset import DatasetError, dataset_path, load_manifest
 
 
 @dataclass(frozen=True)

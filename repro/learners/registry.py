@@ -7,7 +7,7 @@ from collections.abc import Callable
 import torch
 
 from repro.agent.agent import Agent
-from repro.config.schema import AgentConfig
+from repro.config.schema import AgentConfig, LearnerName, check_registry, is_offline
 from repro.learners.base import Learner
 from repro.learners.bc import BCLearner
 from repro.learners.cql import CQL
@@ -25,11 +25,8 @@ LEARNERS: dict[str, LearnerFactory] = {
     "iql": IQL,  # IQL on the DrQ-v2 backbone (offline)
     "dt": DTLearner,  # Decision Transformer on pixels (offline; samples episode windows, return-conditioned)
 }
-ONLINE_LEARNERS = frozenset({"actor_critic"})  # every other learner trains from offline.dataset
-
-
-def is_offline(name: str) -> bool:
-    return name not in ONLINE_LEARNERS
+check_registry("learner", LEARNERS, LearnerName)  # the names (and which train offline) are schema data
+__all__ = ["LEARNERS", "LearnerFactory", "build_learner", "is_offline", "samples_episodes"]
 
 
 def samples_episodes(name: str) -> bool:

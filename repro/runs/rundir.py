@@ -20,9 +20,9 @@ from typing import Any
 import yaml
 from omegaconf import DictConfig, OmegaConf
 
-from repro.config.compose import drop_non_identity, identity
+from repro.config.compose import compose_base, drop_non_identity, identity
+from repro.config.schema import Choice, LearnerName, RunConfig, is_offline
 from repro.runs.fsutil import atomic_write_text, named_os_error
-from repro.learners.registry import is_offline
 from repro.runs.runformat import (
     CHECKPOINT,
     CONFIG,
@@ -35,7 +35,6 @@ from repro.runs.runformat import (
     run_path,
     run_state,
 )
-from repro.config.schema import RunConfig
 
 __all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "REPLAY", "RESOLVED", "WRITER_LOCK", "RunDirMismatch",
            "RunLocked", "WriterLock", "acquire_writer_lock", "config_diff", "config_matches", "lock_holder",
@@ -87,14 +86,16 @@ def config_diff(path: str | Path, cfg: DictConfig) -> list[str]:
 # Keys that came with a change of behaviour (issue 16): a run of these learners written before the key existed
 # behaved as the value here, not as the new default, so it is not the same run and is not resumed; for any
 # other learner the key changes nothing.
-ADDED_WITH_OLD_BEHAVIOUR: dict[str, tuple[tuple[str, ...], object]] = {
-    "agent.stddev_schedule.step_scale": (("td3bc", "cql", "iql"), 1),
-    "agent.cql.clip_policy_samples": (("cql",), False),
-    "agent.iql.value_for_targets": (("iql",), "actor before, critic after the value step"),
-    "agent.dt.activation": (("dt",), "gelu"),
-    "agent.dt.init": (("dt",), "torch"),
-    "agent.dt.ff_dropout": (("dt",), True),
-    "agent.dt.action_pad": (("dt",), 0.0),
+# The old behaviours are plain values (compared with the saved run's YAML text), not Enum members.
+_L = LearnerName
+ADDED_WITH_OLD_BEHAVIOUR: dict[str, tuple[tuple[LearnerName, ...], object]] = {
+    "agent.stddev_schedule.step_scale": ((_L.td3bc, _L.cql, _L.iql), 1),
+    "agent.cql.clip_policy_samples": ((_L.cql,), False),
+    "agent.iql.value_for_targets": ((_L.iql,), "actor before, critic after the value step"),
+    "agent.dt.activation": ((_L.dt,), "gelu"),
+    "agent.dt.init": ((_L.dt,), "torch"),
+    "agent.dt.ff_dropout": ((_L.dt,), True),
+    "agent.dt.action_pad": ((_L.dt,), 0.0),
 }
 
 
@@ -116,9 +117,14 @@ def _added_at_default(diff: str) -> bool:
     old, _, new = change.partition(" -> ")
     if old != repr("<absent>"):
         return False
-    default = OmegaConf.select(OmegaConf.structured(RunConfig), key, default="<no default>")
+    if key.startswith(("agent.objectives.", "agent.objective_params.")):
+        return False  # a name in a free mapping, not a field a newer version added
+    # The default is the packaged YAML's value (the schema has types only): the config with no overrides.
+    default = OmegaConf.select(compose_base(), key, default="<no default>")
     if isinstance(default, DictConfig):
-        default = OmegaConf.to_container(default, resolve=True)
+        default = OmegaConf.to_container(default, resolve=True, enum_to_str=True)
+    elif isinstance(default, Choice):  # as identity() has it: the plain value
+        default = default.value
     return repr(default) == new
 
 

@@ -3,7 +3,7 @@
 File names, CSV columns per file, run states, the config keys that identify a run and the resolved
 values a run records about itself. Training (logger, rundir, api), sweeps (launch/status), analysis
 (analysis/load) and the test fixtures all read these names from here. This module only names things
-and reads small files; it imports nothing heavier than the standard library.
+and reads small files; it imports nothing heavier than the standard library and the config layer.
 """
 
 from __future__ import annotations
@@ -15,6 +15,8 @@ import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
+
+from repro.config.compose import is_folder_value
 
 # ---------------------------------------------------------------- file names
 CONFIG = "config.yaml"  # the resolved config, identity of the run (atomic, at start)
@@ -99,11 +101,6 @@ def run_path(results_root: str | Path, experiment: str, algo: str, variant: str,
     if dataset is not None:
         task_dir = task_dir / dataset_tag(dataset)
     return task_dir / f"seed_{seed}"
-
-
-def is_folder_value(value: str) -> bool:
-    """An ``offline.dataset`` value naming a folder (has a '/', starts with '~', or is '.'/'..'), not a kind."""
-    return "/" in value or value.startswith("~") or value in (".", "..")
 
 
 def dataset_tag(value: str) -> str:

@@ -12,11 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
+from repro.config.schema import VideoEvery
 from repro.runs.runformat import VIDEOS as VIDEO_DIR
 
 __all__ = ["VIDEO_DIR", "VIDEO_EVERY", "EvalVideos", "count_frames", "video_name", "write_mp4"]
 
-VIDEO_EVERY = ("all", "last")
+VIDEO_EVERY = VideoEvery.values()
 
 
 def video_name(index: int, unit: str = "frame") -> str:
@@ -41,7 +42,7 @@ class EvalVideos:
 
     def wanted(self, final: bool) -> bool:
         """Whether the evaluation (``final``: the last one of the run) gets a video."""
-        return self.every == "all" or final
+        return self.every == VideoEvery.all or final
 
     def save(self, index: int, frames: np.ndarray | list[np.ndarray]) -> Path:
         return write_mp4(self.folder / video_name(index, self.unit), frames, fps=self.fps)

@@ -12,7 +12,7 @@ import torch
 from omegaconf import DictConfig
 
 from repro.config.compose import compose, typed
-from repro.config.schema import RunConfig
+from repro.config.schema import Device, RunConfig
 from repro.data.episodes import EpisodeStore
 from repro.data.offline_replay import (
     DatasetError,
@@ -55,11 +55,12 @@ def resolve_device(name: str, key: str = "device") -> str:
 
     Raises :class:`DeviceError` (one line, naming ``key``) for another name or a CUDA device this machine
     lacks, before anything is written."""
-    if name == "auto":
+    name = str(name)  # a Device member (runtime.device, replay.device) or a plain name such as cuda:1
+    if name == Device.auto:
         return "cuda" if torch.cuda.is_available() else "cpu"
-    if name == "cpu":
+    if name == Device.cpu:
         return name
-    if name == "cuda" or (name.startswith("cuda:") and name[5:].isdigit()):
+    if name == Device.cuda or (name.startswith("cuda:") and name[5:].isdigit()):
         if not torch.cuda.is_available():
             raise DeviceError(f"{key}={name}: this machine has no CUDA device (torch sees none); use cpu or auto")
         if ":" in name and int(name[5:]) >= torch.cuda.device_count():

@@ -11,6 +11,7 @@ import torch
 from torch import nn
 
 from repro.agent.networks import SharedHeads
+from repro.config.schema import RewardTarget
 
 OBJECTIVES: dict[str, type[Objective]] = {}
 
@@ -114,7 +115,7 @@ class AuxBatch:
 
     def reward(self) -> torch.Tensor:
         """Reward target: n-step discounted return (upstream) or the sum of the K rewards (paper)."""
-        return self.batch["reward"] if self.reward_target == "nstep" else self.batch["reward_ksum"]
+        return self.batch["reward"] if self.reward_target == RewardTarget.nstep else self.batch["reward_ksum"]
 
 
 class Objective(nn.Module, abc.ABC):

@@ -1,0 +1,116 @@
+"""The config schema's name tables (repro/config/schema.py) and the registries that must agree with them."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import typing
+
+import pandas as pd
+import pytest
+from omegaconf import OmegaConf
+
+from repro.config import schema
+from repro.config.schema import LearnerName, ObjectiveName, check_registry, is_offline
+
+
+def test_check_registry_names_what_is_missing_and_what_is_extra():
+    check_registry("learner", {n.value: None for n in LearnerName}, LearnerName)  # equal keys pass
+    with pytest.raises(ValueError, match=r"missing: iql; not in the schema: -") as err:
+        check_registry("learner", {n.value: None for n in LearnerName if n != LearnerName.iql}, LearnerName)
+    assert "\n" not in str(err.value)
+    with pytest.raises(ValueError, match=r"missing: -; not in the schema: sac"):
+        check_registry("learner", [*LearnerName.values(), "sac"], LearnerName)
+
+
+def _one_more(enum: type[schema.Choice], extra: str) -> type[schema.Choice]:
+    return schema.Choice(enum.__name__, {**{v: v for v in enum.values()}, extra: extra})  # type: ignore[return-value]
+
+
+@pytest.mark.parametrize("module, attribute, what", [("repro.learners.registry", "LearnerName", "learner"),
+                                                     ("repro.agent.objectives", "ObjectiveName", "objective")])
+def test_a_registry_that_lacks_a_schema_name_fails_at_import(monkeypatch, module: str, attribute: str, what: str):
+    """Re-running the registry module's import against a schema with one name more (so the registry lacks it)."""
+    mod = importlib.import_module(module)
+    monkeypatch.setattr(schema, attribute, _one_more(getattr(schema, attribute), "newname"))
+    try:
+        with pytest.raises(ValueError, match=f"the {what} registry .* missing: newname"):
+            importlib.reload(mod)
+    finally:
+        monkeypatch.undo()
+        importlib.reload(mod)
+
+
+def test_the_offline_flag_is_schema_data():
+    assert not is_offline(LearnerName.actor_critic) and not is_offline("actor_critic")
+    assert all(is_offline(n) for n in ("bc", "td3bc", "cql", "iql", "dt"))
+    from repro.learners import is_offline as learners_is_offline
+
+    assert learners_is_offline is is_offline  # the learners layer offers the schema's function, not its own table
+
+
+def test_every_choice_member_is_named_by_its_value():
+    """OmegaConf reads and writes an Enum field by member name: a name other than the value would change the
+    YAML a run writes and the overrides it accepts."""
+    fields = schema.choice_fields()
+    assert fields["agent.learner"] is LearnerName
+    for enum in {*fields.values(), ObjectiveName}:
+        assert all(m.name == m.value for m in enum), enum
+        assert all(str(m) == f"{m}" == m.value for m in enum), enum
+
+
+AGENT_OF_SECTION = {"iql": "iql", "dt": "dt", "td3bc": "td3bc", "learner": "bc"}
+
+
+@pytest.mark.parametrize("key", sorted(schema.choice_fields()))
+def test_a_value_outside_a_choice_is_one_config_error_line_naming_the_allowed_values(key: str):
+    """Every Enum-typed field, task.suite and td3bc.lambda_from included (no check read them before the Enums)."""
+    from repro.config.compose import ConfigError, compose
+
+    parts = key.split(".")
+    agent = AGENT_OF_SECTION.get(parts[1], "taco") if parts[0] == "agent" and len(parts) > 1 else "taco"
+    allowed = schema.choice_fields()[key].values()
+    with pytest.raises(ConfigError) as err:
+        compose([f"agent={agent}", f"{key}=nonsense"])
+    assert str(err.value) == f"{key}=nonsense is not one of {', '.join(allowed)}."
+    ok = compose([f"agent={agent}", "offline.dataset=medium", f"{key}={allowed[-1]}"] if agent != "taco"
+                 else [f"{key}={allowed[-1]}"])
+    assert str(OmegaConf.select(ok, key)) == allowed[-1] and key + ": " + allowed[-1] in _yaml_lines(ok)
+
+
+def _yaml_lines(cfg) -> str:
+    """``section.key: value`` lines of the config.yaml text a run writes for ``cfg``."""
+    import yaml
+
+    flat = pd.json_normalize(yaml.safe_load(OmegaConf.to_yaml(cfg, resolve=True))).iloc[0].to_dict()
+    return "\n".join(f"{k}: {v}" for k, v in flat.items())
+
+
+def _sections(section: type = schema.RunConfig):
+    yield section
+    for f in dataclasses.fields(section):
+        kind = typing.get_type_hints(section)[f.name]
+        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+            yield from _sections(kind)
+
+
+def test_the_schema_gives_types_only_and_the_yaml_every_value():
+    """One source for each default: no dataclass default repeats a YAML value, and every agent's config is
+    complete from the packaged YAML alone."""
+    from repro.config.compose import compose, config_groups
+
+    with_default = [f"{s.__name__}.{f.name}" for s in _sections() for f in dataclasses.fields(s)
+                    if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING]
+    assert not with_default, with_default
+    for agent in config_groups()["agent"]:
+        cfg = compose([f"agent={agent}", "offline.dataset=medium", "agent.cql.alpha=1.0"]
+                      if agent not in ("taco", "drqv2", "spr", "atc", "driml", "curl") else [f"agent={agent}"])
+        assert not OmegaConf.missing_keys(cfg), agent
+
+
+def test_a_value_dropped_from_the_yaml_is_one_config_error_line():
+    from repro.config.compose import ConfigError, compose
+
+    with pytest.raises(ConfigError, match=r"^no value for agent\.cql\.n_samples \(") as err:
+        compose(["~agent.cql.n_samples=10"])  # Hydra deletes the key (at this value)
+    assert "\n" not in str(err.value)
