@@ -182,7 +182,7 @@ def test_iql_learner_refuses_an_unknown_order():
     """Built from a typed config directly (compose already refuses it, see below)."""
     rc = typed(compose(["agent=iql", "task=cheetah_run", "profile=tiny", "offline.dataset=medium"]))
     rc.agent.iql.value_for_targets = "sideways"
-    with pytest.raises(ValueError, match="'after' or 'before'"):
+    with pytest.raises(ValueError, match="'sideways' is not a valid ValueForTargets"):
         build_learner(rc.agent, OBS, A, "cpu")
 
 

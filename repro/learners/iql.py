@@ -24,7 +24,7 @@ from torch import nn
 
 from repro.agent.agent import CRITIC_METRICS
 from repro.agent.networks import mlp, orthogonal_init, trunk
-from repro.config.schema import AgentConfig
+from repro.config.schema import AgentConfig, RewardScaling, ValueForTargets
 from repro.learners.backbone import OfflineBackbone
 from repro.learners.losses import iql as iql_loss
 
@@ -70,15 +70,10 @@ class IQL(OfflineBackbone):
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
-        if cfg.iql.value_for_targets not in ("after", "before"):
-            raise ValueError(f"agent.iql.value_for_targets must be 'after' or 'before', "
-                             f"got {cfg.iql.value_for_targets!r}")
-        if cfg.iql.reward_scaling not in ("none", "return_range"):
-            raise ValueError(f"agent.iql.reward_scaling must be 'none' or 'return_range', "
-                             f"got {cfg.iql.reward_scaling!r}")
         super().__init__(cfg, obs_shape, action_dim, device=device, explore_steps=explore_steps)
-        self.targets_from_v_before = cfg.iql.value_for_targets == "before"  # CORL's order; "after": the JAX code's
-        self.scales_rewards = cfg.iql.reward_scaling == "return_range"
+        # the Enums raise ValueError for a value outside them (compose refuses one first, in one line)
+        self.targets_from_v_before = ValueForTargets(cfg.iql.value_for_targets) == ValueForTargets.before  # CORL's
+        self.scales_rewards = RewardScaling(cfg.iql.reward_scaling) == RewardScaling.return_range
         self.reward_scale = 1.0  # set by set_dataset_returns when scales_rewards
         self.value = ValueNet(self.encoder.repr_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
         self.value_opt = torch.optim.Adam(self.value.parameters(), lr=cfg.lr)

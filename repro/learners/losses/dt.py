@@ -27,21 +27,20 @@ import torch
 from torch import nn
 
 from repro.agent.networks import Encoder
+from repro.config.schema import DTActivation, DTInit
 
-ACTIVATIONS = ("relu", "gelu", "gelu_new")  # GPT2Config.activation_function values (Chen et al.'s default: relu)
-INITS = ("gpt2", "torch")
 GPT2_INIT_STD = 0.02  # GPT2Config.initializer_range
 
 
-def activation(name: str) -> nn.Module:
+def activation(name: DTActivation | str) -> nn.Module:
     """The feed-forward activation by its GPT2Config name: ``relu``, ``gelu`` (erf) or ``gelu_new`` (tanh)."""
-    if name == "relu":
+    if name == DTActivation.relu:
         return nn.ReLU()
-    if name == "gelu":
+    if name == DTActivation.gelu:
         return nn.GELU()
-    if name == "gelu_new":
+    if name == DTActivation.gelu_new:
         return nn.GELU(approximate="tanh")
-    raise ValueError(f"dt.activation must be one of {', '.join(ACTIVATIONS)}; got {name!r}")
+    raise ValueError(f"dt.activation must be one of {', '.join(DTActivation)}; got {name!r}")
 
 
 class GPT2MLP(nn.Module):
@@ -126,11 +125,11 @@ class DecisionTransformer(nn.Module):
     """
 
     def __init__(self, obs_shape: tuple[int, int, int], action_dim: int, *, context: int, embed_dim: int,
-                 n_layers: int, n_heads: int, dropout: float, max_timestep: int, activation: str, init: str,
-                 ff_dropout: bool):
+                 n_layers: int, n_heads: int, dropout: float, max_timestep: int, activation: DTActivation | str,
+                 init: DTInit | str, ff_dropout: bool):
         super().__init__()
-        if init not in INITS:
-            raise ValueError(f"dt.init must be one of {', '.join(INITS)}; got {init!r}")
+        if init not in tuple(DTInit):
+            raise ValueError(f"dt.init must be one of {', '.join(DTInit)}; got {init!r}")
         self.context, self.action_dim, self.n_heads, self.max_timestep = context, action_dim, n_heads, max_timestep
         self.encoder = Encoder(obs_shape)
         self.embed_state = nn.Linear(self.encoder.repr_dim, embed_dim)
@@ -140,7 +139,7 @@ class DecisionTransformer(nn.Module):
         self.embed_ln = nn.LayerNorm(embed_dim)
         self.embed_drop = nn.Dropout(dropout)
         self.transformer = GPT2Stack(embed_dim, n_layers, n_heads, dropout, activation, ff_dropout)
-        if init == "gpt2":
+        if init == DTInit.gpt2:
             gpt2_init(self.transformer)
         self.predict_action = nn.Sequential(nn.Linear(embed_dim, action_dim), nn.Tanh())
 

@@ -17,13 +17,12 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from repro.config.schema import LambdaFrom
 from repro.learners.losses._checks import same_shape
-
-LAMBDA_FROM = ("min", "q1")
 
 
 def actor_loss(q1: torch.Tensor, q2: torch.Tensor, policy_action: torch.Tensor, data_action: torch.Tensor,
-               alpha: float, lambda_from: str) -> tuple[torch.Tensor, dict[str, float]]:
+               alpha: float, lambda_from: LambdaFrom | str) -> tuple[torch.Tensor, dict[str, float]]:
     """TD3+BC actor loss and its metrics.
 
     ``q1``, ``q2``: the critic's heads at (sg(h), u(policy_action)), same shape (e.g. (B, 1)).
@@ -33,12 +32,12 @@ def actor_loss(q1: torch.Tensor, q2: torch.Tensor, policy_action: torch.Tensor, 
     """
     same_shape(q1=q1, q2=q2)
     same_shape(policy_action=policy_action, data_action=data_action)
-    if lambda_from == "min":
+    if lambda_from == LambdaFrom.min:
         q = torch.min(q1, q2)
-    elif lambda_from == "q1":
+    elif lambda_from == LambdaFrom.q1:
         q = q1
     else:
-        raise ValueError(f"lambda_from must be one of {LAMBDA_FROM}, got {lambda_from!r}")
+        raise ValueError(f"lambda_from must be one of {', '.join(LambdaFrom)}, got {lambda_from!r}")
     lam = alpha / q.detach().abs().mean()
     q_term = q.mean()
     bc = F.mse_loss(policy_action, data_action.detach())
