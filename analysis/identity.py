@@ -7,6 +7,8 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
+from repro.config.schema import LearnerName, is_offline
+
 # agent.name (normalised: lower case, alphanumerics only) -> the paper's label
 ALGO_LABELS: dict[str, str] = {
     "taco": "TACO",
@@ -25,7 +27,8 @@ ALGO_LABELS: dict[str, str] = {
     "bc": "BC",
     "dt": "DT",
 }
-OFFLINE_ALGOS = frozenset({"td3bc", "cql", "iql", "bc", "dt"})
+# the offline learners' names (agent.name of their plain agent files), from the config schema
+OFFLINE_ALGOS = frozenset(str(n) for n in LearnerName if is_offline(n))
 
 # Names the paper prints that a plain title-casing would get wrong.
 _TASK_NAMES: dict[str, str] = {
