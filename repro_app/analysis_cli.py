@@ -54,22 +54,28 @@ def _experiment_map(items: Optional[list[str]]) -> dict[str, list[str]]:
     return out
 
 
+def _load_results(results: Path):
+    """The runs under the results root, or one line and exit 2."""
+    from analysis.load import ResultsRootError, load_results
+
+    try:
+        return load_results(results)
+    except ResultsRootError as exc:
+        _fail(f"{exc} (pass --results ROOT)")
+
+
 def make_context(results: Path, out: Path, frames: int, reps: int, seed: int, min_seeds: int = 2,
                  experiment_map: Optional[list[str]] = None, tsne_n: int = 1000, render_envs: bool = True,
                  published: bool = True):
     """Load the results root into a Context, or fail with one line."""
     from analysis.context import Context
-    from analysis.load import ResultsRootError, load_results
 
     if frames <= 0 or reps <= 0 or tsne_n <= 1 or min_seeds < 1:
         _fail("--frames and --reps must be positive, --tsne-n > 1 and --min-seeds >= 1")
     if results == DEFAULT_RESULTS and not results.exists():
         # A fresh checkout before any training: show the paper-only view rather than an error.
         results.mkdir(parents=True, exist_ok=True)
-    try:
-        loaded = load_results(results)
-    except ResultsRootError as exc:
-        _fail(f"{exc} (pass --results ROOT)")
+    loaded = _load_results(results)
     return Context(results=loaded, out_dir=out, budget=frames, reps=reps, seed=seed, min_seeds=min_seeds,
                    experiment_map=_experiment_map(experiment_map), tsne_n=tsne_n, render_envs=render_envs,
                    published_band=published)
@@ -251,14 +257,10 @@ def calibrate_cmd(
 ) -> None:
     """Your DrQ-v2 runs against the DrQ-v2 authors' published curves at your runs' own budget (any budget)."""
     from analysis.calibration import ABOUT_TEXT, INTERP_TEXT, calibrate, write_calibration
-    from analysis.load import ResultsRootError, load_results
 
     if reps <= 0 or (at is not None and at < 0):
         _fail("--reps must be positive and --frames >= 0")
-    try:
-        loaded = load_results(results)
-    except ResultsRootError as exc:
-        _fail(f"{exc} (pass --results ROOT)")
+    loaded = _load_results(results)
     for problem in loaded.problems:
         typer.echo(f"  {problem}", err=True)
     rows, notes = calibrate(loaded, reps=reps, seed=seed, at=at)
