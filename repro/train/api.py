@@ -95,9 +95,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     and the state is read again under it (RunLocked when another process holds it)."""
     rc = typed(cfg)
     path = rundir.run_dir(cfg)
-    _refuse_other_config(path, cfg)
-    if rundir.run_state(path) == "done":
-        echo(f"already done: {path}")
+    if _refuse_other_config_or_done(path, cfg, echo):
         return path
     device = resolve_device(rc.runtime.device, "runtime.device")
     resolve_device(rc.replay.device, "replay.device")
@@ -117,9 +115,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         raise
     with lock:
         # Under the lock: another writer may have finished, started or changed the run since the checks above.
-        _refuse_other_config(path, cfg)
-        if rundir.run_state(path) == "done":
-            echo(f"already done: {path}")
+        if _refuse_other_config_or_done(path, cfg, echo):
             return path
         if (state is None) != (not (path / rundir.CHECKPOINT).exists()) or (
                 state is not None and _checkpoint_changed(path, state)):
@@ -139,12 +135,17 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     return path
 
 
-def _refuse_other_config(path: Path, cfg: DictConfig) -> None:
+def _refuse_other_config_or_done(path: Path, cfg: DictConfig, echo: Callable[[str], None]) -> bool:
+    """RunDirMismatch when ``path`` holds a run of another config; else whether it is done (said in a line)."""
     diff = rundir.config_diff(path, cfg)
     if diff:
         raise rundir.RunDirMismatch(f"{path} holds a run with another config ({diff[0]}"
                                     f"{f' and {len(diff) - 1} more' if len(diff) > 1 else ''}); "
                                     "use another experiment/variant name or move it away.")
+    if rundir.run_state(path) == "done":
+        echo(f"already done: {path}")
+        return True
+    return False
 
 
 def _load_state(path: Path, data: OfflineData | None) -> dict | None:
