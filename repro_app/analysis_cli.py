@@ -9,11 +9,14 @@ import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NoReturn, Optional
+from typing import TYPE_CHECKING, Any, NoReturn, Optional
 
 import typer
 
 from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
+
+if TYPE_CHECKING:
+    from analysis.context import Context
 
 DEFAULT_RESULTS = Path("runs")
 RESULTS_OPT = typer.Option(DEFAULT_RESULTS, "--results", "-r", help="Results root holding the run directories.")
@@ -110,7 +113,7 @@ class ContextOptions:
     indicative: bool
     published: bool
 
-    def load(self):
+    def load(self) -> Context:
         """The results root loaded into a Context (or one line and exit 2), and a line on what was loaded."""
         ctx = make_context(self.results, self.out, self.frames, self.reps, self.seed, self.min_seeds,
                            self.experiment_map, self.tsne_n, self.render_envs, self.published)

@@ -19,6 +19,7 @@ from repro.launch import spec as specs
 from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 
 if TYPE_CHECKING:
+    from repro.launch.local import LaunchReport
     from repro.launch.status import RunStatus
 
 # The same flags as `repro status`, `figures` and `report`.
@@ -180,7 +181,7 @@ def sweep_cmd(
 
 
 def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: Launcher, max_parallel: Optional[int],
-            force: bool, cluster_config: Optional[Path]):
+            force: bool, cluster_config: Optional[Path]) -> LaunchReport:
     """Record the launch in the sweep's state folder and submit (SLURM) or run (local) the planned runs."""
     from repro.launch.local import default_parallel, run_local
     from repro.launch.state import record_launch, state_dir
