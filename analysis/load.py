@@ -350,16 +350,7 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
 
     row: dict[str, Any] = dict(ident)
     row["resolved_from"] = source
-    meta_path = run_dir / META
-    meta: dict[str, Any] = {}
-    if meta_path.exists():
-        try:
-            meta = _read_json(meta_path)
-        except (ValueError, OSError, UnicodeDecodeError) as exc:
-            problems.append(Problem(str(meta_path), f"unreadable meta.json: {exc}", "warning"))
-    else:
-        problems.append(Problem(str(meta_path), "missing meta.json (no provenance)", "warning"))
-    row.update(_provenance(meta))
+    row.update(_provenance(_read_meta(run_dir / META, problems)))
 
     eval_df = _read_eval(run_dir / EVAL, offline, problems)
     if eval_df is not None:
@@ -369,19 +360,37 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
     if eval_df is not None and not eval_df.empty:
         row["last_update" if offline else "last_frame"] = float(eval_df["update" if offline else "frame"].max())
 
-    train_path = run_dir / TRAIN
-    row["fps"] = row["updates_per_s"] = math.nan
+    row.update(_train_speed(run_dir / TRAIN, offline, problems))
+    return row, eval_df, problems
+
+
+def _read_meta(meta_path: Path, problems: list[Problem]) -> dict[str, Any]:
+    """A run's meta.json ({} with a warning recorded when it is missing or unreadable)."""
+    if not meta_path.exists():
+        problems.append(Problem(str(meta_path), "missing meta.json (no provenance)", "warning"))
+        return {}
+    try:
+        return _read_json(meta_path)
+    except (ValueError, OSError, UnicodeDecodeError) as exc:
+        problems.append(Problem(str(meta_path), f"unreadable meta.json: {exc}", "warning"))
+        return {}
+
+
+def _train_speed(train_path: Path, offline: bool, problems: list[Problem]) -> dict[str, float]:
+    """fps (online: from train.csv) and updates_per_s (offline: the median of train.csv's), NaN when unknown (a
+    problem recorded when train.csv is malformed)."""
+    speed = {"fps": math.nan, "updates_per_s": math.nan}
     if train_path.exists():
         try:
             if offline:
                 train = read_csv_strict(train_path, OFFLINE_TRAIN_REQUIRED, order="update")
                 rates = pd.to_numeric(train["updates_per_s"], errors="coerce").dropna()
-                row["updates_per_s"] = float(rates.median()) if len(rates) else math.nan
+                speed["updates_per_s"] = float(rates.median()) if len(rates) else math.nan
             else:
-                row["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED))
+                speed["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED))
         except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
             problems.append(Problem(str(train_path), f"malformed train.csv ({exc}); its speed not used"))
-    return row, eval_df, problems
+    return speed
 
 
 def _read_eval(path: Path, offline: bool, problems: list[Problem]) -> pd.DataFrame | None:

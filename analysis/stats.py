@@ -18,7 +18,7 @@ from __future__ import annotations
 import contextlib
 import math
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -172,6 +172,17 @@ def performance_profiles(
     return out
 
 
+def _interval(scores: np.ndarray | list[np.ndarray], statistic: Callable[..., np.ndarray], reps: int,
+              seed: int) -> tuple[float, float, float]:
+    """One scalar ``statistic`` of ``scores`` (a runs x tasks matrix, or a list of them passed as its arguments)
+    with its 95% percentile stratified-bootstrap CI by rliable: (value, ci_low, ci_high)."""
+    with seeded(seed) as rs:
+        points, cis = rly.get_interval_estimates(
+            {"value": scores}, statistic, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
+        )
+    return float(points["value"][0]), float(cis["value"][0][0]), float(cis["value"][1][0])
+
+
 def _poi(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.array([metrics.probability_of_improvement(x, y)])
 
@@ -183,11 +194,7 @@ def probability_of_improvement(
 
     ``x`` and ``y`` are (n_runs x n_tasks) matrices over the same tasks; runs may differ in number.
     """
-    with seeded(seed) as rs:
-        points, cis = rly.get_interval_estimates(
-            {"poi": [x, y]}, _poi, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
-        )
-    return float(points["poi"][0]), float(cis["poi"][0][0]), float(cis["poi"][1][0])
+    return _interval([x, y], _poi, reps, seed)
 
 
 def pairwise_poi(x: np.ndarray, y: np.ndarray) -> float:
@@ -209,11 +216,7 @@ def poi_interval(
 ) -> tuple[float, float, float]:
     """:func:`probability_of_improvement` with :func:`pairwise_poi` as the statistic (the same value, fast
     enough for rliable's default repetitions): (value, ci_low, ci_high) by rliable's stratified bootstrap."""
-    with seeded(seed) as rs:
-        points, cis = rly.get_interval_estimates(
-            {"poi": [x, y]}, _pairwise_poi, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
-        )
-    return float(points["poi"][0]), float(cis["poi"][0][0]), float(cis["poi"][1][0])
+    return _interval([x, y], _pairwise_poi, reps, seed)
 
 
 def ratio_of_means(
@@ -224,11 +227,7 @@ def ratio_of_means(
     def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.array([np.mean(a) / np.mean(b)])
 
-    with seeded(seed) as rs:
-        points, cis = rly.get_interval_estimates(
-            {"ratio": [x, y]}, ratio, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
-        )
-    return float(points["ratio"][0]), float(cis["ratio"][0][0]), float(cis["ratio"][1][0])
+    return _interval([x, y], ratio, reps, seed)
 
 
 def score_matrix(
@@ -259,11 +258,7 @@ def _grand_mean(x: np.ndarray) -> np.ndarray:
 
 def grand_mean_ci(matrix: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED) -> tuple[float, float, float]:
     """Mean over runs and tasks of a (n_runs x n_tasks) matrix with its 95% stratified-bootstrap CI."""
-    with seeded(seed) as rs:
-        points, cis = rly.get_interval_estimates(
-            {"mean": matrix}, _grand_mean, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
-        )
-    return float(points["mean"][0]), float(cis["mean"][0][0]), float(cis["mean"][1][0])
+    return _interval(matrix, _grand_mean, reps, seed)
 
 
 def difference_of_means(

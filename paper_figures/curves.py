@@ -59,20 +59,7 @@ def render_curves(
         if not rows.empty:
             any_data = True
             curve_panel(ax, rows, labels, colors, ctx.curve_reps, ctx.seed, per_seed=per_seed)
-        marks = {lab: v for (t, lab), v in paper_marks.items() if t == task}
-        show_marks = marks and (rows.empty or rows["frame"].max() >= 0.5e6)
-        if show_marks:
-            for lab, v in marks.items():
-                ax.plot([1e6], [v], **{**PAPER_MARK, "color": colors.get(lab, "black"), "markeredgecolor": "black"})
-        if rows.empty and not show_marks:
-            placeholder(ax, f"no runs for {task_display(task)}")
-        elif rows.empty:
-            ax.text(0.5, 0.95, "no runs", transform=ax.transAxes, ha="center", va="top", color="#777777")
-            ax.set_xlim(0, 1.1e6)
-            handles = [Line2D([], [], **{**PAPER_MARK, "color": colors.get(lab, "black"), "markeredgecolor": "black"},
-                              label=f"{lab} (paper, 1M)") for lab in marks]
-            handles += [h for h in ax.get_legend_handles_labels()[0] if isinstance(h, Line2D)]
-            ax.legend(handles=handles, fontsize=7, loc="center left")
+        _paper_marks(ax, task, rows, {lab: v for (t, lab), v in paper_marks.items() if t == task}, colors)
         ax.xaxis.set_major_formatter(FuncFormatter(frames_label))
         if hline is not None and not rows.empty:
             ax.axhline(hline[0], color="#555555", ls="--", lw=1, label=hline[1])
@@ -89,11 +76,34 @@ def render_curves(
         fig.suptitle(title, y=1.04 if ctx.no_runs or not any_data else 1.0)
     fig.tight_layout()
     png = save_figure(fig, ctx, artifact_id)
+    return ArtifactResult(artifact_id, title, _caption(ctx, caption, per_seed, bool(paper_marks), drew_published),
+                          figures=[png], has_runs=any_data)
+
+
+def _paper_marks(ax, task: str, rows: pd.DataFrame, marks: dict[str, float], colors: dict[str, str]) -> None:
+    """The paper's values at 1M (diamonds) on a panel whose runs reach 0.5M frames or that has none; a panel with
+    neither runs nor marks gets a placeholder, one with marks only a legend of them."""
+    show_marks = marks and (rows.empty or rows["frame"].max() >= 0.5e6)
+    if show_marks:
+        for lab, v in marks.items():
+            ax.plot([1e6], [v], **{**PAPER_MARK, "color": colors.get(lab, "black"), "markeredgecolor": "black"})
+    if rows.empty and not show_marks:
+        placeholder(ax, f"no runs for {task_display(task)}")
+    elif rows.empty:
+        ax.text(0.5, 0.95, "no runs", transform=ax.transAxes, ha="center", va="top", color="#777777")
+        ax.set_xlim(0, 1.1e6)
+        handles = [Line2D([], [], **{**PAPER_MARK, "color": colors.get(lab, "black"), "markeredgecolor": "black"},
+                          label=f"{lab} (paper, 1M)") for lab in marks]
+        handles += [h for h in ax.get_legend_handles_labels()[0] if isinstance(h, Line2D)]
+        ax.legend(handles=handles, fontsize=7, loc="center left")
+
+
+def _caption(ctx: Context, caption: str, per_seed: bool, paper_marks: bool, drew_published: bool) -> str:
+    """The figure's caption: the artifact's own text, then what the lines, bands, diamonds and published band are."""
     bands = ("thin lines: individual seeds" if per_seed else
              f"lines: mean over seeds; bands: 95% stratified-bootstrap CI of the mean at each frame (rliable, "
              f"{ctx.curve_reps:,} repetitions, random state {ctx.seed}); curves are interpolated on a common "
              "frame grid and not extrapolated past a run's last evaluation")
     marks_text = " Diamonds at 1M frames: the paper's Table 1 values." if paper_marks else ""
     pub_text = " " + band_caption(ctx.curve_reps, ctx.seed) if drew_published else ""
-    return ArtifactResult(artifact_id, title, f"{caption} {bands[0].upper() + bands[1:]}.{marks_text}{pub_text}",
-                          figures=[png], has_runs=any_data)
+    return f"{caption} {bands[0].upper() + bands[1:]}.{marks_text}{pub_text}"

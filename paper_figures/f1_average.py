@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -56,39 +57,8 @@ def render(ctx: Context) -> ArtifactResult:
     paper = ctx.paper.online.groupby("method", sort=False)["mean"].mean()
     mats, mat_notes = average_matrices(ctx)
     normed = {m: x / SCALE for m, x in mats.items()}
-    agg = (
-        aggregate_estimates(normed, reps=ctx.reps, seed=ctx.seed)
-        if normed
-        else pd.DataFrame(columns=["method", "metric"])
-    )
     methods = list(paper.index) + [m for m in mats if m not in paper.index]
-    cells, extra_rows = [], []
-    for method in methods:
-        a = agg[agg["method"] == method]
-        stats = CellStats(0, math.nan, math.nan, math.nan, math.nan)
-        row = {"IQM": "—", "Optimality gap": "—", "P(TACO > method)": "—"}
-        if not a.empty:
-            mean_row = a[a["metric"] == "Mean"].iloc[0]
-            n = mats[method].shape[0]
-            per_run = mats[method].mean(axis=1)
-            stats = CellStats(n, mean_row["value"] * SCALE, float(np.std(per_run, ddof=1)) if n > 1 else math.nan,
-                              mean_row["ci_low"] * SCALE, mean_row["ci_high"] * SCALE)
-            iqm = a[a["metric"] == "IQM"].iloc[0]
-            og = a[a["metric"] == "Optimality Gap"].iloc[0]
-            row["IQM"] = (
-                f"{fmt_num(iqm['value'] * SCALE, 0)} {fmt_ci(iqm['ci_low'] * SCALE, iqm['ci_high'] * SCALE, 0)}"
-            )
-            row["Optimality gap"] = f"{og['value']:.3f} {fmt_ci(og['ci_low'], og['ci_high'], 3)}"
-            if "TACO" in mats and method != "TACO":
-                p, lo, hi = probability_of_improvement(
-                    normed["TACO"], normed[method], min(ctx.reps, POI_REPS), ctx.seed
-                )
-                row["P(TACO > method)"] = f"{p:.2f} {fmt_ci(lo, hi, 2)}"
-        note = mat_notes.get(method, "no runs") if method not in mats else mat_notes[method]
-        cells.append(
-            Cell({"method": method}, float(paper[method]) if method in paper.index else None, None, stats, note=note)
-        )
-        extra_rows.append(row)
+    cells, extra_rows = _cells(ctx, methods, paper, mats, mat_notes, normed)
     caption = (
         "Average episode return over the nine DMC tasks at the frame budget. Paper: the mean of Table 1's nine "
         "means (recomputed; the paper prints no number). Reproduced: rliable mean over runs and tasks with a "
@@ -101,7 +71,66 @@ def render(ctx: Context) -> ArtifactResult:
         table.display[col] = [r[col] for r in extra_rows]
     table = write_table(ctx.out_dir, "F1", pd.concat([table.data, pd.DataFrame(extra_rows)], axis=1),
                         caption, table.display, table.notes)
+    png = _figure(ctx, cells, methods, normed)
+    full_caption = (
+        caption
+        + " "
+        + bar_caption(
+            ctx, "Right: run-score performance profiles with 95% bootstrap bands (rliable, 2,000 repetitions)."
+        )
+    )
+    return ArtifactResult("F1", "Average performance", full_caption, figures=[png], tables=[table], notes=table.notes,
+                          has_runs=bool(mats))
 
+
+def _cells(ctx: Context, methods: list[str], paper: pd.Series, mats: dict[str, np.ndarray], mat_notes: dict[str, str],
+           normed: dict[str, np.ndarray]) -> tuple[list[Cell], list[dict[str, str]]]:
+    """Per method: its comparison cell (paper value, rliable mean and CI) and its IQM / optimality gap /
+    P(TACO > method) texts ("—" without runs on all nine tasks)."""
+    agg = (
+        aggregate_estimates(normed, reps=ctx.reps, seed=ctx.seed)
+        if normed
+        else pd.DataFrame(columns=["method", "metric"])
+    )
+    cells, extra_rows = [], []
+    for method in methods:
+        a = agg[agg["method"] == method]
+        stats = CellStats(0, math.nan, math.nan, math.nan, math.nan)
+        row = {"IQM": "—", "Optimality gap": "—", "P(TACO > method)": "—"}
+        if not a.empty:
+            stats = _aggregate_cell(a, mats[method], row)
+            if "TACO" in mats and method != "TACO":
+                p, lo, hi = probability_of_improvement(
+                    normed["TACO"], normed[method], min(ctx.reps, POI_REPS), ctx.seed
+                )
+                row["P(TACO > method)"] = f"{p:.2f} {fmt_ci(lo, hi, 2)}"
+        note = mat_notes.get(method, "no runs") if method not in mats else mat_notes[method]
+        cells.append(
+            Cell({"method": method}, float(paper[method]) if method in paper.index else None, None, stats, note=note)
+        )
+        extra_rows.append(row)
+    return cells, extra_rows
+
+
+def _aggregate_cell(a: pd.DataFrame, matrix: np.ndarray, row: dict[str, str]) -> CellStats:
+    """A method's rliable Mean (with its CI) as the cell's statistics, on the return scale; fills ``row``'s
+    IQM and optimality-gap texts."""
+    mean_row = a[a["metric"] == "Mean"].iloc[0]
+    n = matrix.shape[0]
+    per_run = matrix.mean(axis=1)
+    stats = CellStats(n, mean_row["value"] * SCALE, float(np.std(per_run, ddof=1)) if n > 1 else math.nan,
+                      mean_row["ci_low"] * SCALE, mean_row["ci_high"] * SCALE)
+    iqm = a[a["metric"] == "IQM"].iloc[0]
+    og = a[a["metric"] == "Optimality Gap"].iloc[0]
+    row["IQM"] = (
+        f"{fmt_num(iqm['value'] * SCALE, 0)} {fmt_ci(iqm['ci_low'] * SCALE, iqm['ci_high'] * SCALE, 0)}"
+    )
+    row["Optimality gap"] = f"{og['value']:.3f} {fmt_ci(og['ci_low'], og['ci_high'], 3)}"
+    return stats
+
+
+def _figure(ctx: Context, cells: list[Cell], methods: list[str], normed: dict[str, np.ndarray]) -> Path:
+    """Left: the average per method (bars); right: rliable performance profiles (or a placeholder)."""
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.2), gridspec_kw={"width_ratios": [1.3, 1]})
     cf = cells_frame(cells).assign(group="avg")
     grouped_bars(ax, cf, "method", "group", methods, ["avg"], x_labels=methods, colors={"avg": "#4c72b0"})
@@ -126,13 +155,4 @@ def render(ctx: Context) -> ArtifactResult:
         placeholder(ax2, "performance profile: needs runs of a method on all nine DMC tasks")
     if ctx.no_runs:
         banner(fig, NO_RUNS_TEXT)
-    png = save_figure(fig, ctx, "F1")
-    full_caption = (
-        caption
-        + " "
-        + bar_caption(
-            ctx, "Right: run-score performance profiles with 95% bootstrap bands (rliable, 2,000 repetitions)."
-        )
-    )
-    return ArtifactResult("F1", "Average performance", full_caption, figures=[png], tables=[table], notes=table.notes,
-                          has_runs=bool(mats))
+    return save_figure(fig, ctx, "F1")

@@ -59,14 +59,12 @@ def _dry_run(cfg) -> None:
     from rich.table import Table
 
     from repro.config.compose import typed
-    from repro.envs import get_task
-    from repro.train.api import build_agent
+    from repro.train.api import build_agent, run_action_dim
 
     rc = typed(cfg)
     console = _console()
     console.print(OmegaConf.to_yaml(cfg, resolve=True), markup=False, highlight=False)
-    info = get_task(rc.task.name)
-    action_dim = info.action_dim + rc.env.distracting_dims
+    action_dim = run_action_dim(rc)
     obs_shape = (3 * rc.env.frame_stack, rc.env.image_size, rc.env.image_size)
     agent = build_agent(rc, obs_shape, action_dim, "cpu")
     table = Table(title=f"trainable parameters ({rc.agent.name}, |A|={action_dim})")

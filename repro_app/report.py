@@ -67,6 +67,19 @@ def _section(title: str, body: str) -> str:
 
 def build_markdown(ctx: Context, artifacts, verdicts, findings,
                    calibration: tuple[list[CalibrationRow], list[str]] | None = None) -> str:
+    """REPORT.md: the header, the claims, the audit, the calibration, every artifact and the provenance."""
+    lines = _header(ctx, verdicts, findings)
+    lines.append(_claims_section(ctx, verdicts))
+    lines += _audit_sections(findings)
+    if calibration is not None:
+        lines.append(_calibration_section(ctx, *calibration))
+    lines += [_artifact_section(art) for art in artifacts]
+    lines.append(_provenance_section(ctx))
+    return "\n".join(lines) + "\n"
+
+
+def _header(ctx: Context, verdicts, findings) -> list[str]:
+    """The title, what the scores are, what was loaded, and the claim and audit counts."""
     res = ctx.results
     lines = ["# TACO reproduction report", "",
              f"Generated {dt.datetime.now().astimezone().isoformat(timespec='seconds')} from `{res.root}`; "
@@ -81,6 +94,10 @@ def build_markdown(ctx: Context, artifacts, verdicts, findings,
     n_bad = len(mismatches(findings))
     lines.append(f"\n**Claims:** {verdict_counts(verdicts)}. **Audit of the paper's own numbers:** {n_bad} "
                  "mismatches.")
+    return lines
+
+
+def _claims_section(ctx: Context, verdicts) -> str:
     claims_note = ("Each claim is judged at its own budget (column Budget, from analysis/claim_budgets.csv, not "
                    f"from the runs; the tables below use {ctx.budget_text()}) and only from cells with at least the "
                    "seeds in column Seeds that reached it; otherwise the verdict is 'not enough data' with the "
@@ -88,7 +105,11 @@ def build_markdown(ctx: Context, artifacts, verdicts, findings,
     if any(v.indicative for v in verdicts):
         claims_note += (" Entries marked 'indicative' are readings below a claim's budget or seed count, asked for "
                         "with --indicative: they are not verdicts.")
-    lines.append(_section("Claims", claims_note + "\n\n" + to_markdown(claims_frame(verdicts))))
+    return _section("Claims", claims_note + "\n\n" + to_markdown(claims_frame(verdicts)))
+
+
+def _audit_sections(findings) -> list[str]:
+    """The paper's derived numbers that do not recompute, and its DrQ-v2 baseline against the published curves."""
     bad = [f for f in findings if f.kind == "check" and not f.match]
     audit_md = to_markdown(
         pd.DataFrame(
@@ -100,40 +121,49 @@ def build_markdown(ctx: Context, artifacts, verdicts, findings,
             }
         )
     )
-    lines.append(
+    sections = [
         _section(
             "Audit: mismatches in the paper's derived numbers",
             audit_md + f"\nAll {len(findings)} checks, including those that agree: [audit.md](audit.md).",
         )
-    )
+    ]
     if published_rows(findings):
-        lines.append(_section("Audit: the paper's DrQ-v2 baseline against the published curves",
-                              published_summary(findings) + "\n\n" + to_markdown(published_frame(findings))))
-    if calibration is not None:
-        rows, notes = calibration
-        cal = (to_markdown(calibration_frames(rows)[1]) if rows else
-               "No DrQ-v2 runs under the results root: nothing to calibrate (run DrQ-v2 at any budget, e.g. "
-               "100K frames, to see whether it sits where the published curve sits).\n")
-        cal += "".join(f"\n_{n}_\n" for n in calibration_notes(ctx.reps, ctx.seed, notes))
-        lines.append(_section("Baseline calibration: your DrQ-v2 against the DrQ-v2 authors' published curves",
-                              cal + "\nFiles: [csv](calibration.csv), [md](calibration.md), [tex](calibration.tex)"))
-    for art in artifacts:
-        body = [f"_{art.caption}_", ""] if art.figures else []
-        for png in art.figures:
-            body.append(f"![{art.id}]({png.name})  \n[PDF]({png.with_suffix('.pdf').name})")
-        for table in art.tables:
-            body.append(table.markdown())
-            body.append(f"Files: {', '.join(f'[{p.suffix[1:]}]({p.name})' for p in table.files)}")
-        extra = [n for n in art.notes if all(n not in t.notes for t in art.tables)]
-        body += [f"_{n}_" for n in extra]
-        lines.append(_section(f"{art.id}: {art.title}", "\n\n".join(body)))
+        sections.append(_section("Audit: the paper's DrQ-v2 baseline against the published curves",
+                                 published_summary(findings) + "\n\n" + to_markdown(published_frame(findings))))
+    return sections
+
+
+def _calibration_section(ctx: Context, rows: list[CalibrationRow], notes: list[str]) -> str:
+    cal = (to_markdown(calibration_frames(rows)[1]) if rows else
+           "No DrQ-v2 runs under the results root: nothing to calibrate (run DrQ-v2 at any budget, e.g. "
+           "100K frames, to see whether it sits where the published curve sits).\n")
+    cal += "".join(f"\n_{n}_\n" for n in calibration_notes(ctx.reps, ctx.seed, notes))
+    return _section("Baseline calibration: your DrQ-v2 against the DrQ-v2 authors' published curves",
+                    cal + "\nFiles: [csv](calibration.csv), [md](calibration.md), [tex](calibration.tex)")
+
+
+def _artifact_section(art) -> str:
+    """One table or figure: caption, images with their PDF, tables with their files, and its other notes."""
+    body = [f"_{art.caption}_", ""] if art.figures else []
+    for png in art.figures:
+        body.append(f"![{art.id}]({png.name})  \n[PDF]({png.with_suffix('.pdf').name})")
+    for table in art.tables:
+        body.append(table.markdown())
+        body.append(f"Files: {', '.join(f'[{p.suffix[1:]}]({p.name})' for p in table.files)}")
+    extra = [n for n in art.notes if all(n not in t.notes for t in art.tables)]
+    body += [f"_{n}_" for n in extra]
+    return _section(f"{art.id}: {art.title}", "\n\n".join(body))
+
+
+def _provenance_section(ctx: Context) -> str:
+    """This analysis' versions, the runs' provenance (meta.json) and every problem file."""
+    res = ctx.results
     prov = tool_provenance()
     prov_md = to_markdown(pd.DataFrame({"Item": list(prov), "Value": list(prov.values())}))
     runs_md = to_markdown(runs_provenance(ctx)) if not res.empty else "No runs.\n"
     probs = "\n".join(f"- `{p.path}`: {p.level}: {p.message}" for p in res.problems) or "None."
-    lines.append(_section("Provenance", f"### This analysis\n\n{prov_md}\n### Runs (from meta.json)\n\n{runs_md}\n"
-                                        f"### Problem files (skipped or used with a caveat)\n\n{probs}\n"))
-    return "\n".join(lines) + "\n"
+    return _section("Provenance", f"### This analysis\n\n{prov_md}\n### Runs (from meta.json)\n\n{runs_md}\n"
+                                  f"### Problem files (skipped or used with a caveat)\n\n{probs}\n")
 
 
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}

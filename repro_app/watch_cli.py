@@ -10,11 +10,14 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
 
 from repro.runs.tblog import TB_DIR
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 def _fail(message: str) -> None:
@@ -31,63 +34,70 @@ def tensorboard_command(root: Path, port: Optional[int] = None) -> list[str]:
 
 def register(app: typer.Typer) -> None:
     """Add ``tensorboard`` and ``plot`` to ``app``."""
+    app.command("tensorboard")(tensorboard_cmd)
+    app.command("plot")(plot_cmd)
 
-    @app.command("tensorboard")
-    def tensorboard_cmd(
-        root: Path = typer.Argument(..., help="A results root (a whole sweep) or one run directory."),
-        run: bool = typer.Option(False, "--run", help="Start TensorBoard instead of printing the command."),
-        port: Optional[int] = typer.Option(None, "--port", min=1, max=65535, help="TensorBoard's port."),
-    ) -> None:
-        """Print (or --run) the command that opens every run under ROOT in TensorBoard (runtime.tensorboard=true)."""
-        if not root.is_dir():
-            _fail(f"{root} does not exist or is not a directory")
-        n = sum(1 for _ in root.rglob(f"{TB_DIR}/events.out.tfevents.*"))
-        cmd = tensorboard_command(root, port)
-        if not run:
-            typer.echo(shlex.join(cmd))
-            typer.echo(f"# {n} run(s) with event files under {root}"
-                       + ("" if n else " (train with runtime.tensorboard=true)"), err=True)
-            return
-        if n == 0:
-            _fail(f"no event files under {root} (train with runtime.tensorboard=true)")
-        raise typer.Exit(subprocess.call(cmd))
 
-    @app.command("plot")
-    def plot_cmd(
-        paths: list[Path] = typer.Argument(..., help="Results roots and/or run directories."),
-        metric: str = typer.Option("episode_reward", "--metric", "-m",
-                                   help="An eval.csv column, or else a train.csv column (e.g. critic_loss)."),
-        by: str = typer.Option("agent,variant", "--by",
-                               help="Identity columns that name a curve (e.g. agent,variant or method,K)."),
-        out: Path = typer.Option(Path("plot.png"), "--out", "-o", help="PNG to write; the PDF goes beside it."),
-        reps: int = typer.Option(2000, "--reps", min=1, help="Bootstrap repetitions of the CI band."),
-        seed: int = typer.Option(0, "--seed", help="Random state of the bootstrap."),
-        published: bool = typer.Option(True, "--published/--no-published",
-                                       help="Draw the DrQ-v2 authors' published curve (mean and 95% CI band) on "
-                                            "each task that has one (episode_reward against frames only)."),
-    ) -> None:
-        """Learning curves of any runs: one panel per task, mean over seeds with a 95% bootstrap CI band."""
-        from analysis.calibration import packaged_published, published_band
-        from analysis.quick import PlotInputError, by_columns, load_runs, repeated_seeds, tidy_curves
-        from paper_figures.quick_plot import plot_curves
+def tensorboard_cmd(
+    root: Path = typer.Argument(..., help="A results root (a whole sweep) or one run directory."),
+    run: bool = typer.Option(False, "--run", help="Start TensorBoard instead of printing the command."),
+    port: Optional[int] = typer.Option(None, "--port", min=1, max=65535, help="TensorBoard's port."),
+) -> None:
+    """Print (or --run) the command that opens every run under ROOT in TensorBoard (runtime.tensorboard=true)."""
+    if not root.is_dir():
+        _fail(f"{root} does not exist or is not a directory")
+    n = sum(1 for _ in root.rglob(f"{TB_DIR}/events.out.tfevents.*"))
+    cmd = tensorboard_command(root, port)
+    if not run:
+        typer.echo(shlex.join(cmd))
+        typer.echo(f"# {n} run(s) with event files under {root}"
+                   + ("" if n else " (train with runtime.tensorboard=true)"), err=True)
+        return
+    if n == 0:
+        _fail(f"no event files under {root} (train with runtime.tensorboard=true)")
+    raise typer.Exit(subprocess.call(cmd))
 
-        try:
-            cols = by_columns(by)
-            runs, evals, problems = load_runs(paths)
-            curves = tidy_curves(runs, evals, metric, cols)
-        except PlotInputError as exc:
-            _fail(str(exc))
-        for problem in problems:
-            typer.echo(f"  {problem}", err=True)
-        for cell in repeated_seeds(curves):
-            typer.echo(f"  warning: {cell}: several runs share a seed (averaged); add experiment to --by", err=True)
-        bands = {}
-        if published and metric == "episode_reward":
-            pub = packaged_published()
-            for task, rows in curves.groupby("task"):
-                band = published_band(pub, str(task), float(rows["frame"].max()), reps, seed)
-                if not band.empty:
-                    bands[str(task)] = band
-        written = plot_curves(curves, metric, out, by=cols, reps=reps, seed=seed, published=bands)
-        typer.echo(f"{curves['run_id'].nunique()} run(s), {curves['task'].nunique()} task(s): "
-                   f"wrote {', '.join(str(p) for p in written)}")
+def plot_cmd(
+    paths: list[Path] = typer.Argument(..., help="Results roots and/or run directories."),
+    metric: str = typer.Option("episode_reward", "--metric", "-m",
+                               help="An eval.csv column, or else a train.csv column (e.g. critic_loss)."),
+    by: str = typer.Option("agent,variant", "--by",
+                           help="Identity columns that name a curve (e.g. agent,variant or method,K)."),
+    out: Path = typer.Option(Path("plot.png"), "--out", "-o", help="PNG to write; the PDF goes beside it."),
+    reps: int = typer.Option(2000, "--reps", min=1, help="Bootstrap repetitions of the CI band."),
+    seed: int = typer.Option(0, "--seed", help="Random state of the bootstrap."),
+    published: bool = typer.Option(True, "--published/--no-published",
+                                   help="Draw the DrQ-v2 authors' published curve (mean and 95% CI band) on "
+                                        "each task that has one (episode_reward against frames only)."),
+) -> None:
+    """Learning curves of any runs: one panel per task, mean over seeds with a 95% bootstrap CI band."""
+    from analysis.quick import PlotInputError, by_columns, load_runs, repeated_seeds, tidy_curves
+    from paper_figures.quick_plot import plot_curves
+
+    try:
+        cols = by_columns(by)
+        runs, evals, problems = load_runs(paths)
+        curves = tidy_curves(runs, evals, metric, cols)
+    except PlotInputError as exc:
+        _fail(str(exc))
+    for problem in problems:
+        typer.echo(f"  {problem}", err=True)
+    for cell in repeated_seeds(curves):
+        typer.echo(f"  warning: {cell}: several runs share a seed (averaged); add experiment to --by", err=True)
+    bands = _published_bands(curves, reps, seed) if published and metric == "episode_reward" else {}
+    written = plot_curves(curves, metric, out, by=cols, reps=reps, seed=seed, published=bands)
+    typer.echo(f"{curves['run_id'].nunique()} run(s), {curves['task'].nunique()} task(s): "
+               f"wrote {', '.join(str(p) for p in written)}")
+
+
+def _published_bands(curves: pd.DataFrame, reps: int, seed: int) -> dict[str, pd.DataFrame]:
+    """Per task of ``curves`` with a published DrQ-v2 curve: its mean and 95% CI band up to the task's last frame."""
+    from analysis.calibration import packaged_published, published_band
+
+    pub = packaged_published()
+    bands = {}
+    for task, rows in curves.groupby("task"):
+        band = published_band(pub, str(task), float(rows["frame"].max()), reps, seed)
+        if not band.empty:
+            bands[str(task)] = band
+    return bands

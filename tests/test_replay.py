@@ -158,3 +158,25 @@ def test_future_sequence_holds_every_step_up_to_K():
             assert stack[-1] == (ep, t + k) and all(e == ep for e, _ in stack)
         assert torch.equal(batch["future_obs_seq"][i, -1], batch["future_obs"][i])
     assert "future_obs_seq" not in buf.sample(4)
+
+
+def test_add_episode_equals_the_online_loops_step_by_step_fill():
+    """add_episode(arrays) stores what start_episode/add/end_episode store (frames, actions, rewards, terminal
+    discount), so a buffer filled from a dataset samples what the online loop's buffer samples."""
+    stepwise = ReplayBuffer(40, (3, 4, 4), A, frame_stack=3, nstep=2, K=3, discount=0.9, seed=5)
+    episodes = []
+    for i, n in enumerate([8, 6, 9]):
+        stepwise.start_episode(frame(i, 0))
+        for t in range(n):
+            stepwise.add(np.array([i, -t], np.float32), float(3 * t - i), 0.0 if t == n - 1 and i == 1 else 1.0,
+                         frame(i, t + 1))
+        episodes.append(stepwise.end_episode())
+    whole = ReplayBuffer(40, (3, 4, 4), A, frame_stack=3, nstep=2, K=3, discount=0.9, seed=5)
+    for ep in episodes:
+        out = whole.add_episode(ep)
+        for key in ("frames", "actions", "rewards", "discounts", "ep_id"):
+            np.testing.assert_array_equal(out[key], ep[key])
+    assert whole.state() == stepwise.state()
+    a, b = stepwise.sample(64), whole.sample(64)
+    for key in a:
+        assert torch.equal(a[key], b[key]), key

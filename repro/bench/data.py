@@ -74,10 +74,7 @@ def fill_online(directory: Path, capacity: int, seed: int) -> ReplayBuffer:
     """An online ReplayBuffer holding the dataset's episodes, filled step by step as the online loop does."""
     buf = ReplayBuffer(capacity, FRAME_SHAPE, ACTION_DIM, FRAME_STACK, NSTEP, K, DISCOUNT, seed=seed)
     for ep in iter_episodes(directory, verify=False):
-        buf.start_episode(ep["frames"][0])
-        for t in range(len(ep["actions"])):
-            buf.add(ep["actions"][t], float(ep["rewards"][t]), float(ep["discounts"][t]), ep["frames"][t + 1])
-        buf.end_episode()
+        buf.add_episode(ep)
     return buf
 
 

@@ -49,10 +49,7 @@ def fill_buffer(episodes: Sequence[Mapping[str, np.ndarray]], cfg: AgentConfig, 
     buf = ReplayBuffer(capacity, FRAME_SHAPE, action_dim, frame_stack, cfg.nstep, cfg.K, cfg.discount,
                        seed=seed, device=device)
     for ep in episodes:
-        buf.start_episode(ep["frames"][0])
-        for t in range(len(ep["actions"])):
-            buf.add(ep["actions"][t], float(ep["rewards"][t]), float(ep["discounts"][t]), ep["frames"][t + 1])
-        buf.end_episode()
+        buf.add_episode(ep)
     return buf
 
 

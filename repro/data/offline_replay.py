@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import hashlib
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -74,14 +76,31 @@ def _checked(data: dict[str, np.ndarray], index: int, transitions: int, frame_sh
     return data
 
 
+def _checked_manifest(directory: Path, task: str, action_dim: int,
+                      frame_shape: tuple[int, int, int]) -> tuple[Manifest, list[int]]:
+    """The dataset's manifest, checked against the run, and its episodes' lengths in transitions."""
+    manifest = load_manifest(directory)
+    check_compatible(manifest, directory, task, action_dim, frame_shape)
+    return manifest, [int(e.transitions) for e in manifest.episodes]
+
+
+@contextmanager
+def _unreadable_episodes(directory: Path) -> Iterator[None]:
+    """An episode file that cannot be read, inside the block, as a one-line DatasetError naming the dataset."""
+    try:
+        yield
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+        if isinstance(exc, DatasetError):
+            raise
+        raise DatasetError(f"{directory}: unreadable episode file ({str(exc).splitlines()[0]})") from None
+
+
 def load_offline_data(directory: str | Path, *, task: str, action_dim: int, frame_shape: tuple[int, int, int],
                       frame_stack: int, nstep: int, K: int, discount: float, seed: int,
                       device: str | torch.device = "cpu") -> OfflineData:
     """Check the dataset against the run, then fill a ReplayBuffer sized to it, one episode file at a time."""
     directory = Path(directory)
-    manifest = load_manifest(directory)
-    check_compatible(manifest, directory, task, action_dim, frame_shape)
-    lengths = [int(e.transitions) for e in manifest.episodes]
+    manifest, lengths = _checked_manifest(directory, task, action_dim, frame_shape)
     capacity = sum(n + 1 for n in lengths)
     buffer = ReplayBuffer(capacity, frame_shape, action_dim, frame_stack, nstep, K, discount, seed=seed,
                           device=device)
@@ -102,12 +121,8 @@ def load_offline_data(directory: str | Path, *, task: str, action_dim: int, fram
     state = {"cursor": 0, "size": capacity, "next_ep_id": len(lengths),
              "episodes": [[i, int(s), n + 1] for i, (s, n) in enumerate(zip(starts, lengths))],
              "rng": buffer.rng.bit_generator.state}
-    try:
+    with _unreadable_episodes(directory):
         buffer.restore(state, next_episode)
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
-        if isinstance(exc, DatasetError):
-            raise
-        raise DatasetError(f"{directory}: unreadable episode file ({str(exc).splitlines()[0]})") from None
     if buffer.num_valid() == 0:
         raise DatasetError(f"{directory}: no episode has {buffer.horizon} steps after a frame (agent.K, agent.nstep)")
     return OfflineData(directory, manifest, manifest_digest(directory), buffer, raw)
@@ -118,22 +133,16 @@ def load_offline_episodes(directory: str | Path, *, task: str, action_dim: int, 
     """Check the dataset against the run as ``load_offline_data`` does and keep its episodes (frames held once,
     no replay); ``max_length``: the most steps an episode may have (DT: its timestep embedding's size)."""
     directory = Path(directory)
-    manifest = load_manifest(directory)
-    check_compatible(manifest, directory, task, action_dim, frame_shape)
-    lengths = [int(e.transitions) for e in manifest.episodes]
+    manifest, lengths = _checked_manifest(directory, task, action_dim, frame_shape)
     if max_length is not None and max(lengths) > max_length:
         raise DatasetError(f"{directory}: an episode has {max(lengths)} steps, more than the learner's "
                            f"{max_length} (agent.dt.max_timestep)")
     episodes: list[dict[str, np.ndarray]] = []
-    try:
+    with _unreadable_episodes(directory):
         for index, data in enumerate(iter_episodes(directory)):
             if index >= len(lengths):
                 break
             episodes.append(_checked(dict(data), index, lengths[index], frame_shape, action_dim, directory))
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
-        if isinstance(exc, DatasetError):
-            raise
-        raise DatasetError(f"{directory}: unreadable episode file ({str(exc).splitlines()[0]})") from None
     if len(episodes) != len(lengths):
         raise DatasetError(f"{directory}: manifest lists {len(lengths)} episodes, {len(episodes)} files read")
     raw = sum(ep["frames"].nbytes for ep in episodes)

@@ -8,6 +8,7 @@ The storage can live on any torch device (``replay.device=cuda`` on a GPU machin
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -119,6 +120,14 @@ class ReplayBuffer:
                 "actions": np.asarray(cur["actions"], dtype=np.float32).reshape(-1, self.action_dim),
                 "rewards": np.asarray(cur["rewards"], dtype=np.float32),
                 "discounts": np.asarray(cur["discounts"], dtype=np.float32)}
+
+    def add_episode(self, ep: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """A whole episode (arrays as :meth:`end_episode` returns them), added step by step as the online loop
+        adds it; returns :meth:`end_episode`'s arrays."""
+        self.start_episode(ep["frames"][0])
+        for t in range(len(ep["actions"])):
+            self.add(ep["actions"][t], float(ep["rewards"][t]), float(ep["discounts"][t]), ep["frames"][t + 1])
+        return self.end_episode()
 
     # ------------------------------------------------------------------ resume
     def state(self) -> dict:

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
+import numpy.typing as npt
 
 
 @dataclass
@@ -54,3 +55,11 @@ class Env(Protocol):
         ...
 
     def close(self) -> None: ...
+
+
+def checked_action(action: np.ndarray, action_dim: int, dtype: npt.DTypeLike) -> np.ndarray:
+    """``action`` as an array of ``dtype``; a ValueError unless its shape is ``(action_dim,)``."""
+    action = np.asarray(action, dtype=dtype)
+    if action.shape != (action_dim,):
+        raise ValueError(f"expected action shape ({action_dim},), got {action.shape}")
+    return action

@@ -10,12 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from repro.envs.base import EnvSpec, TimeStep
+from repro.envs.base import TimeStep
 from repro.envs.registry import TaskInfo
-from repro.envs.wrappers import FrameStack
+from repro.envs.suite import SuiteEnv
 
 
-class DMCEnv:
+class DMCEnv(SuiteEnv):
     """A DMC task as a pixel :class:`repro.envs.base.Env` with actions in [-1, 1].
 
     For ``reach_duplo`` the composer environment's own ``front_close`` camera observable is disabled and
@@ -23,36 +23,17 @@ class DMCEnv:
     (the pixels are identical: same camera, same physics, same default render settings).
     """
 
-    def __init__(
-        self,
-        info: TaskInfo,
-        *,
-        seed: int,
-        action_repeat: int = 2,
-        frame_stack: int = 3,
-        image_size: int = 84,
-        camera: int | str | None = None,
-    ) -> None:
-        if info.suite not in ("dmc", "manipulation"):
-            raise ValueError(f"{info.name} is not a DMC task (suite {info.suite!r})")
-        if action_repeat < 1:
-            raise ValueError(f"action_repeat must be >= 1, got {action_repeat}")
-        self.info = info
-        self._action_repeat = action_repeat
-        self._image_size = image_size
-        self._camera = info.camera if camera is None else camera
-        self._env = self._load(info, seed)
+    SUITES = ("dmc", "manipulation")
+    SUITE_NAME = "DMC"
+    HAS_SUCCESS = False
+
+    def _build(self, seed: int) -> int:
+        self._env = self._load(self.info, seed)
         aspec = self._env.action_spec()
         self._action_dtype = aspec.dtype
         self._low = np.asarray(aspec.minimum, dtype=np.float64)
         self._high = np.asarray(aspec.maximum, dtype=np.float64)
-        self._frames = FrameStack(frame_stack)
-        self._done = True
-        self.spec = EnvSpec(
-            action_dim=int(aspec.shape[0]),
-            obs_shape=(3 * frame_stack, image_size, image_size),
-            has_success=False,
-        )
+        return int(aspec.shape[0])
 
     @staticmethod
     def _load(info: TaskInfo, seed: int) -> Any:
@@ -76,31 +57,24 @@ class DMCEnv:
             self._env.random_state.seed(seed)
 
     def _render(self) -> np.ndarray:
-        size = self._image_size
-        return self._env.physics.render(height=size, width=size, camera_id=self._camera)
+        return self.render_view(self._image_size)
 
     def render_view(self, size: int) -> np.ndarray:
         return self._env.physics.render(height=size, width=size, camera_id=self._camera)
 
     def _to_env_action(self, action: np.ndarray) -> np.ndarray:
-        action = np.asarray(action, dtype=np.float64)
-        if action.shape != (self.spec.action_dim,):
-            raise ValueError(f"expected action shape ({self.spec.action_dim},), got {action.shape}")
-        action = np.clip(action, -1.0, 1.0)
+        """[-1, 1] -> the action spec's [minimum, maximum], in its dtype."""
         scaled = self._low + (action + 1.0) * 0.5 * (self._high - self._low)
         return scaled.astype(self._action_dtype)
 
     def reset(self, seed: int) -> TimeStep:
         self._reseed(seed)
         self._env.reset()
-        self._done = False
-        obs = self._frames.reset(self._render())
+        obs = self._first_observation()
         return TimeStep(observation=obs, reward=0.0, discount=1.0, first=True, last=False)
 
     def step(self, action: np.ndarray) -> TimeStep:
-        if self._done:
-            raise RuntimeError("episode is over: call reset(seed) first")
-        env_action = self._to_env_action(action)
+        env_action = self._to_env_action(self._step_action(action, np.float64))
         reward = 0.0
         discount = 1.0
         last = False
@@ -111,8 +85,7 @@ class DMCEnv:
                 last = True
                 discount = 1.0 if ts.discount is None else float(ts.discount)
                 break
-        self._done = last
-        obs = self._frames.push(self._render())
+        obs = self._next_observation(last)
         return TimeStep(observation=obs, reward=reward, discount=discount, first=False, last=last)
 
     def close(self) -> None:

@@ -18,60 +18,40 @@ from typing import Any
 
 import numpy as np
 
-from repro.envs.base import EnvSpec, TimeStep
-from repro.envs.registry import TaskInfo
-from repro.envs.wrappers import FrameStack
+from repro.envs.base import TimeStep
+from repro.envs.suite import SuiteEnv
 
 
-class MetaWorldEnv:
+class MetaWorldEnv(SuiteEnv):
     """A Meta-world v3 MT1 task as a pixel :class:`repro.envs.base.Env`; ``info['success']`` is 0.0/1.0.
 
     ``info['success']`` is the environment's success flag after the last environment step of the agent
     step (a function of the current state, like ``evaluate_state``).
     """
 
-    def __init__(
-        self,
-        info: TaskInfo,
-        *,
-        seed: int,
-        action_repeat: int = 2,
-        frame_stack: int = 3,
-        image_size: int = 84,
-        camera: int | str | None = None,
-    ) -> None:
-        if info.suite != "metaworld":
-            raise ValueError(f"{info.name} is not a Meta-world task (suite {info.suite!r})")
-        if action_repeat < 1:
-            raise ValueError(f"action_repeat must be >= 1, got {action_repeat}")
+    SUITES = ("metaworld",)
+    SUITE_NAME = "Meta-world"
+    HAS_SUCCESS = True
+
+    def _build(self, seed: int) -> int:
         import metaworld
 
-        self.info = info
-        self._action_repeat = action_repeat
-        camera = info.camera if camera is None else camera
-        self._benchmark = metaworld.MT1(info.task, seed=seed)
+        self._benchmark = metaworld.MT1(self.info.task, seed=seed)
         self._tasks = list(self._benchmark.train_tasks)
         camera_kwargs: dict[str, Any] = (
-            {"camera_id": camera} if isinstance(camera, int) else {"camera_name": camera}
+            {"camera_id": self._camera} if isinstance(self._camera, int) else {"camera_name": self._camera}
         )
-        self._env = self._benchmark.train_classes[info.task](
-            render_mode="rgb_array", width=image_size, height=image_size, **camera_kwargs
+        self._env = self._benchmark.train_classes[self.info.task](
+            render_mode="rgb_array", width=self._image_size, height=self._image_size, **camera_kwargs
         )
         self._env.set_task(self._tasks[0])
-        self._camera = camera
         self._rotate: bool | None = None  # decided after the first reset (needs camera poses)
-        self._frames = FrameStack(frame_stack)
-        self._done = True
         self._state: np.ndarray | None = None
         self._viewer: Any = None  # mujoco.Renderer for render_view, made on first use
         self.task_index = 0
         action_shape = self._env.action_space.shape
         assert action_shape is not None  # a Box space
-        self.spec = EnvSpec(
-            action_dim=int(action_shape[0]),
-            obs_shape=(3 * frame_stack, image_size, image_size),
-            has_success=True,
-        )
+        return int(action_shape[0])
 
     @property
     def raw_env(self) -> Any:
@@ -123,19 +103,13 @@ class MetaWorldEnv:
         self._state, _ = self._env.reset()
         if self._rotate is None:
             self._rotate = self._camera_upside_down()
-        self._done = False
-        obs = self._frames.reset(self._render())
+        obs = self._first_observation()
         return TimeStep(
             observation=obs, reward=0.0, discount=1.0, first=True, last=False, info={"success": 0.0}
         )
 
     def step(self, action: np.ndarray) -> TimeStep:
-        if self._done:
-            raise RuntimeError("episode is over: call reset(seed) first")
-        action = np.asarray(action, dtype=np.float32)
-        if action.shape != (self.spec.action_dim,):
-            raise ValueError(f"expected action shape ({self.spec.action_dim},), got {action.shape}")
-        action = np.clip(action, -1.0, 1.0)
+        action = self._step_action(action, np.float32)
         reward = 0.0
         discount = 1.0
         last = False
@@ -148,8 +122,7 @@ class MetaWorldEnv:
                 last = True
                 discount = 0.0 if terminated else 1.0
                 break
-        self._done = last
-        obs = self._frames.push(self._render())
+        obs = self._next_observation(last)
         return TimeStep(
             observation=obs,
             reward=reward,

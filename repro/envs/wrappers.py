@@ -7,7 +7,7 @@ from collections import deque
 
 import numpy as np
 
-from repro.envs.base import Env, EnvSpec, TimeStep
+from repro.envs.base import Env, EnvSpec, TimeStep, checked_action
 
 
 class FrameStack:
@@ -59,10 +59,7 @@ class DistractingActionDims:
         return self.env.reset(seed)
 
     def step(self, action: np.ndarray) -> TimeStep:
-        action = np.asarray(action, dtype=np.float32)
-        if action.shape != (self.spec.action_dim,):
-            raise ValueError(f"expected action shape ({self.spec.action_dim},), got {action.shape}")
-        return self.env.step(action[: self._inner_dim])
+        return self.env.step(checked_action(action, self.spec.action_dim, np.float32)[: self._inner_dim])
 
     def render_view(self, size: int) -> np.ndarray:
         return self.env.render_view(size)

@@ -19,6 +19,7 @@ from repro.launch import spec as specs
 from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 
 if TYPE_CHECKING:
+    from repro.launch.local import LaunchReport
     from repro.launch.status import RunStatus
 
 # The same flags as `repro status`, `figures` and `report`.
@@ -92,150 +93,166 @@ def _mismatch_error(planned: list[PlannedRun], root: Path) -> str:
 
 def register(app: typer.Typer) -> None:
     """Add ``sweeps``, ``sweep`` and ``status`` to ``app``."""
+    for name, command in (("sweeps", sweeps_cmd), ("sweep", sweep_cmd), ("status", status_cmd)):
+        app.command(name)(command)
 
-    @app.command("sweeps")
-    def sweeps_cmd() -> None:
-        """List the paper's experiment sweeps with their run counts."""
-        con = _console()
-        table = Table(title="Sweeps (sweeps/*.yaml)")
-        for col in ("name", "artifacts", "runs", "tasks", "agents", "variants", "seeds", "frames", "status"):
-            table.add_column(col, overflow="fold")
-        try:
-            all_specs = specs.load_all()
-        except SweepError as exc:
-            raise _fail(str(exc)) from None
-        for s in all_specs:
-            reason = specs.unavailable_reason(s)
-            agents = {a for v in s.variants.values() for a in
-                      [specs.override_value(o) for o in v if specs.override_key(o) == "agent"] or s.agents}
-            if reason:
-                runs = len(s.tasks) * len(s.seeds) * sum(
-                    1 if any(specs.override_key(o) == "agent" for o in v) else len(s.agents)
-                    for v in s.variants.values())
-                status = "[red]refused:[/] " + escape(reason.split(": ", 1)[1])
-            else:
-                runs = len(specs.expand(s))
-                status = "[green]ok[/]"
-            frames = f"{s.frames:,}" if s.frames else "default"
-            table.add_row(s.name, ",".join(s.artifacts), str(runs), str(len(s.tasks)), ",".join(sorted(agents)),
-                          str(len(s.variants)), str(len(s.seeds)), frames, status)
-        con.print(table)
 
-    @app.command("sweep")
-    def sweep_cmd(
-        name: str = typer.Argument(..., help="Sweep name (see `repro sweeps`) or path to a sweep YAML."),
-        tasks: Optional[str] = typer.Option(None, "--tasks", help="Comma-separated tasks instead of the sweep's."),
-        seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Use seeds 1..N."),
-        frames: Optional[int] = typer.Option(None, "--frames", min=1, help="Frame budget of every run."),
-        sets: Optional[list[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
-        results_root: Optional[Path] = typer.Option(
-            None,
-            *RESULTS_FLAGS,
-            help="Results root to write the runs under (the same as --set "
-            "runtime.results_root=ROOT; default: the config's runtime.results_root).",
-        ),
-        dry_run: bool = typer.Option(
-            False, "--dry-run", help="Print the grid (run dir, overrides, state); launch nothing."
-        ),
-        launcher: Launcher = typer.Option(Launcher.local, "--launcher", help="Where to run."),
-        max_parallel: Optional[int] = typer.Option(
-            None, "--max-parallel", min=1, help="Local: runs at once (default: cores / 2)."
-        ),
-        force: bool = typer.Option(
-            False, "--force", help="Move aside run dirs whose saved config differs, then rerun."
-        ),
-        cluster_config: Optional[Path] = typer.Option(
-            None,
-            "--cluster-config",
-            help="SLURM launcher YAML (default: $REPRO_SLURM_CONFIG or ~/.config/taco-repro/slurm.yaml).",
-        ),
-    ) -> None:
-        """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
-        from repro.launch.local import default_parallel, run_local
-        from repro.launch.state import record_launch, state_dir
+def sweeps_cmd() -> None:
+    """List the paper's experiment sweeps with their run counts."""
+    con = _console()
+    table = Table(title="Sweeps (sweeps/*.yaml)")
+    for col in ("name", "artifacts", "runs", "tasks", "agents", "variants", "seeds", "frames", "status"):
+        table.add_column(col, overflow="fold")
+    try:
+        all_specs = specs.load_all()
+    except SweepError as exc:
+        raise _fail(str(exc)) from None
+    for s in all_specs:
+        table.add_row(*_sweep_row(s))
+    con.print(table)
 
-        try:
-            spec = specs.load(name)
-            task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
-            sel = Selection(tasks=task_list, seeds=seeds, frames=frames, sets=_with_results_root(sets, results_root))
-            runs = specs.expand(spec, sel)
-            planned = specs.plan(runs)
-            root = specs.results_root_of(planned)
-            if dry_run:
-                print_plan(planned, spec, root, force, specs.excluded(spec, sel))
+
+def _sweep_row(s: SweepSpec) -> tuple[str, ...]:
+    """One row of ``repro sweeps``: a refused sweep's runs are counted without expanding it."""
+    reason = specs.unavailable_reason(s)
+    agents = {a for v in s.variants.values() for a in
+              [specs.override_value(o) for o in v if specs.override_key(o) == "agent"] or s.agents}
+    if reason:
+        runs = len(s.tasks) * len(s.seeds) * sum(
+            1 if any(specs.override_key(o) == "agent" for o in v) else len(s.agents)
+            for v in s.variants.values())
+        status = "[red]refused:[/] " + escape(reason.split(": ", 1)[1])
+    else:
+        runs = len(specs.expand(s))
+        status = "[green]ok[/]"
+    frames = f"{s.frames:,}" if s.frames else "default"
+    return (s.name, ",".join(s.artifacts), str(runs), str(len(s.tasks)), ",".join(sorted(agents)),
+            str(len(s.variants)), str(len(s.seeds)), frames, status)
+
+
+def sweep_cmd(
+    name: str = typer.Argument(..., help="Sweep name (see `repro sweeps`) or path to a sweep YAML."),
+    tasks: Optional[str] = typer.Option(None, "--tasks", help="Comma-separated tasks instead of the sweep's."),
+    seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Use seeds 1..N."),
+    frames: Optional[int] = typer.Option(None, "--frames", min=1, help="Frame budget of every run."),
+    sets: Optional[list[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
+    results_root: Optional[Path] = typer.Option(
+        None,
+        *RESULTS_FLAGS,
+        help="Results root to write the runs under (the same as --set "
+        "runtime.results_root=ROOT; default: the config's runtime.results_root).",
+    ),
+    dry_run: bool = typer.Option(
+        False, "--dry-run", help="Print the grid (run dir, overrides, state); launch nothing."
+    ),
+    launcher: Launcher = typer.Option(Launcher.local, "--launcher", help="Where to run."),
+    max_parallel: Optional[int] = typer.Option(
+        None, "--max-parallel", min=1, help="Local: runs at once (default: cores / 2)."
+    ),
+    force: bool = typer.Option(
+        False, "--force", help="Move aside run dirs whose saved config differs, then rerun."
+    ),
+    cluster_config: Optional[Path] = typer.Option(
+        None,
+        "--cluster-config",
+        help="SLURM launcher YAML (default: $REPRO_SLURM_CONFIG or ~/.config/taco-repro/slurm.yaml).",
+    ),
+) -> None:
+    """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
+    try:
+        spec = specs.load(name)
+        task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
+        sel = Selection(tasks=task_list, seeds=seeds, frames=frames, sets=_with_results_root(sets, results_root))
+        planned = specs.plan(specs.expand(spec, sel))
+        root = specs.results_root_of(planned)
+        if dry_run:
+            print_plan(planned, spec, root, force, specs.excluded(spec, sel))
+            return
+        if any(p.state == "mismatch" for p in planned) and not force:
+            raise SweepError(_mismatch_error(planned, root))
+        report = _launch(spec, planned, root, launcher, max_parallel, force, cluster_config)
+    except SweepError as exc:
+        raise _fail(str(exc)) from None
+    _print_report(report, launcher, spec.name)
+    if report.interrupted:
+        raise typer.Exit(130)
+    if report.failed or report.mismatch:
+        raise typer.Exit(1)
+
+
+def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: Launcher, max_parallel: Optional[int],
+            force: bool, cluster_config: Optional[Path]) -> LaunchReport:
+    """Record the launch in the sweep's state folder and submit (SLURM) or run (local) the planned runs."""
+    from repro.launch.local import default_parallel, run_local
+    from repro.launch.state import record_launch, state_dir
+
+    sdir = state_dir(root, spec.name)
+    grid = {p.key: {"run_dir": str(p.run_dir), "overrides": list(p.overrides),
+                    **({"dataset": p.need.to_json()} if p.need else {})} for p in planned}
+    say = _console().print
+    if launcher == Launcher.slurm:
+        from repro.launch.slurm import cluster_config_path, load_cluster_config, submit
+
+        cpath = cluster_config_path(cluster_config)
+        cluster = load_cluster_config(cpath)
+        report = submit(planned, spec.name, sdir, cluster, force, say)
+        record_launch(sdir, spec.name, spec.path, "slurm", grid, report.job_ids,
+                      {"cluster_config": str(cpath) if cpath else None})
+        return report
+    parallel = max_parallel or default_parallel()
+    record_launch(sdir, spec.name, spec.path, "local", grid, extra={"max_parallel": parallel})
+    return run_local(planned, spec.name, sdir, parallel, force, say)
+
+
+def status_cmd(
+    name: Optional[str] = typer.Argument(None, help="Sweep name; all launched sweeps when omitted."),
+    results_root: Optional[Path] = typer.Option(
+        None, *RESULTS_FLAGS,
+        help="Results root the sweeps ran under (default: the config's runtime.results_root)."),
+    watch_: bool = typer.Option(False, "--watch", "-w",
+                                help="Refresh until every run is done or failed (Ctrl-C stops)."),
+    every: float = typer.Option(WATCH_SECONDS, "--every", metavar="N", help="Seconds between --watch refreshes."),
+) -> None:
+    """Per sweep: done / running / queued / failed / pending per run, last frame and eval return."""
+    from repro.launch.state import state_dir
+
+    if every <= 0:
+        raise _fail(f"--every takes a positive number of seconds (got {every:g})")
+    watch = every if watch_ else None
+
+    try:
+        root = (results_root or _default_results_root()).expanduser().absolute()
+        names = _launched_names(name, root)
+        while names:
+            if watch is not None:
+                _console().print(f"[dim]{time.strftime('%H:%M:%S')}  refreshing every {watch:g}s "
+                                 "(Ctrl-C to stop)[/]", highlight=False)
+            statuses = [s for n in names for s in _print_status(n, root, state_dir(root, n))]
+            if watch is None or all(s.status in FINISHED for s in statuses):
                 return
-            if any(p.state == "mismatch" for p in planned) and not force:
-                raise SweepError(_mismatch_error(planned, root))
-            sdir = state_dir(root, spec.name)
-            grid = {p.key: {"run_dir": str(p.run_dir), "overrides": list(p.overrides),
-                            **({"dataset": p.need.to_json()} if p.need else {})} for p in planned}
-            say = _console().print
-            if launcher == Launcher.slurm:
-                from repro.launch.slurm import cluster_config_path, load_cluster_config, submit
+            time.sleep(watch)
+    except SweepError as exc:
+        raise _fail(str(exc)) from None
+    except KeyboardInterrupt:
+        raise typer.Exit(130) from None
 
-                cpath = cluster_config_path(cluster_config)
-                cluster = load_cluster_config(cpath)
-                report = submit(planned, spec.name, sdir, cluster, force, say)
-                record_launch(sdir, spec.name, spec.path, "slurm", grid, report.job_ids,
-                              {"cluster_config": str(cpath) if cpath else None})
-            else:
-                parallel = max_parallel or default_parallel()
-                record_launch(sdir, spec.name, spec.path, "local", grid, extra={"max_parallel": parallel})
-                report = run_local(planned, spec.name, sdir, parallel, force, say)
-        except SweepError as exc:
-            raise _fail(str(exc)) from None
-        _print_report(report, launcher, spec.name)
-        if report.interrupted:
-            raise typer.Exit(130)
-        if report.failed or report.mismatch:
-            raise typer.Exit(1)
 
-    @app.command("status")
-    def status_cmd(
-        name: Optional[str] = typer.Argument(None, help="Sweep name; all launched sweeps when omitted."),
-        results_root: Optional[Path] = typer.Option(
-            None, *RESULTS_FLAGS,
-            help="Results root the sweeps ran under (default: the config's runtime.results_root)."),
-        watch_: bool = typer.Option(False, "--watch", "-w",
-                                    help="Refresh until every run is done or failed (Ctrl-C stops)."),
-        every: float = typer.Option(WATCH_SECONDS, "--every", metavar="N", help="Seconds between --watch refreshes."),
-    ) -> None:
-        """Per sweep: done / running / queued / failed / pending per run, last frame and eval return."""
-        from repro.launch.state import state_dir
-
-        if every <= 0:
-            raise _fail(f"--every takes a positive number of seconds (got {every:g})")
-        watch = every if watch_ else None
-
-        try:
-            root = (results_root or _default_results_root()).expanduser().absolute()
-            base = root / ".sweeps"
-            launched = sorted(d.name for d in base.iterdir() if (d / "state.json").exists()) if base.is_dir() else []
-            if name is None:
-                names = launched
-                if not names:
-                    _console().print(f"no sweep launched under {root}", highlight=False)
-                    return
-            elif name in launched:
-                names = [name]
-            else:
-                known = set(specs.sweep_names()) | set(launched)
-                if name not in known:
-                    raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, sorted(known)))
-                _console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
-                return
-            while True:
-                if watch is not None:
-                    _console().print(f"[dim]{time.strftime('%H:%M:%S')}  refreshing every {watch:g}s "
-                                     "(Ctrl-C to stop)[/]", highlight=False)
-                statuses = [s for n in names for s in _print_status(n, root, state_dir(root, n))]
-                if watch is None or all(s.status in FINISHED for s in statuses):
-                    return
-                time.sleep(watch)
-        except SweepError as exc:
-            raise _fail(str(exc)) from None
-        except KeyboardInterrupt:
-            raise typer.Exit(130) from None
+def _launched_names(name: Optional[str], root: Path) -> list[str]:
+    """The launched sweeps ``repro status`` shows: ``name``, or all without one; none (said in a line) when
+    nothing is launched or ``name`` is a known sweep not launched here (SweepError: an unknown one)."""
+    base = root / ".sweeps"
+    launched = sorted(d.name for d in base.iterdir() if (d / "state.json").exists()) if base.is_dir() else []
+    if name is None:
+        if not launched:
+            _console().print(f"no sweep launched under {root}", highlight=False)
+        return launched
+    if name in launched:
+        return [name]
+    known = set(specs.sweep_names()) | set(launched)
+    if name not in known:
+        raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, sorted(known)))
+    _console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
+    return []
 
 
 def _with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) -> tuple[str, ...]:

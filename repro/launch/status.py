@@ -64,6 +64,14 @@ def progress(run_dir: Path) -> tuple[int | None, float | None]:
     return (int(max(frames)) if frames else None, _num(ev.get("episode_reward") if ev else None))
 
 
+def _lock_owner(results_root: Path, run_dir: Path) -> lock.LockInfo | None:
+    """Who holds the run's launcher lock (None when nobody does or the lock file is unreadable)."""
+    try:
+        return lock.read(lock.lock_path(results_root, run_dir))
+    except ValueError:
+        return None
+
+
 def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
                slurm_states: dict[str, str] | None, waiting: str | None = None) -> RunStatus:
     """The run's status; ``waiting`` (why its dataset is not usable yet) makes a run that is neither done
@@ -71,10 +79,7 @@ def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
     frame, ret = progress(run_dir)
     state = run_state(run_dir)
     record = read_record(sdir, key)
-    try:
-        owner = lock.read(lock.lock_path(results_root, run_dir))
-    except ValueError:
-        owner = None
+    owner = _lock_owner(results_root, run_dir)
     job = (owner.job_id if owner and owner.job_id else None) or (record.job_id if record else None)
 
     def make(status: str, detail: str) -> RunStatus:
@@ -114,10 +119,7 @@ def collect(runs: dict[str, Path], results_root: Path, sdir: Path) -> list[RunSt
         record = read_record(sdir, key)
         if record and record.job_id:
             jobs.append(record.job_id)
-        try:
-            owner = lock.read(lock.lock_path(results_root, run_dir))
-        except ValueError:
-            owner = None
+        owner = _lock_owner(results_root, run_dir)
         if owner and owner.job_id:
             jobs.append(owner.job_id)
     states = job_states(jobs) if jobs else {}

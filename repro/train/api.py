@@ -6,7 +6,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, Protocol, TypeVar, cast
 
 import torch
 from omegaconf import DictConfig
@@ -40,6 +40,9 @@ from repro.runs.logger import RunLogger
 from repro.runs.video import VIDEO_DIR, EvalVideos
 from repro.train.offline import BatchSource, OfflineLogger, OfflineTrainer, check_resume_dataset
 from repro.train.online import Trainer
+
+T = TypeVar("T")
+T_co = TypeVar("T_co", covariant=True)
 
 
 class CheckpointError(ValueError):
@@ -93,9 +96,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     and the state is read again under it (RunLocked when another process holds it)."""
     rc = typed(cfg)
     path = rundir.run_dir(cfg)
-    _refuse_other_config(path, cfg)
-    if rundir.run_state(path) == "done":
-        echo(f"already done: {path}")
+    if _refuse_other_config_or_done(path, cfg, echo):
         return path
     device = resolve_device(rc.runtime.device, "runtime.device")
     resolve_device(rc.replay.device, "replay.device")
@@ -115,9 +116,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         raise
     with lock:
         # Under the lock: another writer may have finished, started or changed the run since the checks above.
-        _refuse_other_config(path, cfg)
-        if rundir.run_state(path) == "done":
-            echo(f"already done: {path}")
+        if _refuse_other_config_or_done(path, cfg, echo):
             return path
         if (state is None) != (not (path / rundir.CHECKPOINT).exists()) or (
                 state is not None and _checkpoint_changed(path, state)):
@@ -137,12 +136,17 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     return path
 
 
-def _refuse_other_config(path: Path, cfg: DictConfig) -> None:
+def _refuse_other_config_or_done(path: Path, cfg: DictConfig, echo: Callable[[str], None]) -> bool:
+    """RunDirMismatch when ``path`` holds a run of another config; else whether it is done (said in a line)."""
     diff = rundir.config_diff(path, cfg)
     if diff:
         raise rundir.RunDirMismatch(f"{path} holds a run with another config ({diff[0]}"
                                     f"{f' and {len(diff) - 1} more' if len(diff) > 1 else ''}); "
                                     "use another experiment/variant name or move it away.")
+    if rundir.run_state(path) == "done":
+        echo(f"already done: {path}")
+        return True
+    return False
 
 
 def _load_state(path: Path, data: OfflineData | None) -> dict | None:
@@ -201,22 +205,48 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
                           lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
                           save_frames=lambda frames: _save_frames(path / "frames.npz", frames), recorder=recorder,
                           videos=eval_videos(rc, path, "frame"))
-        if state is not None:
-            trainer.restore(state)
-            episodes.prune({rec[0] for rec in state["buffer"]["episodes"]})
+
+        def resumed(saved: dict) -> None:
+            episodes.prune({rec[0] for rec in saved["buffer"]["episodes"]})
             echo(f"resumed {path} at frame {trainer.frame}")
-        try:
-            counters = trainer.run()
-        finally:
-            if bar:
-                bar.close()
-            logger.close()
-        rundir.write_done(path, {"frame": counters.step * rc.env.action_repeat, "step": counters.step,
-                                 "episode": counters.episode, "total_time": round(trainer.total_time(), 3),
-                                 "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+
+        _restore_run_finish(path, trainer, state, resumed, bar, logger,
+                            lambda c: {"frame": c.step * rc.env.action_repeat, "step": c.step, "episode": c.episode})
     finally:
         env.close()
         eval_env.close()
+
+
+class _Loop(Protocol[T_co]):
+    """The part of :class:`Trainer` and :class:`OfflineTrainer` that :func:`_restore_run_finish` drives."""
+
+    def restore(self, state: dict) -> None: ...
+
+    def run(self) -> T_co: ...
+
+    def total_time(self) -> float: ...
+
+
+class _Closing(Protocol):
+    def close(self) -> None: ...
+
+
+def _restore_run_finish(path: Path, trainer: _Loop[T], state: dict | None, resumed: Callable[[dict], None],
+                        bar: _Progress | None, logger: _Closing, done: Callable[[T], dict[str, Any]]) -> None:
+    """What an online and an offline run share once built: restore ``state`` (then ``resumed(state)``), run
+    the loop, close the progress bar and the logger even when the loop fails, and mark the run done with
+    ``done(result)`` followed by its total time and finishing time."""
+    if state is not None:
+        trainer.restore(state)
+        resumed(state)
+    try:
+        result = trainer.run()
+    finally:
+        if bar:
+            bar.close()
+        logger.close()
+    rundir.write_done(path, {**done(result), "total_time": round(trainer.total_time(), 3),
+                             "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
 
 
 def eval_videos(rc: RunConfig, path: Path, unit: str) -> EvalVideos | None:
@@ -272,18 +302,9 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, st
                                  reference=score_reference(rc.task.name, data.manifest.source),
                                  dataset_digest=data.digest, progress=bar.update if bar else None,
                                  dataset_best_return=data.best_return, videos=eval_videos(rc, path, "update"))
-        if state is not None:
-            trainer.restore(state)
-            echo(f"resumed {path} at update {trainer.update}")
-        try:
-            updates = trainer.run()
-        finally:
-            if bar:
-                bar.close()
-            logger.close()
-        rundir.write_done(path, {"update": updates, "dataset": str(data.directory), "dataset_sha256": data.digest,
-                                 "total_time": round(trainer.total_time(), 3),
-                                 "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+        _restore_run_finish(path, trainer, state, lambda _: echo(f"resumed {path} at update {trainer.update}"), bar,
+                            logger, lambda updates: {"update": updates, "dataset": str(data.directory),
+                                                     "dataset_sha256": data.digest})
     finally:
         eval_env.close()
 

@@ -40,8 +40,9 @@ from repro.config.compose import CONF_DIR, ConfigError, typed, validate
 from repro.config.schema import RunConfig
 from repro.data.dataset import MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
 from repro.data.record import EPISODES, SNAPSHOTS, load_snapshot, record_dir, snapshot_path, snapshot_steps
+from repro.envs import TASKS
 from repro.runs import rundir
-from repro.train.api import DeviceError, build_env, resolve_device
+from repro.train.api import DeviceError, build_env, resolve_device, run_action_dim
 from repro.train.online import episode_seed
 
 KINDS = ("medium", "medium-replay", "full-replay")
@@ -144,7 +145,7 @@ def open_source(run_dir: str | Path, task: str | None = None) -> Source:
         n = int(len(rewards))
         step += n
         episodes.append(RecordedEpisode(ep_id, path, n, step, float(np.sum(rewards, dtype=np.float64))))
-    expected_dim = _action_dim(cfg)
+    expected_dim = run_action_dim(cfg) if cfg.task.name in TASKS else None
     if expected_dim is not None and action_dim != expected_dim:
         raise MakeError(f"{run_dir}: recorded actions have {action_dim} dims, {cfg.task.name} has {expected_dim}")
     snaps = []
@@ -156,13 +157,6 @@ def open_source(run_dir: str | Path, task: str | None = None) -> Source:
             raise MakeError(f"{path}: unreadable snapshot ({type(exc).__name__})") from None
     ident = rundir.saved_identity(run_dir) or {}
     return Source(run_dir, cfg, config_hash(ident), episodes, snaps)
-
-
-def _action_dim(cfg: RunConfig) -> int | None:
-    from repro.envs import TASKS
-
-    info = TASKS.get(cfg.task.name)
-    return None if info is None else info.action_dim + cfg.env.distracting_dims
 
 
 def _ids(ids: list[int]) -> str:

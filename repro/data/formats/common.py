@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import zipfile
 import zlib
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -89,6 +89,75 @@ def column(arr: np.ndarray, n: int, name: str, where: str) -> np.ndarray:
     return a
 
 
+def checked_episode(frames: np.ndarray, action: np.ndarray, reward: np.ndarray, discount: np.ndarray, n: int,
+                    where: str) -> Episode:
+    """A dataset episode from ``n`` read dm_env rows: frames (n, 3, H, W), actions finite, reward and discount
+    per-row columns (see :func:`column`)."""
+    return from_rows(frames, action, column(reward, n, "reward", where), column(discount, n, "discount", where), where)
+
+
+def finite_action(action: np.ndarray, where: str) -> np.ndarray:
+    """The action rows as float64; a :class:`DatasetError` when one is not finite."""
+    action = np.asarray(action, dtype=np.float64)
+    if not np.all(np.isfinite(action)):
+        raise DatasetError(f"{where}: non-finite values in 'action'")
+    return action
+
+
+def read_npz_units(scan_: Scan, keys: tuple[str, ...], image_key: str,
+                   frames: Callable[[np.ndarray, str], np.ndarray]) -> Iterator[Episode]:
+    """The episodes of a one-episode-per-npz layout: each file's arrays ``keys`` (with ``action``, ``reward`` and
+    ``discount``) checked against its scan; ``frames(images, where)`` makes the (n, 3, H, W) frames."""
+    for u in scan_.units:
+        z = load_npz(u.file, keys)
+        where, n = str(u.file), u.stop
+        if len(z[image_key]) != n:
+            raise DatasetError(f"{where}: changed since it was checked")
+        action = finite_action(z["action"], where)
+        yield checked_episode(frames(z[image_key], where), action, z["reward"], z["discount"], n, where)
+
+
+class ScanTotals:
+    """What a scan gathers over its input files: the episodes, their transitions, and the action dimension and
+    frame size every file must share."""
+
+    def __init__(self) -> None:
+        self.units: list[Unit] = []
+        self.transitions = 0
+        self.action_dim: int | None = None
+        self.size: tuple[int, int] | None = None
+
+    def same_shapes(self, file: Path, action_dim: int, size: tuple[int, int]) -> None:
+        """Refuse ``file`` when its action dimension or frame size differs from the earlier files'."""
+        if self.action_dim is not None and action_dim != self.action_dim:
+            raise DatasetError(f"{file}: action dim {action_dim}, earlier files have {self.action_dim}")
+        if self.size is not None and size != self.size:
+            raise DatasetError(f"{file}: frames {size}, earlier files have {self.size}")
+        self.action_dim, self.size = int(action_dim), (int(size[0]), int(size[1]))
+
+    def add(self, unit: Unit) -> None:
+        """One more episode (refused below 2 rows)."""
+        n = unit.stop - unit.start
+        if n < 2:
+            raise DatasetError(f"{unit.file}: an episode needs at least 2 rows, found {n}")
+        self.units.append(unit)
+        self.transitions += n - 1
+
+    def scan(self, details: dict[str, Any] | None = None) -> Scan:
+        assert self.action_dim is not None and self.size is not None
+        return Scan(self.units, self.transitions, self.action_dim, self.size, details=details or {})
+
+
+def check_rows(file: Path, shapes: Mapping[str, tuple[int, ...]], n: int, expected: str) -> None:
+    """Refuse ``file`` unless its action is (n, A) and each per-row column in ``shapes`` is (n,) or (n, 1)."""
+    ashape = shapes["action"]
+    if len(ashape) != 2 or ashape[0] != n:
+        raise DatasetError(f"wrong format: {file}: action is {ashape}, expected ({n}, A)")
+    for k, shape in shapes.items():
+        if k != "action" and shape not in ((n,), (n, 1)):
+            raise DatasetError(f"wrong format: {file}: {k} is {shape}, expected {expected}")
+
+
 def npz_header(path: Path, keys: tuple[str, ...]) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     """Shape and dtype of each array in an npz file without decompressing it (a truncated file fails here)."""
     try:
@@ -122,9 +191,9 @@ def load_npz(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
         raise DatasetError(f"corrupt or truncated file {path}: {type(exc).__name__}") from None
 
 
-def resize_frames(frames: np.ndarray, size: int) -> np.ndarray:
-    """(N, 3, H, W) uint8 -> (N, 3, size, size) uint8, bicubic (Pillow); a no-op at that size."""
-    if frames.shape[2:] == (size, size):
+def resize_frames(frames: np.ndarray, size: int | None) -> np.ndarray:
+    """(N, 3, H, W) uint8 -> (N, 3, size, size) uint8, bicubic (Pillow); a no-op at that size or without one."""
+    if size is None or frames.shape[2:] == (size, size):
         return frames
     from PIL import Image
 

@@ -19,12 +19,12 @@ import numpy as np
 from repro.data.dataset import DatasetError, Episode
 from repro.data.formats.common import (
     Scan,
+    ScanTotals,
     Unit,
-    column,
-    from_rows,
+    check_rows,
     input_files,
-    load_npz,
     npz_header,
+    read_npz_units,
     resize_frames,
     to_rows,
 )
@@ -48,34 +48,19 @@ def scan(path: Path) -> Scan:
     if len(set(seen)) != len(seen):
         dup = next(i for i in seen if seen.count(i) > 1)
         raise DatasetError(f"wrong format: two episode files with index {dup} in {path}")
-    units: list[Unit] = []
-    action_dim = None
-    size = None
-    transitions = 0
+    totals = ScanTotals()
     for _, length, f in named:
         head = npz_header(f, KEYS)
-        (shape, dtype), (ashape, _) = head["observation"], head["action"]
+        shape, dtype = head["observation"]
         if len(shape) != 4 or shape[1] % 3 or dtype != np.uint8:
             raise DatasetError(f"wrong format: {f}: observation is {shape} {dtype}, expected (T+1, 3k, H, W) uint8")
         n = shape[0]
         if n != length + 1:
             raise DatasetError(f"truncated: {f}: its name says {length} transitions, it holds {n - 1}")
-        if len(ashape) != 2 or ashape[0] != n:
-            raise DatasetError(f"wrong format: {f}: action is {ashape}, expected ({n}, A)")
-        for k in ("reward", "discount"):
-            if head[k][0] not in ((n,), (n, 1)):
-                raise DatasetError(f"wrong format: {f}: {k} is {head[k][0]}, expected ({n}, 1)")
-        if action_dim is not None and ashape[1] != action_dim:
-            raise DatasetError(f"{f}: action dim {ashape[1]}, earlier files have {action_dim}")
-        if size is not None and tuple(shape[2:]) != size:
-            raise DatasetError(f"{f}: frames {tuple(shape[2:])}, earlier files have {size}")
-        if n < 2:
-            raise DatasetError(f"{f}: an episode needs at least 2 rows, found {n}")
-        action_dim, size = int(ashape[1]), (int(shape[2]), int(shape[3]))
-        units.append(Unit(f, 0, n))
-        transitions += n - 1
-    assert action_dim is not None and size is not None
-    return Scan(units, transitions, action_dim, size)
+        check_rows(f, {k: head[k][0] for k in ("action", "reward", "discount")}, n, f"({n}, 1)")
+        totals.same_shapes(f, head["action"][0][1], (shape[2], shape[3]))
+        totals.add(Unit(f, 0, n))
+    return totals.scan()
 
 
 def newest_frames(obs: np.ndarray, where: str) -> np.ndarray:
@@ -89,17 +74,8 @@ def newest_frames(obs: np.ndarray, where: str) -> np.ndarray:
 
 def read(scan_: Scan, image_size: int | None = None) -> Iterator[Episode]:
     """The episodes; ``image_size``: resize the frames to it (bicubic), as asked by ``--resize``."""
-    for u in scan_.units:
-        z = load_npz(u.file, KEYS)
-        where, n = str(u.file), u.stop
-        if len(z["observation"]) != n:
-            raise DatasetError(f"{where}: changed since it was checked")
-        action = np.asarray(z["action"], dtype=np.float64)
-        if not np.all(np.isfinite(action)):
-            raise DatasetError(f"{where}: non-finite values in 'action'")
-        frames = newest_frames(z["observation"], where)
-        yield from_rows(frames if image_size is None else resize_frames(frames, image_size), action,
-                        column(z["reward"], n, "reward", where), column(z["discount"], n, "discount", where), where)
+    return read_npz_units(scan_, KEYS, "observation",
+                          lambda obs, where: resize_frames(newest_frames(obs, where), image_size))
 
 
 def stack(frames: np.ndarray, k: int = FRAME_STACK) -> np.ndarray:

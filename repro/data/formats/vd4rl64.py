@@ -21,7 +21,17 @@ import numpy as np
 from PIL import Image
 
 from repro.data.dataset import DatasetError, Episode
-from repro.data.formats.common import Scan, Unit, column, from_rows, input_files, load_npz, npz_header, to_rows
+from repro.data.formats.common import (
+    Scan,
+    ScanTotals,
+    Unit,
+    check_rows,
+    input_files,
+    load_npz,
+    npz_header,
+    read_npz_units,
+    to_rows,
+)
 
 NAME = "vd4rl-64"
 KEYS = ("image", "action", "reward", "discount")
@@ -53,53 +63,27 @@ def _check_flags(flags: dict[str, np.ndarray], n: int, where: str) -> None:
 
 
 def scan(path: Path) -> Scan:
-    units: list[Unit] = []
-    action_dim = None
-    size = None
-    transitions = 0
+    totals = ScanTotals()
     for f in input_files(path, ".npz", "V-D4RL 64px npz episode files"):
         head = npz_header(f, KEYS + FLAGS)
-        (shape, dtype), (ashape, _) = head["image"], head["action"]
+        shape, dtype = head["image"]
         if len(shape) != 4 or shape[3] != 3 or dtype != np.uint8:
             raise DatasetError(f"wrong format: {f}: image is {shape} {dtype}, expected (T+1, H, W, 3) uint8")
         n = shape[0]
-        if len(ashape) != 2 or ashape[0] != n:
-            raise DatasetError(f"wrong format: {f}: action is {ashape}, expected ({n}, A)")
-        for k in ("reward", "discount"):
-            if head[k][0] not in ((n,), (n, 1)):
-                raise DatasetError(f"wrong format: {f}: {k} is {head[k][0]}, expected ({n},)")
+        check_rows(f, {k: head[k][0] for k in ("action", "reward", "discount")}, n, f"({n},)")
         m = _ROWS.search(f.name)
         if m and int(m.group(1)) != n:
             raise DatasetError(f"truncated: {f}: its name says {m.group(1)} rows, it holds {n}")
-        if action_dim is not None and ashape[1] != action_dim:
-            raise DatasetError(f"{f}: action dim {ashape[1]}, earlier files have {action_dim}")
-        if size is not None and tuple(shape[1:3]) != size:
-            raise DatasetError(f"{f}: frames {tuple(shape[1:3])}, earlier files have {size}")
-        action_dim, size = int(ashape[1]), (int(shape[1]), int(shape[2]))
+        totals.same_shapes(f, head["action"][0][1], (shape[1], shape[2]))
         _check_flags(load_npz(f, FLAGS), n, str(f))
-        if n < 2:
-            raise DatasetError(f"{f}: an episode needs at least 2 rows, found {n}")
-        units.append(Unit(f, 0, n))
-        transitions += n - 1
-    assert action_dim is not None and size is not None
-    return Scan(units, transitions, action_dim, size,
-                details={"resized_to": IMPORT_SIZE, "interpolation": "bicubic (Pillow)"})
+        totals.add(Unit(f, 0, n))
+    return totals.scan(details={"resized_to": IMPORT_SIZE, "interpolation": "bicubic (Pillow)"})
 
 
 def read(scan_: Scan, image_size: int | None = None) -> Iterator[Episode]:
     """The episodes, frames resized to ``image_size`` (default IMPORT_SIZE), bicubic."""
     size = IMPORT_SIZE if image_size is None else image_size
-    for u in scan_.units:
-        z = load_npz(u.file, KEYS)
-        where, n = str(u.file), u.stop
-        if len(z["image"]) != n:
-            raise DatasetError(f"{where}: changed since it was checked")
-        action = np.asarray(z["action"], dtype=np.float64)
-        if not np.all(np.isfinite(action)):
-            raise DatasetError(f"{where}: non-finite values in 'action'")
-        frames = resize(z["image"], size).transpose(0, 3, 1, 2)
-        yield from_rows(frames, action, column(z["reward"], n, "reward", where),
-                        column(z["discount"], n, "discount", where), where)
+    return read_npz_units(scan_, KEYS, "image", lambda images, _: resize(images, size).transpose(0, 3, 1, 2))
 
 
 def write(episodes: Iterable[Episode], out: Path, image_size: int = EXPORT_SIZE) -> list[Path]:

@@ -15,7 +15,17 @@ import h5py
 import numpy as np
 
 from repro.data.dataset import DatasetError, Episode
-from repro.data.formats.common import Scan, Unit, column, from_rows, input_files, resize_frames, to_rows
+from repro.data.formats.common import (
+    Scan,
+    ScanTotals,
+    Unit,
+    check_rows,
+    checked_episode,
+    finite_action,
+    input_files,
+    resize_frames,
+    to_rows,
+)
 
 NAME = "vd4rl-84"
 KEYS = ("observation", "action", "reward", "discount", "step_type")
@@ -61,10 +71,7 @@ def split_episodes(step_type: np.ndarray, where: str) -> list[tuple[int, int]]:
 
 
 def scan(path: Path) -> Scan:
-    units: list[Unit] = []
-    action_dim = None
-    size = None
-    transitions = 0
+    totals = ScanTotals()
     for f in input_files(path, ".hdf5", "V-D4RL 84px hdf5 files"):
         with _open(f) as h:
             missing = [k for k in KEYS if k not in h]
@@ -76,25 +83,15 @@ def scan(path: Path) -> Scan:
             if obs.ndim != 4 or obs.shape[1] != 3 or obs.dtype != np.uint8:
                 raise DatasetError(f"wrong format: {f}: observation is {obs.shape} {obs.dtype}, "
                                    "expected (N, 3, H, W) uint8")
-            if act.ndim != 2 or act.shape[0] != n:
-                raise DatasetError(f"wrong format: {f}: action is {act.shape}, expected ({n}, A)")
-            for k in ("reward", "discount", "step_type"):
-                if h[k].shape not in ((n,), (n, 1)):
-                    raise DatasetError(f"wrong format: {f}: {k} is {h[k].shape}, expected ({n},)")
-            if action_dim is not None and act.shape[1] != action_dim:
-                raise DatasetError(f"{f}: action dim {act.shape[1]}, earlier files have {action_dim}")
-            if size is not None and tuple(obs.shape[2:]) != size:
-                raise DatasetError(f"{f}: frames {tuple(obs.shape[2:])}, earlier files have {size}")
-            action_dim, size = int(act.shape[1]), (int(obs.shape[2]), int(obs.shape[3]))
+            check_rows(f, {k: h[k].shape for k in ("action", "reward", "discount", "step_type")}, n, f"({n},)")
+            totals.same_shapes(f, act.shape[1], (obs.shape[2], obs.shape[3]))
             try:
                 step_type = np.asarray(h["step_type"][:]).reshape(n)
             except OSError as exc:
                 raise DatasetError(f"corrupt or truncated file {f}: {exc.__class__.__name__}") from None
         for s, stop in split_episodes(step_type, str(f)):
-            units.append(Unit(f, s, stop))
-            transitions += stop - s - 1
-    assert action_dim is not None and size is not None
-    return Scan(units, transitions, action_dim, size)
+            totals.add(Unit(f, s, stop))
+    return totals.scan()
 
 
 def read(scan_: Scan, image_size: int | None = None) -> Iterator[Episode]:
@@ -111,14 +108,9 @@ def read(scan_: Scan, image_size: int | None = None) -> Iterator[Episode]:
                 rows = {k: handle[k][u.start:u.stop] for k in KEYS}
             except OSError as exc:
                 raise DatasetError(f"corrupt or truncated file {u.file}: {exc.__class__.__name__}") from None
-            n = u.stop - u.start
-            action = np.asarray(rows["action"], dtype=np.float64)
-            if not np.all(np.isfinite(action)):
-                raise DatasetError(f"{where}: non-finite values in 'action'")
-            frames = rows["observation"]
-            yield from_rows(frames if image_size is None else resize_frames(frames, image_size), action,
-                            column(rows["reward"], n, "reward", where),
-                            column(rows["discount"], n, "discount", where), where)
+            action = finite_action(rows["action"], where)
+            yield checked_episode(resize_frames(rows["observation"], image_size), action, rows["reward"],
+                                  rows["discount"], u.stop - u.start, where)
     finally:
         if handle is not None:
             handle.close()
