@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from repro.config.schema import Suite
 from repro.envs.base import Env, EnvSpec, TimeStep
 from repro.envs.registry import TASKS, TaskInfo, UnknownTaskError, get_task
 from repro.envs.wrappers import DistractingActionDims, TimeLimit
@@ -53,9 +54,9 @@ def make_env(
     """
     info = get_task(task)
     env_class: Callable[..., Env]
-    if info.suite in ("dmc", "manipulation"):
+    if info.suite in (Suite.dmc, Suite.manipulation):
         from repro.envs.dmc import DMCEnv as env_class
-    elif info.suite == "metaworld":
+    elif info.suite == Suite.metaworld:
         from repro.envs.metaworld_env import MetaWorldEnv as env_class
     else:  # pragma: no cover - the registry only holds the suites above
         raise ValueError(f"unsupported suite {info.suite!r} for task {task!r}")

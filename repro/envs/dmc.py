@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from repro.config.schema import Suite
 from repro.envs.base import TimeStep
 from repro.envs.registry import TaskInfo
 from repro.envs.suite import SuiteEnv
@@ -23,7 +24,7 @@ class DMCEnv(SuiteEnv):
     (the pixels are identical: same camera, same physics, same default render settings).
     """
 
-    SUITES = ("dmc", "manipulation")
+    SUITES = (Suite.dmc, Suite.manipulation)
     SUITE_NAME = "DMC"
     HAS_SUCCESS = False
 
@@ -37,7 +38,7 @@ class DMCEnv(SuiteEnv):
 
     @staticmethod
     def _load(info: TaskInfo, seed: int) -> Any:
-        if info.suite == "dmc":
+        if info.suite == Suite.dmc:
             from dm_control import suite
 
             return suite.load(info.domain, info.task, task_kwargs={"random": seed})
@@ -51,7 +52,7 @@ class DMCEnv(SuiteEnv):
 
     def _reseed(self, seed: int) -> None:
         """Re-seed every source of task randomness in place."""
-        if self.info.suite == "dmc":
+        if self.info.suite == Suite.dmc:
             self._env.task.random.seed(seed)
         else:
             self._env.random_state.seed(seed)

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from repro.config.schema import Suite
 from repro.envs.base import TimeStep
 from repro.envs.suite import SuiteEnv
 
@@ -29,7 +30,7 @@ class MetaWorldEnv(SuiteEnv):
     step (a function of the current state, like ``evaluate_state``).
     """
 
-    SUITES = ("metaworld",)
+    SUITES = (Suite.metaworld,)
     SUITE_NAME = "Meta-world"
     HAS_SUCCESS = True
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 import difflib
 from dataclasses import dataclass
 
+from repro.config.schema import Suite
+
 
 @dataclass(frozen=True)
 class TaskInfo:
@@ -29,7 +31,7 @@ class TaskInfo:
     """
 
     name: str
-    suite: str
+    suite: Suite
     domain: str
     task: str
     action_dim: int
@@ -55,7 +57,7 @@ def _dmc(name: str, action_dim: int, *, notes: str = "") -> TaskInfo:
     domain, task = name.split("_", 1)
     return TaskInfo(
         name=name,
-        suite="dmc",
+        suite=Suite.dmc,
         domain=domain,
         task=task,
         action_dim=action_dim,
@@ -68,7 +70,7 @@ def _metaworld(name: str) -> TaskInfo:
     """A Meta-world v3 task, loaded as ``<name>-v3``."""
     return TaskInfo(
         name=name,
-        suite="metaworld",
+        suite=Suite.metaworld,
         domain="metaworld",
         task=f"{name}-v3",
         action_dim=4,
@@ -88,7 +90,7 @@ _ALL: list[TaskInfo] = [
     _dmc("finger_turn_hard", 2),
     TaskInfo(
         name="manipulator_bring_ball",
-        suite="dmc",
+        suite=Suite.dmc,
         domain="manipulator",
         task="bring_ball",
         action_dim=5,
@@ -97,7 +99,7 @@ _ALL: list[TaskInfo] = [
     ),
     TaskInfo(
         name="reach_duplo",
-        suite="manipulation",
+        suite=Suite.manipulation,
         domain="manipulation",
         task="reach_duplo_vision",
         action_dim=9,

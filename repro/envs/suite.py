@@ -12,6 +12,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from repro.config.schema import Suite
 from repro.envs.base import EnvSpec, checked_action
 from repro.envs.registry import TaskInfo
 from repro.envs.wrappers import FrameStack
@@ -20,7 +21,7 @@ from repro.envs.wrappers import FrameStack
 class SuiteEnv:
     """A pixel environment of one simulator suite, built from a :class:`TaskInfo`."""
 
-    SUITES: ClassVar[tuple[str, ...]]  # the TaskInfo.suite values the class builds
+    SUITES: ClassVar[tuple[Suite, ...]]  # the TaskInfo.suite values the class builds
     SUITE_NAME: ClassVar[str]  # for the error on another suite's task: "... is not a {SUITE_NAME} task"
     HAS_SUCCESS: ClassVar[bool]  # EnvSpec.has_success
 
