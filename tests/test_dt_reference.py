@@ -12,8 +12,7 @@ import torch
 from torch import nn
 
 from repro.config.compose import compose, typed
-from repro.learners import build_learner
-from repro.learners.losses import dt
+from repro.learners import build_learner, dt_model
 
 OBS = (9, 16, 16)
 A_DIM = 2
@@ -23,14 +22,14 @@ GYM = {"context": 20, "embed_dim": 128, "n_layers": 3, "n_heads": 1, "dropout": 
        "activation": "relu", "init": "gpt2", "ff_dropout": False}
 
 
-def model_of(**over: object) -> dt.DecisionTransformer:
+def model_of(**over: object) -> dt_model.DecisionTransformer:
     """The gym model with ``over`` replacing some of its values."""
-    return dt.DecisionTransformer(OBS, A_DIM, **{**GYM, **over})
+    return dt_model.DecisionTransformer(OBS, A_DIM, **{**GYM, **over})
 
 
-def sampler_of(episodes: list[dict[str, np.ndarray]], context: int) -> dt.SequenceSampler:
+def sampler_of(episodes: list[dict[str, np.ndarray]], context: int) -> dt_model.SequenceSampler:
     """A window sampler as the gym code's get_batch (frame stacks of 3, returns-to-go / 1000, actions padded: -10)."""
-    return dt.SequenceSampler(episodes, context=context, frame_stack=3, rtg_scale=1e-3, seed=0, action_pad=-10.0)
+    return dt_model.SequenceSampler(episodes, context=context, frame_stack=3, rtg_scale=1e-3, seed=0, action_pad=-10.0)
 
 
 def gpt2_block_params(e: int) -> int:
@@ -157,7 +156,7 @@ def test_training_windows_pad_actions_with_minus_10_and_padding_never_reaches_a_
     model = model_of(context=5, embed_dim=16, n_layers=2, n_heads=2).double().eval()
 
     def predict(window: dict[str, np.ndarray]) -> torch.Tensor:
-        x = dt.batch_to_tensors({k: v[None] for k, v in window.items()})
+        x = dt_model.batch_to_tensors({k: v[None] for k, v in window.items()})
         with torch.no_grad():
             return model(x["frames"], x["actions"], x["rtg"], x["timesteps"], x["mask"])[0]
 

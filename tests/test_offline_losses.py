@@ -13,6 +13,7 @@ import torch
 
 from repro.config import paper_defaults
 from repro.config.schema import CQLConfig, DTConfig, IQLConfig, TD3BCConfig
+from repro.learners import dt_model
 from repro.learners.losses import cql, dt, iql, td3bc
 
 F64 = torch.float64
@@ -274,9 +275,9 @@ OBS = (9, 16, 16)
 A_DIM = 2
 
 
-def tiny_dt(context: int = 5) -> dt.DecisionTransformer:
+def tiny_dt(context: int = 5) -> dt_model.DecisionTransformer:
     torch.manual_seed(0)
-    model = dt.DecisionTransformer(OBS, A_DIM, context=context, embed_dim=16, n_layers=2, n_heads=2,
+    model = dt_model.DecisionTransformer(OBS, A_DIM, context=context, embed_dim=16, n_layers=2, n_heads=2,
                                    dropout=0.1, max_timestep=50, activation="relu", init="gpt2",
                                    ff_dropout=False).double()
     return model.eval()
@@ -318,7 +319,7 @@ def test_dt_attention_mask_known_answer():
 
 def test_dt_token_layout_known_answer():
     r, s, a = (torch.tensor([[[10 * k + t] for t in range(3)]]) for k in (1, 2, 3))  # (1, 3, 1) tags
-    assert dt.interleave(r, s, a).flatten().tolist() == [10, 20, 30, 11, 21, 31, 12, 22, 32]
+    assert dt_model.interleave(r, s, a).flatten().tolist() == [10, 20, 30, 11, 21, 31, 12, 22, 32]
 
 
 def test_dt_causal_and_token_order():
@@ -381,7 +382,7 @@ def test_dt_action_loss_known_answer_and_mask():
 def test_returns_to_go():
     rewards = np.array([1.0, 0.5, 2.0, 0.25], dtype=np.float32)
     ref = [sum(rewards[t:].tolist()) for t in range(4)]
-    assert dt.returns_to_go(rewards).tolist() == pytest.approx(ref, rel=1e-12)
+    assert dt_model.returns_to_go(rewards).tolist() == pytest.approx(ref, rel=1e-12)
 
 
 def tagged_episodes(lengths):
@@ -398,7 +399,7 @@ def tagged_episodes(lengths):
 def test_sequence_sampler_windows_never_cross_and_pad_left():
     lengths, K, fs = [7, 3, 12], 5, 3
     eps = tagged_episodes(lengths)
-    sampler = dt.SequenceSampler(eps, context=K, frame_stack=fs, rtg_scale=1e-3, seed=0, action_pad=-10.0)
+    sampler = dt_model.SequenceSampler(eps, context=K, frame_stack=fs, rtg_scale=1e-3, seed=0, action_pad=-10.0)
     batch = sampler.sample(400)
     assert batch["frames"].shape == (400, K, 3 * fs, 4, 4) and batch["frames"].dtype == np.uint8
     starts_seen = set()
@@ -427,19 +428,19 @@ def test_sequence_sampler_windows_never_cross_and_pad_left():
 def test_sequence_sampler_state_and_bad_episodes():
     eps = tagged_episodes([6, 4])
     kw = {"context": 3, "frame_stack": 3, "rtg_scale": 1e-3, "action_pad": -10.0}
-    a = dt.SequenceSampler(eps, seed=5, **kw)
+    a = dt_model.SequenceSampler(eps, seed=5, **kw)
     a.sample(3)
-    b = dt.SequenceSampler(eps, seed=99, **kw)
+    b = dt_model.SequenceSampler(eps, seed=99, **kw)
     b.load_state_dict(a.state_dict())
     assert np.array_equal(a.sample(8)["start"], b.sample(8)["start"])
     bad = dict(eps[0], frames=eps[0]["frames"][:-1])  # frames must be T+1
     with pytest.raises(ValueError, match="episode 0"):
-        dt.SequenceSampler([bad], seed=0, **kw)
+        dt_model.SequenceSampler([bad], seed=0, **kw)
     with pytest.raises(ValueError, match="no episodes"):
-        dt.SequenceSampler([], seed=0, **kw)
+        dt_model.SequenceSampler([], seed=0, **kw)
     with pytest.raises(ValueError, match="timestep embedding"):
-        dt.SequenceSampler(eps, seed=0, max_timestep=5, **kw)
-    dt.SequenceSampler(eps, seed=0, max_timestep=6, **kw)
+        dt_model.SequenceSampler(eps, seed=0, max_timestep=5, **kw)
+    dt_model.SequenceSampler(eps, seed=0, max_timestep=6, **kw)
 
 
 def test_config_values_have_one_source_the_loss_functions_repeat_none():
@@ -453,18 +454,18 @@ def test_config_values_have_one_source_the_loss_functions_repeat_none():
 
     config_names = config_fields(TD3BCConfig, CQLConfig, IQLConfig, DTConfig) | {"frame_stack", "seed"}
     functions = [td3bc.actor_loss, cql.regulariser, cql.critic_regularisers, iql.value_loss, iql.actor_loss,
-                 dt.DecisionTransformer.__init__, dt.SequenceSampler.__init__, dt.EvalContext.__init__,
-                 dt.make_optimizer, dt.GPT2Stack.__init__]
+                 dt_model.DecisionTransformer.__init__, dt_model.SequenceSampler.__init__,
+                 dt_model.EvalContext.__init__, dt_model.make_optimizer, dt_model.GPT2Stack.__init__]
     repeated = {fn.__qualname__: sorted(set(defaults(fn)) & config_names) for fn in functions}
     # the sampler's max_timestep=None switches its length check off; it is not the config's value (1000)
-    assert repeated == {fn.__qualname__: (["max_timestep"] if fn is dt.SequenceSampler.__init__ else [])
+    assert repeated == {fn.__qualname__: (["max_timestep"] if fn is dt_model.SequenceSampler.__init__ else [])
                         for fn in functions}
-    assert defaults(dt.SequenceSampler.__init__)["max_timestep"] is None
+    assert defaults(dt_model.SequenceSampler.__init__)["max_timestep"] is None
     assert not hasattr(dt, "GRAD_CLIP")  # the clip is agent.dt.grad_clip alone
 
 
 def test_eval_context_history():
-    ctx = dt.EvalContext(target_return=500.0, context=3, rtg_scale=1e-3)
+    ctx = dt_model.EvalContext(target_return=500.0, context=3, rtg_scale=1e-3)
     obs = [np.full((9, 2, 2), i, dtype=np.uint8) for i in range(5)]
     first = ctx.inputs(obs[0], action_dim=2)
     assert first["mask"].tolist() == [False, False, True] and first["rtg"][-1, 0] == pytest.approx(0.5)
@@ -484,7 +485,7 @@ def test_eval_context_history():
 
 def test_dt_optimizer_warmup_and_weight_decay():
     model = torch.nn.Linear(2, 2)
-    opt, sched = dt.make_optimizer(model, lr=1e-4, weight_decay=1e-4, warmup_steps=10)
+    opt, sched = dt_model.make_optimizer(model, lr=1e-4, weight_decay=1e-4, warmup_steps=10)
     assert opt.param_groups[0]["weight_decay"] == 1e-4
     lrs = []
     for _ in range(12):
@@ -498,8 +499,8 @@ def test_dt_sampler_batch_feeds_the_model():
     eps = tagged_episodes([8, 3])
     for ep in eps:
         ep["frames"] = np.repeat(np.repeat(ep["frames"], 4, axis=2), 4, axis=3)  # 16x16
-    sampler = dt.SequenceSampler(eps, context=5, frame_stack=3, rtg_scale=1e-3, seed=0, action_pad=-10.0)
+    sampler = dt_model.SequenceSampler(eps, context=5, frame_stack=3, rtg_scale=1e-3, seed=0, action_pad=-10.0)
     model = tiny_dt()
-    b = dt.batch_to_tensors(sampler.sample(4))
+    b = dt_model.batch_to_tensors(sampler.sample(4))
     pred = model(b["frames"], b["actions"], b["rtg"], b["timesteps"], b["mask"])
     assert pred.shape == (4, 5, A_DIM) and torch.isfinite(pred).all()

@@ -1,5 +1,5 @@
 """Decision Transformer (offline learner ``dt``) on pixels: the model, loss, sampler and optimizer of
-``repro/learners/losses/dt.py`` wired to the learner protocol.
+``repro/learners/dt_model.py`` and ``repro/learners/losses/dt.py`` wired to the learner protocol.
 
 Training: ``make_sampler`` builds the window sampler from the dataset's episodes (the offline loop then
 skips the replay); each update is AdamW on the masked action MSE, gradients clipped to ``dt.grad_clip``,
@@ -20,14 +20,8 @@ from torch import nn
 
 from repro.config.schema import AgentConfig
 from repro.learners.base import count_parameters
-from repro.learners.losses.dt import (
-    DecisionTransformer,
-    EvalContext,
-    SequenceSampler,
-    action_loss,
-    batch_to_tensors,
-    make_optimizer,
-)
+from repro.learners.dt_model import DecisionTransformer, EvalContext, SequenceSampler, batch_to_tensors, make_optimizer
+from repro.learners.losses.dt import action_loss
 
 METRICS = ("dt_loss", "lr", "grad_norm")  # grad_norm: before clipping; lr: the rate this update used
 
