@@ -156,7 +156,7 @@ def main_job(tmp_path_factory: pytest.TempPathFactory, _main_job_started_early: 
 UNIT_SECONDS = {
     "tiny_taco": 240,
     "slurm": 190,
-    "figures": 140,
+    "figures": 100,
     "offline_train": 90,
     "tests/test_sweeps.py::test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once": 70,
     "contract": 60,
