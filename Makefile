@@ -36,7 +36,8 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 # Two pytest workers (this project's CI machine has 2 cores); the tests sharing one session run (tests/conftest.py)
-# are kept on one worker (--dist loadgroup). The 15 slowest are printed so they stay visible.
+# are kept on one worker (--dist loadgroup), and the longest units are queued first (tests/conftest.py). The 15
+# slowest are printed so they stay visible.
 XDIST ?= -n 2 --dist loadgroup
 test: lint
 	$(BIN)/python -m pytest -q -ra $(XDIST) --durations=15 $(PYTEST_ARGS)

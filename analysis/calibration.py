@@ -53,9 +53,17 @@ def packaged_published() -> Results:
 def values_at(results: Results, frame: float, task: str | None = None) -> pd.DataFrame:
     """Each run's ``episode_reward`` at ``frame`` by linear interpolation between its own evaluations: columns
     run_id, task, seed, value. A run whose evaluations do not span ``frame`` is left out (no extrapolation)."""
+    return _interpolate(_run_curves(results, task), frame)
+
+
+_Curve = tuple[object, object, object, np.ndarray, np.ndarray]  # run_id, task, seed, frames, values
+
+
+def _run_curves(results: Results, task: str | None) -> list[_Curve]:
+    """Each run's evaluations with a value (of ``task``, if given), sorted by frame, in the runs' order."""
     ev = results.eval
     if ev.empty:
-        return pd.DataFrame(columns=["run_id", "task", "seed", "value"])
+        return []
     ev = ev[ev["frame"].notna()]
     if task is not None:
         ev = ev[ev["task"] == task]
@@ -65,10 +73,13 @@ def values_at(results: Results, frame: float, task: str | None = None) -> pd.Dat
         vals = pd.to_numeric(rows["episode_reward"], errors="coerce").to_numpy(dtype=float)
         frames = rows["frame"].to_numpy(dtype=float)
         ok = ~np.isnan(vals)
-        if not ok.any() or not frames[ok][0] <= frame <= frames[ok][-1]:
-            continue
-        out.append({"run_id": run_id, "task": rows["task"].iloc[0], "seed": rows["seed"].iloc[0],
-                    "value": float(np.interp(frame, frames[ok], vals[ok]))})
+        out.append((run_id, rows["task"].iloc[0], rows["seed"].iloc[0], frames[ok], vals[ok]))
+    return out
+
+
+def _interpolate(curves: Sequence[_Curve], frame: float) -> pd.DataFrame:
+    out = [{"run_id": run_id, "task": task, "seed": seed, "value": float(np.interp(frame, frames, vals))}
+           for run_id, task, seed, frames, vals in curves if len(frames) and frames[0] <= frame <= frames[-1]]
     return pd.DataFrame(out, columns=["run_id", "task", "seed", "value"])
 
 
@@ -253,7 +264,8 @@ def published_band(published: Results, task: str, upto: float, reps: int, seed: 
     upto = min(float(upto), end)
     ev = published.eval[published.eval["task"] == task]
     frames = sorted({float(f) for f in ev["frame"] if f <= upto} | {upto})
-    cols = [published_values(published, task, f) for f in frames]
+    curves = _run_curves(published, task)  # once per task, not once per frame (459 frames on F4)
+    cols = [_interpolate(curves, f)["value"].to_numpy(dtype=float) for f in frames]
     cis = mean_cis(cols, reps=reps, seed=seed)
     return pd.DataFrame({"frame": frames, "n": [len(c) for c in cols],
                          "mean": [float(np.mean(c)) if len(c) else math.nan for c in cols],

@@ -25,6 +25,7 @@ from repro_app.report import build_report
 pytestmark = pytest.mark.xdist_group("figures")
 
 REPS = 200
+CURVE_REPS = 50  # repetitions of the learning curves' CI bands (default 2,000): no test here reads a band's width
 EXPECTED = ["T1", "T2", "T3", "T3b", "T4", "T5", "T6", "F1", "F3", "F4", "F5", "F6", "F7a", "F7b", "F8", "F9", "F10",
             "F11", "F12", "F13"]
 
@@ -41,7 +42,7 @@ def assert_png_not_blank(path: Path) -> None:
 def full_report(tmp_path_factory):
     root = full_coverage_root(tmp_path_factory.mktemp("results"))
     ctx = Context(results=load_results(root), out_dir=tmp_path_factory.mktemp("report"), budget=FRAMES, reps=REPS,
-                  tsne_n=30, tsne_iter=250, render_envs=False, indicative=True)
+                  curve_reps=CURVE_REPS, tsne_n=30, tsne_iter=250, render_envs=False, indicative=True)
     md, html = build_report(ctx)
     return ctx, md, html
 
@@ -53,6 +54,9 @@ def test_registry_has_every_artifact():
         paper_figures.resolve(["F2"])
 
 
+# The full-coverage report (about 60 s of CPU for ~390 synthetic runs and every artifact) is an end-to-end check:
+# `make test` runs it, `make test-fast` (unit tests) does not.
+@pytest.mark.slow
 def test_every_figure_renders_non_blank_on_full_coverage(full_report):
     ctx, _, _ = full_report
     manifest = {m["id"]: m for m in json.loads((ctx.out_dir / "manifest.json").read_text())}
@@ -67,6 +71,7 @@ def test_every_figure_renders_non_blank_on_full_coverage(full_report):
             assert entry["has_runs"], f"{aid} found no runs in the full-coverage root"
 
 
+@pytest.mark.slow
 def test_full_coverage_tables_and_claims(full_report):
     ctx, md, html = full_report
     import pandas as pd

@@ -16,7 +16,9 @@ import pytest
 
 from helpers import write_sweep  # the same tiny-run sweep files as the local launcher tests
 
-pytestmark = [pytest.mark.slurm, pytest.mark.slow]
+# one worker runs both tests: they share the session's cluster (brought up once, and not taken down by one
+# worker while the other still uses it)
+pytestmark = [pytest.mark.slurm, pytest.mark.slow, pytest.mark.xdist_group("slurm")]
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "scripts" / "slurm_local.sh"
