@@ -17,9 +17,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import torch
+import typer
 import yaml
 
 from repro.data.record import load_snapshot
+from repro.launch.cli import register as register_launch
 from repro.runs.logger import WALLCLOCK_COLUMNS
 from repro.runs.runformat import EVAL, TRAIN
 from repro.runs.tblog import read_scalars
@@ -155,3 +157,15 @@ def make_batch(B: int = 6, K: int = 3, A: int = 4, seed: int = 0) -> dict[str, t
     return {"obs": u8(), "next_obs": u8(), "future_obs": u8(), "action": torch.rand(B, A, generator=g) * 2 - 1,
             "action_seq": torch.rand(B, K, A, generator=g) * 2 - 1, "reward": torch.rand(B, 1, generator=g),
             "discount": torch.full((B, 1), 0.99 ** 3), "reward_ksum": torch.rand(B, 1, generator=g) * 3}
+
+
+def launch_app() -> typer.Typer:
+    """A Typer app with the launch commands only (``sweep``, ``sweeps``, ``status``), as ``repro`` registers them."""
+    app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
+    register_launch(app)
+
+    @app.callback()
+    def _root() -> None:  # keep sub-commands even when only one is registered
+        pass
+
+    return app

@@ -14,12 +14,12 @@ import typer
 import yaml
 from typer.testing import CliRunner
 
+from helpers import launch_app
 from offline_fixtures import make_episode
 from repro.config.compose import config_groups
 from repro.data.dataset import write_dataset
 from repro.launch import local, slurm
 from repro.launch import spec as specs
-from repro.launch.cli import register
 from repro.launch.state import RunRecord, state_dir, write_record
 from repro.launch.status import collect
 from repro.launch.waiting import waiting_lines
@@ -36,19 +36,8 @@ def available_learners() -> list[str]:
     return [a for a in LEARNERS if a in config_groups()["agent"]]
 
 
-def make_app() -> typer.Typer:
-    app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
-    register(app)
-
-    @app.callback()
-    def _root() -> None:  # keep sub-commands even when only one is registered
-        pass
-
-    return app
-
-
 def run_cli(*args: str) -> tuple[int, str]:
-    res = CliRunner().invoke(make_app(), list(args))
+    res = CliRunner().invoke(launch_app(), list(args))
     if res.exception and not isinstance(res.exception, SystemExit):
         raise res.exception
     return res.exit_code, res.output

@@ -15,31 +15,17 @@ import time
 from pathlib import Path
 
 import pytest
-import typer
 import yaml
 from typer.testing import CliRunner
 
-from helpers import write_sweep
+from helpers import launch_app, write_sweep
 from repro.launch import lock
 from repro.launch import spec as specs
-from repro.launch.cli import register
 from repro.launch.runner import claim
 from repro.launch.state import RunRecord, state_dir, write_record
 from repro.launch.status import collect
 
-
-def make_app() -> typer.Typer:
-    app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
-    register(app)
-
-    @app.callback()
-    def _root() -> None:  # keep sub-commands even when only one is registered
-        pass
-
-    return app
-
-
-APP = make_app()
+APP = launch_app()
 
 
 def run_cli(*args: str) -> tuple[int, str]:
