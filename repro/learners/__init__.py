@@ -1,7 +1,7 @@
 """Learners: one protocol (base.Learner) and a registry keyed by ``agent.learner``."""
 
 from repro.learners.base import EpisodicActor, Learner, OnlineLearner, ReturnConditioned, Sampler, SequenceLearner
-from repro.learners.registry import LEARNERS, build_learner, is_offline, samples_episodes
+from repro.learners.registry import LEARNERS, build_learner, samples_episodes
 
 __all__ = ["LEARNERS", "EpisodicActor", "Learner", "OnlineLearner", "ReturnConditioned", "Sampler",
-           "SequenceLearner", "build_learner", "is_offline", "samples_episodes"]
+           "SequenceLearner", "build_learner", "samples_episodes"]

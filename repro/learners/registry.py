@@ -7,7 +7,7 @@ from collections.abc import Callable
 import torch
 
 from repro.agent.agent import Agent
-from repro.config.schema import AgentConfig, LearnerName, check_registry, is_offline
+from repro.config.schema import AgentConfig, LearnerName, check_registry
 from repro.learners.base import Learner
 from repro.learners.bc import BCLearner
 from repro.learners.cql import CQL
@@ -26,7 +26,7 @@ LEARNERS: dict[str, LearnerFactory] = {
     "dt": DTLearner,  # Decision Transformer on pixels (offline; samples episode windows, return-conditioned)
 }
 check_registry("learner", LEARNERS, LearnerName)  # the names (and which train offline) are schema data
-__all__ = ["LEARNERS", "LearnerFactory", "build_learner", "is_offline", "samples_episodes"]
+__all__ = ["LEARNERS", "LearnerFactory", "build_learner", "samples_episodes"]
 
 
 def samples_episodes(name: str) -> bool:

@@ -12,7 +12,7 @@ import torch
 from omegaconf import DictConfig
 
 from repro.config.compose import compose, typed
-from repro.config.schema import Device, RunConfig
+from repro.config.schema import Device, RunConfig, is_offline
 from repro.data.episodes import EpisodeStore
 from repro.data.offline_replay import (
     DatasetError,
@@ -30,7 +30,6 @@ from repro.learners import (
     ReturnConditioned,
     SequenceLearner,
     build_learner,
-    is_offline,
     samples_episodes,
 )
 from repro.runs import rundir
