@@ -15,6 +15,7 @@ from analysis.context import Context
 from analysis.paper import DMC9
 from analysis.stats import (
     POI_REPS,
+    PROFILE_REPS,
     SCORE_SCALE,
     CellStats,
     aggregate_estimates,
@@ -76,7 +77,8 @@ def render(ctx: Context) -> ArtifactResult:
         caption
         + " "
         + bar_caption(
-            ctx, "Right: run-score performance profiles with 95% bootstrap bands (rliable, 2,000 repetitions)."
+            ctx, "Right: run-score performance profiles with 95% bootstrap bands (rliable, "
+            f"{min(ctx.reps, PROFILE_REPS):,} repetitions)."
         )
     )
     return ArtifactResult("F1", "Average performance", full_caption, figures=[png], tables=[table], notes=table.notes,
@@ -142,7 +144,7 @@ def _figure(ctx: Context, cells: list[Cell], methods: list[str], normed: dict[st
     ax.tick_params(axis="x", rotation=30)
     if normed:
         taus = np.linspace(0.0, 1.0, 51)
-        profiles = performance_profiles(normed, taus, seed=ctx.seed)
+        profiles = performance_profiles(normed, taus, reps=min(ctx.reps, PROFILE_REPS), seed=ctx.seed)
         colors = palette(list(normed))
         for method, (prof, ci) in profiles.items():
             ax2.plot(taus * SCALE, prof, color=colors[method], label=method)

@@ -153,3 +153,10 @@ def test_tsne_scores_latent_clusters_above_raw():
     assert res.silhouette_latent > 0.9 and res.silhouette_raw < 0.2
     assert res.silhouette_latent_2d > res.silhouette_raw_2d
     assert np.bincount(res.labels).tolist() == [30, 30, 30, 30]
+
+
+@pytest.mark.slow
+def test_f1_performance_profiles_use_the_repetitions_asked_for(full_report):
+    """--reps governs F1's profile bands too (capped at rliable's 2,000), and the caption says the number used."""
+    _, md, _ = full_report
+    assert f"performance profiles with 95% bootstrap bands (rliable, {REPS:,} repetitions)" in md.read_text()
