@@ -24,6 +24,7 @@ from repro.launch import spec as specs
 from repro.launch.runner import claim
 from repro.launch.state import RunRecord, state_dir, write_record
 from repro.launch.status import collect
+from repro.runs.rundir import writer_lock_holder
 
 APP = launch_app()
 
@@ -316,7 +317,8 @@ def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_
     done_before = {p.key for p in planned if (p.run_dir / "DONE").exists()}
     partial = {p.key for p in planned if (p.run_dir / "checkpoint.pt").exists() and p.key not in done_before}
     assert partial
-    # the children die with the launcher (PDEATHSIG), so their locks become stale
+    # the children die with the launcher (PDEATHSIG), so their locks become stale; a child still shutting down
+    # holds its run's writer lock until it has exited, and a launcher started before then skips that run as held
     def children_gone() -> bool:
         for p in planned:
             try:
@@ -325,8 +327,10 @@ def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_
                 return False
             if info is not None and not lock.is_stale(info, None):
                 return False
+            if writer_lock_holder(p.run_dir) is not None:
+                return False
         return True
-    _wait(children_gone, 30, "the killed launcher's children to exit")
+    _wait(children_gone, 60, "the killed launcher's children to exit")
 
     b = cli_proc("sweep", *common, "--max-parallel", "1")
     c = cli_proc("sweep", *common, "--max-parallel", "1")
