@@ -11,9 +11,10 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
+from repro.bench import OFFLINE_AGENTS
 from repro.bench.cli import register, same_run_ratios
 from repro.bench.data import episode_lengths, synthetic_episode
-from repro.bench.offline import OFFLINE_AGENTS, available, run_offline_bench
+from repro.bench.offline import available, run_offline_bench
 
 
 def _app() -> typer.Typer:

@@ -18,6 +18,16 @@ def repro(*args: str, timeout: int = 300) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "repro", *args], capture_output=True, text=True, timeout=timeout)
 
 
+def test_the_command_line_starts_without_torch():
+    """`repro --help`, `status`, `sweep` (the launcher itself) and bad input need no torch: the commands that train or
+    time import it when they run (about 2 s of every start otherwise). Fails when a CLI module imports torch (or a
+    module that does) at the top."""
+    code = ("import sys, repro_app.cli; "
+            "print(sorted(m for m in ('torch', 'dm_control', 'matplotlib') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
 def test_tasks_lists_every_task_with_action_dim_and_defaults():
     result = runner.invoke(app, ["tasks"], terminal_width=200)
     assert result.exit_code == 0, result.output

@@ -19,17 +19,20 @@ import socket
 import statistics
 import time
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
-import torch
 import typer
 
-from repro.bench.data import run_data_bench
-from repro.bench.offline import OFFLINE_AGENTS, run_offline_bench
+from repro.bench import OFFLINE_AGENTS
 from repro.runs.fsutil import atomic_write_text
+
+if TYPE_CHECKING:
+    import torch
 
 
 def _batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tensor]:
+    import torch
+
     g = torch.Generator().manual_seed(0)
     u8 = lambda: torch.randint(0, 256, (B, 9, 84, 84), dtype=torch.uint8, generator=g).to(device)  # noqa: E731
     return {"obs": u8(), "next_obs": u8(), "future_obs": u8(),
@@ -43,6 +46,8 @@ def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: 
                 device: str = "cpu", speedup: str = "plain", warmup: int = 1) -> dict:
     """Median wall-clock seconds of one full agent update, over ``repeats`` timed updates after ``warmup``
     untimed ones (same batch every time)."""
+    import torch
+
     from repro.agent.agent import Agent
     from repro.config.compose import compose, typed
     from repro.envs import get_task
@@ -81,6 +86,8 @@ def replay_memory_ratio(capacity: int = 100_000, action_dim: int = 12) -> dict:
 
 
 def hardware(device: str) -> str:
+    import torch
+
     if device.startswith("cuda") and torch.cuda.is_available():
         return torch.cuda.get_device_name(0)
     from repro.runs.rundir import _cpu_model
@@ -119,6 +126,8 @@ def _ratio_text(name: str, value: float) -> str:
 def run_bench(configs: list[tuple[str, int]], repeats: int, device: str, out_dir: Path,
               echo=print, speedups: tuple[str, ...] = (), warmup: int = 1) -> dict:
     """Time every (algo, batch) plain and with each speed-up, print the same-run ratios, write the JSON."""
+    import torch
+
     results = []
     plain_seconds: dict[tuple[str, int], float] = {}
     for algo, bs, speedup in [(a, b, "plain") for a, b in configs] + [(a, b, s) for s in speedups
@@ -188,6 +197,11 @@ def register(app: typer.Typer) -> None:
               results_root: Path = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).")):
         """Time one update of TACO and DrQ-v2 at batch 256 and 1024; print same-run ratios and replay memory.
         With --offline: each offline learner against DrQ-v2; with --offline-data: dataset load and sampling."""
+        import torch
+
+        from repro.bench.data import run_data_bench
+        from repro.bench.offline import run_offline_bench
+
         if device.startswith("cuda") and not torch.cuda.is_available():
             raise _fail("--device cuda but no CUDA device is available")
         for a in algo or []:

@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 import torch
 
+from repro.bench import OFFLINE_AGENTS
 from repro.config.compose import ConfigError, compose, config_groups, typed
 from repro.config.schema import AgentConfig
 from repro.data.replay import ReplayBuffer
 from repro.envs import get_task
 from repro.learners.registry import LEARNERS, build_learner
 
-OFFLINE_AGENTS = ("bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "dt")  # agent files (repro/conf/agent)
 REFERENCE = "drqv2"  # the online update every ratio is taken against
 FRAME_SHAPE = (3, 84, 84)
 DATASET_KIND = "medium"  # offline.dataset of the timed offline learners (not read: the batches are synthetic)

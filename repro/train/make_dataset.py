@@ -38,14 +38,13 @@ import yaml
 from repro.agent.networks import Actor, Encoder
 from repro.config.compose import CONF_DIR, ConfigError, typed, validate
 from repro.config.schema import RunConfig
-from repro.data.dataset import MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
+from repro.data.dataset import KINDS, MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
 from repro.data.record import EPISODES, SNAPSHOTS, load_snapshot, record_dir, snapshot_path, snapshot_steps
 from repro.envs import TASKS
 from repro.runs import rundir
 from repro.train.api import DeviceError, build_env, resolve_device, run_action_dim
 from repro.train.online import episode_seed
 
-KINDS = ("medium", "medium-replay", "full-replay")
 DEFAULTS_FILE = CONF_DIR / "datasets.yaml"
 ROLLOUT_KIND = 2  # episode_seed kind of dataset rollouts (0: training, 1: evaluation)
 

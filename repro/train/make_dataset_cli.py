@@ -1,4 +1,5 @@
-"""The `repro dataset make` command, added to the `dataset` sub-app by ``register(dataset_app)``."""
+"""The `repro dataset make` command, added to the `dataset` sub-app by ``register(dataset_app)``. The maker (and
+with it torch) is imported when the command runs, so that `repro` starts without it."""
 
 from __future__ import annotations
 
@@ -7,9 +8,8 @@ from typing import Optional
 
 import typer
 
-from repro.data.dataset import DatasetError
+from repro.data.dataset import KINDS, DatasetError
 from repro.runs.fsutil import write_error_message
-from repro.train.make_dataset import KINDS, make
 
 
 def register(dataset_app: typer.Typer) -> None:
@@ -31,6 +31,8 @@ def register(dataset_app: typer.Typer) -> None:
         device: str = typer.Option("auto", "--device", help="Torch device of the medium rollouts: auto | cpu | cuda."),
     ) -> None:
         """Make a medium, medium-replay or full-replay dataset from a recorded online run (docs/offline.md)."""
+        from repro.train.make_dataset import make
+
         try:
             make(source, kind, transitions, medium_fraction, seed, out, results, task, device, echo=typer.echo)
         except DatasetError as exc:  # MakeError included
