@@ -90,10 +90,12 @@ def status_line(name: str, root: Path) -> str:
 
 
 def test_array_completes_and_survives_cancel_and_relaunch(slurm, tmp_path):
-    """2 tasks x 2 variants x 2 seeds as one job array: submission returns at once, a second submission
-    queues nothing, the array is cancelled halfway, and a relaunch finishes every run exactly once."""
+    """2 tasks x 2 variants as one job array of 4: submission returns at once, a second submission queues
+    nothing, the array is cancelled halfway (the node runs two at once: two done, two running), and a relaunch
+    finishes every run exactly once."""
     sweep = write_sweep(tmp_path, "sgrid", ["reacher_hard", "cheetah_run"], {"K1": ["agent.K=1"], "K3": ["agent.K=3"]},
-                        2, frames=100)
+                        1, frames=100)
+    N = 4
     root = tmp_path / "results"
     args = ["sweep", str(sweep), "--set", f"runtime.results_root={root}", "--launcher", "slurm",
             "--cluster-config", str(CLUSTER)]
@@ -102,30 +104,30 @@ def test_array_completes_and_survives_cancel_and_relaunch(slurm, tmp_path):
     assert code == 0, out
     assert time.time() - t0 < 60, "submission must not wait for the jobs"
     ids = re.search(r"SLURM job ids: (\S+(?:, \S+)*);", out).group(1).split(", ")
-    assert len(ids) == 8 and len({i.split("_")[0] for i in ids}) == 1, "one array, one task per run"
+    assert len(ids) == N and len({i.split("_")[0] for i in ids}) == 1, "one array, one task per run"
     out = status_line("sgrid", root)
     assert re.search(r"sgrid: 0 done, \d running, \d queued", out) and "queued" in out.split("\n", 1)[1]
 
     code, out = cli(*args)  # queues nothing: each run is held by the array (or already done: 100 frames are quick)
     counts = re.search(r"0 submitted, (\d+) already done, (\d+) held elsewhere", out)
-    assert code == 0 and counts and int(counts.group(1)) + int(counts.group(2)) == 8, out
+    assert code == 0 and counts and int(counts.group(1)) + int(counts.group(2)) == N, out
 
     wait(lambda: sum((d / "DONE").exists() for d in run_dirs(root, "sgrid")) >= 2, 400, "two runs to finish")
     subprocess.run(["scancel", ids[0].split("_")[0]], check=True)
     wait(lambda: not squeue(), 60, "the cancelled array to leave the queue")
     done_first = {d for d in run_dirs(root, "sgrid") if (d / "DONE").exists()}
-    assert 2 <= len(done_first) < 8
+    assert 2 <= len(done_first) < N
 
     code, out = cli(*args)
     assert code == 0, out
-    assert f"{8 - len(done_first)} submitted" in out and f"{len(done_first)} already done" in out, out
-    wait(lambda: len([d for d in run_dirs(root, "sgrid") if (d / "DONE").exists()]) == 8 and not squeue(), 600,
+    assert f"{N - len(done_first)} submitted" in out and f"{len(done_first)} already done" in out, out
+    wait(lambda: len([d for d in run_dirs(root, "sgrid") if (d / "DONE").exists()]) == N and not squeue(), 600,
          "the relaunched runs")
     dirs = run_dirs(root, "sgrid")
-    assert len(dirs) == 8
+    assert len(dirs) == N
     for d in dirs:
         assert_complete(d, 100)
-    assert "sgrid: 8 done" in status_line("sgrid", root)
+    assert f"sgrid: {N} done" in status_line("sgrid", root)
 
 
 def test_usr2_requeues_and_resumes_without_duplicate_rows(slurm, tmp_path):
