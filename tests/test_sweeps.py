@@ -14,17 +14,19 @@ import sys
 import time
 from pathlib import Path
 
+import pandas as pd
 import pytest
 import yaml
 from typer.testing import CliRunner
 
-from helpers import launch_app, write_sweep
+from helpers import deterministic, launch_app, write_sweep
 from repro.launch import lock
 from repro.launch import spec as specs
 from repro.launch.runner import claim
 from repro.launch.state import RunRecord, state_dir, write_record
 from repro.launch.status import collect
 from repro.runs.rundir import writer_lock_holder
+from repro.runs.runformat import EVAL, TRAIN
 
 APP = launch_app()
 
@@ -309,7 +311,7 @@ def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_
     assert len(planned) == 4
     dirs = [p.run_dir for p in planned]
 
-    first = cli_proc("sweep", *common, "--max-parallel", "2")
+    first = cli_proc("sweep", *common, "--max-parallel", "2", "--warm-start")  # its children die with it too
     _wait(lambda: sum((d / "DONE").exists() for d in dirs) >= 2
           and any((d / "checkpoint.pt").exists() and not (d / "DONE").exists() for d in dirs), 300, "a partial run")
     first.send_signal(signal.SIGKILL)
@@ -353,24 +355,42 @@ def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_
 
 
 @pytest.mark.slow
-def test_local_launcher_keeps_going_after_a_failure(tmp_path):
+def test_local_launcher_keeps_going_after_a_failure_and_a_warm_start_gives_the_same_runs(tmp_path):
+    """The same two-run sweep, one run of it broken (a corrupt checkpoint), launched plain and with --warm-start
+    (runs forked from a server that has imported torch: repro/launch/warm.py): each launch keeps going past the
+    failure, exits 1 and names the failed run's log, and `status` says so; the good runs' logs, config and
+    resolved values are the same either way, and so is the broken run's error line."""
     from repro.runs.rundir import write_config
 
     sweep = write_sweep(tmp_path, "fail", ["reacher_hard"], {"a": [], "b": []}, 1)
-    root = tmp_path / "results"
-    planned = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={root}",))))
-    bad, good = planned
-    bad.run_dir.mkdir(parents=True)
-    write_config(bad.run_dir, bad.cfg)
-    (bad.run_dir / "checkpoint.pt").write_bytes(b"not a checkpoint")  # resuming it fails
-    proc = cli_proc("sweep", str(sweep), "--set", f"runtime.results_root={root}", "--max-parallel", "1")
-    out = proc.communicate(timeout=300)[0]
-    assert proc.returncode == 1, out
-    assert (good.run_dir / "DONE").exists() and not (bad.run_dir / "DONE").exists()
-    log = state_dir(root, "fail") / "logs" / f"{bad.key}.log"
-    assert f"failed {bad.key}: log {log}" in out and log.exists() and log.read_text().strip()
-    code, out = run_cli("status", "fail", "--results-root", str(root))
-    assert "1 done" in out and "1 failed" in out and f"failed {os.path.relpath(bad.run_dir, root)}: {log}" in out
+    got = {}
+    for how, extra in (("plain", []), ("warm", ["--warm-start"])):
+        root = tmp_path / how
+        sel = specs.Selection(sets=(f"runtime.results_root={root}",))
+        bad, good = specs.plan(specs.expand(specs.load(str(sweep)), sel))
+        bad.run_dir.mkdir(parents=True)
+        write_config(bad.run_dir, bad.cfg)
+        (bad.run_dir / "checkpoint.pt").write_bytes(b"not a checkpoint")  # resuming it fails
+        proc = cli_proc("sweep", str(sweep), "--set", f"runtime.results_root={root}", "--max-parallel", "1", *extra)
+        out = proc.communicate(timeout=300)[0]
+        assert proc.returncode == 1, out
+        assert (good.run_dir / "DONE").exists() and not (bad.run_dir / "DONE").exists()
+        log = state_dir(root, "fail") / "logs" / f"{bad.key}.log"
+        assert f"failed {bad.key}: log {log}" in out and log.exists() and log.read_text().strip()
+        code, out = run_cli("status", "fail", "--results-root", str(root))
+        assert "1 done" in out and "1 failed" in out and f"failed {os.path.relpath(bad.run_dir, root)}: {log}" in out
+        header, *lines = log.read_text().strip().splitlines()
+        assert header.endswith("(warm start)") == (how == "warm")
+        got[how] = (good.run_dir, [ln.replace(str(root), "ROOT") for ln in lines])
+    (plain, plain_log), (warm, warm_log) = got["plain"], got["warm"]
+    # the error: one line (a file that is not a checkpoint is no traceback), the same from both
+    assert warm_log == plain_log and len(plain_log) == 1, (warm_log, plain_log)
+    assert plain_log[0].startswith("error: ") and "checkpoint.pt cannot be read" in plain_log[0], plain_log
+    for name in (EVAL, TRAIN):
+        pd.testing.assert_frame_equal(deterministic(warm / name), deterministic(plain / name))
+    for name in ("resolved.json", "config.yaml"):
+        assert (warm / name).read_text().replace(str(tmp_path / "warm"), "ROOT") == \
+            (plain / name).read_text().replace(str(tmp_path / "plain"), "ROOT"), name
 
 
 def test_repr_objectives_marks_driml_na_on_k1_tasks():

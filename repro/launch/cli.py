@@ -157,6 +157,10 @@ def sweep_cmd(
         "--cluster-config",
         help="SLURM launcher YAML (default: $REPRO_SLURM_CONFIG or ~/.config/taco-repro/slurm.yaml).",
     ),
+    warm_start: bool = typer.Option(
+        False, "--warm-start", help="Local: fork each run from a process that has imported torch and the trainer "
+        "already (about 4 s of CPU less per run; the same files and logs) instead of a fresh interpreter."
+    ),
 ) -> None:
     """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
     try:
@@ -170,7 +174,7 @@ def sweep_cmd(
             return
         if any(p.state == "mismatch" for p in planned) and not force:
             raise SweepError(_mismatch_error(planned, root))
-        report = _launch(spec, planned, root, launcher, max_parallel, force, cluster_config)
+        report = _launch(spec, planned, root, launcher, max_parallel, force, cluster_config, warm_start)
     except SweepError as exc:
         raise _fail(str(exc)) from None
     _print_report(report, launcher, spec.name)
@@ -181,7 +185,7 @@ def sweep_cmd(
 
 
 def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: Launcher, max_parallel: Optional[int],
-            force: bool, cluster_config: Optional[Path]) -> LaunchReport:
+            force: bool, cluster_config: Optional[Path], warm_start: bool = False) -> LaunchReport:
     """Record the launch in the sweep's state folder and submit (SLURM) or run (local) the planned runs."""
     from repro.launch.local import default_parallel, run_local
     from repro.launch.state import record_launch, state_dir
@@ -200,8 +204,8 @@ def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: La
                       {"cluster_config": str(cpath) if cpath else None})
         return report
     parallel = max_parallel or default_parallel()
-    record_launch(sdir, spec.name, spec.path, "local", grid, extra={"max_parallel": parallel})
-    return run_local(planned, spec.name, sdir, parallel, force, say)
+    record_launch(sdir, spec.name, spec.path, "local", grid, extra={"max_parallel": parallel, "warm_start": warm_start})
+    return run_local(planned, spec.name, sdir, parallel, force, say, warm_start)
 
 
 def status_cmd(

@@ -1,4 +1,5 @@
-"""Local launcher: run a sweep's runs as parallel ``repro train`` subprocesses on this machine."""
+"""Local launcher: run a sweep's runs as parallel ``repro train`` subprocesses on this machine (fresh interpreters, or
+forked from a warm server with ``warm_start``: repro/launch/warm.py)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from repro.launch.runner import Claim, claim, train_command
 from repro.launch.spec import PlannedRun
 from repro.launch.state import RunRecord, log_path, write_record
 from repro.launch.waiting import waiting_lines
+from repro.launch.warm import WarmProcess, WarmStarter
 
 POLL_S = 0.2
 TERM_GRACE_S = 10.0
@@ -93,22 +95,26 @@ def child_env(max_parallel: int) -> dict[str, str]:
 @dataclass
 class _Active:
     claim: Claim
-    proc: subprocess.Popen
+    proc: subprocess.Popen | WarmProcess
     log: Path
     record: RunRecord
     started: float
 
 
-def _start(c: Claim, sdir: Path, env: dict[str, str]) -> _Active:
+def _start(c: Claim, sdir: Path, env: dict[str, str], warm: WarmStarter | None) -> _Active:
     p = c.planned
     log = log_path(sdir, p.key)
     log.parent.mkdir(parents=True, exist_ok=True)
     cmd = train_command(p.overrides)
     with open(log, "a") as fh:
-        fh.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} {' '.join(cmd)}\n")
+        fh.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} {' '.join(cmd)}{' (warm start)' if warm else ''}\n")
         fh.flush()
-        proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
-                                preexec_fn=_die_with_parent)
+        proc: subprocess.Popen | WarmProcess
+        if warm is not None:
+            proc = warm.start(cmd[3:], log, _die_with_parent)  # the arguments after `python -m repro`
+        else:
+            proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
+                                    preexec_fn=_die_with_parent)
     assert c.info is not None
     lock.update(c.lock_path, c.info.token, child_pid=proc.pid, child_start=lock.process_start(proc.pid))
     record = RunRecord(key=p.key, run_dir=str(p.run_dir), overrides=list(p.overrides), launcher="local",
@@ -157,16 +163,18 @@ def _stop_all(active: dict[str, _Active], sdir: Path) -> None:
 
 
 def run_local(planned: Sequence[PlannedRun], sweep: str, sdir: Path, max_parallel: int, force: bool,
-              say: Callable[[str], None]) -> LaunchReport:
+              say: Callable[[str], None], warm_start: bool = False) -> LaunchReport:
     """Run every not-yet-done run, at most ``max_parallel`` at a time; keep going past failures.
 
     Each run is claimed (locked, state re-read) just before it starts, so a concurrent launcher on
     the same grid never runs it twice. SIGINT/SIGTERM stop the children and release their locks; the
-    runs resume from their checkpoints on the next launch.
+    runs resume from their checkpoints on the next launch. ``warm_start`` forks each run from a server that has
+    imported torch and the trainer already (repro/launch/warm.py) instead of starting a fresh interpreter.
     """
     report = LaunchReport()
     env = child_env(max_parallel)
     queue = report.to_launch(planned, say)
+    warm = WarmStarter(env) if warm_start and queue else None
     active: dict[str, _Active] = {}
 
     def on_term(signum: int, frame: object) -> None:
@@ -185,7 +193,7 @@ def run_local(planned: Sequence[PlannedRun], sweep: str, sdir: Path, max_paralle
                     continue
                 if c.moved_to is not None:
                     say(f"[yellow]moved[/] old run dir of {p.key} to {escape(str(c.moved_to))}")
-                active[p.key] = _start(c, sdir, env)
+                active[p.key] = _start(c, sdir, env, warm)
                 report.started.append(p.key)
                 say(f"[cyan]start[/] {p.key} ({len(active)} running, {len(queue)} queued)")
             for key, a in list(active.items()):

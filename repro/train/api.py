@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pickle
 import sys
 import time
 from collections.abc import Callable
@@ -155,7 +156,7 @@ def _load_state(path: Path, data: OfflineData | None) -> dict | None:
         return None
     try:
         state = load_checkpoint(file)
-    except (OSError, RuntimeError, ValueError, EOFError) as exc:
+    except (OSError, RuntimeError, ValueError, EOFError, pickle.UnpicklingError) as exc:  # torn, or not a checkpoint
         raise CheckpointError(f"{file} cannot be read ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
                               "); move the run directory away to start it afresh") from None
     if data is not None:
