@@ -25,9 +25,10 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-# The server's imports, in order: its tie to the launcher, then what `python -m repro train` imports before its
-# first step (a module that fails to import is skipped by the server, and the child imports it itself).
-PRELOAD = ["repro.launch.warm_server", "repro_app.cli", "repro.train.api", "torch._dynamo", "dm_control.suite"]
+# The server's imports, in order: its tie to the launcher, then the heavy part of what `python -m repro train`
+# imports before its first step (the trainer and below; the child imports the command line itself, a fraction of a
+# second). A module that fails to import is skipped by the server, and the child imports it itself.
+PRELOAD = ["repro.launch.warm_server", "repro.train.api", "torch._dynamo", "dm_control.suite"]
 
 
 def _child(args: list[str], log: str, env: dict[str, str], die_with_parent: Callable[[], None]) -> None:
