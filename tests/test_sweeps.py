@@ -144,6 +144,7 @@ def test_refused_sweep_is_one_line_exit_2(tmp_path):
     (["sweep", "horizon", "--tasks", "hopper_hop", "--set", "agent.KK=2", "--dry-run"], "agent.KK"),
     (["sweep", "horizon", "--tasks", "hopper_hop", "--set", "agent=tacoo", "--dry-run"], "Did you mean: taco"),
     (["status", "horizn"], "Did you mean: horizon"),
+    (["sweep", "horizon", "--launcher", "slurm", "--warm-start", "--dry-run"], "--warm-start is for the local"),
 ])
 def test_unknown_names_are_one_line_with_close_matches(args, needle, tmp_path):
     code, out = run_cli(*args, *(["--results-root", str(tmp_path)] if args[0] == "status" else []))

@@ -163,6 +163,8 @@ def sweep_cmd(
     ),
 ) -> None:
     """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
+    if warm_start and launcher == Launcher.slurm:
+        raise _fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
     try:
         spec = specs.load(name)
         task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
