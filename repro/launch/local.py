@@ -3,7 +3,6 @@ forked from a warm server with ``warm_start``: repro/launch/warm.py)."""
 
 from __future__ import annotations
 
-import ctypes
 import os
 import signal
 import subprocess
@@ -15,7 +14,7 @@ from pathlib import Path
 from rich.markup import escape
 
 from repro.launch import lock
-from repro.launch.runner import Claim, claim, train_command
+from repro.launch.runner import Claim, claim, die_with_parent, train_args, train_command
 from repro.launch.spec import PlannedRun
 from repro.launch.state import RunRecord, log_path, write_record
 from repro.launch.waiting import waiting_lines
@@ -74,15 +73,6 @@ class Interrupted(Exception):
     """SIGINT or SIGTERM reached the launcher."""
 
 
-def _die_with_parent() -> None:
-    """In the child: get SIGTERM when the launcher dies, even by SIGKILL (Linux prctl)."""
-    try:
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except OSError:
-        pass
-
-
 def child_env(max_parallel: int) -> dict[str, str]:
     env = dict(os.environ)
     env.setdefault("MUJOCO_GL", "egl")
@@ -111,10 +101,10 @@ def _start(c: Claim, sdir: Path, env: dict[str, str], warm: WarmStarter | None) 
         fh.flush()
         proc: subprocess.Popen | WarmProcess
         if warm is not None:
-            proc = warm.start(cmd[3:], log, _die_with_parent)  # the arguments after `python -m repro`
+            proc = warm.start(train_args(p.overrides), log)
         else:
             proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
-                                    preexec_fn=_die_with_parent)
+                                    preexec_fn=die_with_parent)
     assert c.info is not None
     lock.update(c.lock_path, c.info.token, child_pid=proc.pid, child_start=lock.process_start(proc.pid))
     record = RunRecord(key=p.key, run_dir=str(p.run_dir), overrides=list(p.overrides), launcher="local",

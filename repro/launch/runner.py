@@ -1,10 +1,12 @@
 """Steps shared by the launchers: claim a run (lock + fresh state check), move a mismatched run dir
-aside, and the ``repro train`` command line."""
+aside, the ``repro train`` command line, and a child's tie to its parent."""
 
 from __future__ import annotations
 
+import ctypes
 import os
 import shutil
+import signal
 import sys
 import time
 from dataclasses import dataclass
@@ -29,9 +31,22 @@ class Claim:
         return lock.lock_path(self.planned.results_root, self.planned.run_dir)
 
 
+def train_args(overrides: tuple[str, ...] | list[str]) -> list[str]:
+    """The arguments of ``repro train OVERRIDES`` after the program name."""
+    return ["train", *overrides]
+
+
 def train_command(overrides: tuple[str, ...] | list[str]) -> list[str]:
     """``repro train OVERRIDES`` with the interpreter (and import path) running this process."""
-    return [sys.executable, "-m", "repro", "train", *overrides]
+    return [sys.executable, "-m", "repro", *train_args(overrides)]
+
+
+def die_with_parent(signum: int = signal.SIGTERM) -> None:
+    """In a child: get ``signum`` when its parent dies, even by SIGKILL (Linux prctl; elsewhere nothing)."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signum)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
 
 
 def move_aside(planned: PlannedRun) -> Path:

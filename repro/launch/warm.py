@@ -22,8 +22,9 @@ import runpy
 import subprocess
 import sys
 import traceback
-from collections.abc import Callable
 from pathlib import Path
+
+from repro.launch.runner import die_with_parent
 
 # The server's imports, in order: its tie to the launcher, then the heavy part of what `python -m repro train`
 # imports before its first step (the trainer and below; the child imports the command line itself, a fraction of a
@@ -31,7 +32,7 @@ from pathlib import Path
 PRELOAD = ["repro.launch.warm_server", "repro.train.api", "torch._dynamo", "dm_control.suite"]
 
 
-def _child(args: list[str], log: str, env: dict[str, str], die_with_parent: Callable[[], None]) -> None:
+def _child(args: list[str], log: str, env: dict[str, str]) -> None:
     """In the forked child: the plain path's subprocess setup, then ``python -m repro ARGS``."""
     die_with_parent()
     os.environ.clear()
@@ -99,7 +100,8 @@ class WarmStarter:
             os.environ.clear()
             os.environ.update(saved)
 
-    def start(self, args: list[str], log: Path, die_with_parent: Callable[[], None]) -> WarmProcess:
-        proc = self._ctx.Process(target=_child, args=(args, str(log), self.env, die_with_parent), daemon=False)
+    def start(self, args: list[str], log: Path) -> WarmProcess:
+        """Fork ``repro ARGS`` (e.g. ``train OVERRIDES``) with its output appended to ``log``."""
+        proc = self._ctx.Process(target=_child, args=(args, str(log), self.env), daemon=False)
         proc.start()
         return WarmProcess(proc)
