@@ -23,6 +23,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from analysis.identity import algo_key, enabled_objectives, method_label, normalize_dataset
+from repro.runs.migrate import migrate_config
 from repro.runs.runformat import (
     CONFIG,
     EVAL,
@@ -41,6 +42,7 @@ from repro.runs.runformat import (
     TRAIN,
     TRAIN_REQUIRED,
     ResolvedError,
+    reached_budgets,
     read_resolved,
     run_state,
 )
@@ -247,13 +249,27 @@ def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
 
 
 def read_config(path: Path) -> Any:
-    """The run's resolved config as plain containers (libyaml when available; OmegaConf resolves any
-    interpolation left in the file)."""
+    """The run's resolved config as plain containers, in today's format (repro/runs/migrate.py; libyaml when
+    available; OmegaConf resolves any interpolation left in the file)."""
     text = path.read_text(encoding="utf-8")
     data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
     if "${" in text and isinstance(data, dict):
         data = OmegaConf.to_container(OmegaConf.create(data), resolve=True)
-    return data
+    return migrate_config(data) if isinstance(data, dict) else data
+
+
+def budget_end_rows(eval_df: pd.DataFrame, cfg: dict[str, Any], run_dir: Path, offline: bool) -> pd.Series:
+    """Which eval rows only the end of a shorter budget produced: at a budget the run reached before it was extended
+    (meta.json ``budgets``), off the evaluation grid, below the run's budget now. A run trained to the larger budget
+    in one go has every other row, equal; analysis at a budget uses such a row only at exactly that budget."""
+    x, every, budget = (("update", "offline.eval_every_updates", "offline.updates") if offline
+                        else ("frame", "train.eval_every_frames", "train.frames"))
+    step, now = _int_or_none(_get(cfg, every)), _int_or_none(_get(cfg, budget))
+    ends = [b for b in reached_budgets(run_dir) if now is None or b < now]
+    if not ends or not step or eval_df.empty:
+        return pd.Series(False, index=eval_df.index)
+    at = pd.to_numeric(eval_df[x], errors="coerce")
+    return at.isin(ends) & (at % step != 0)
 
 
 def _read_json(path: Path) -> dict[str, Any]:
@@ -354,7 +370,7 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
 
     eval_df = _read_eval(run_dir / EVAL, offline, problems)
     if eval_df is not None:
-        eval_df = eval_df.assign(run_id=rel)
+        eval_df = eval_df.assign(run_id=rel, budget_end=budget_end_rows(eval_df, cfg, run_dir, offline))
     row["eval_rows"] = 0 if eval_df is None else len(eval_df)
     row["last_frame"] = row["last_update"] = math.nan
     if eval_df is not None and not eval_df.empty:
@@ -456,7 +472,7 @@ def load_results(root: Path | str) -> Results:
     if evals and not runs.empty:
         eval_all = pd.concat(evals, ignore_index=True).merge(runs[list(IDENTITY)], on="run_id", how="left")
     else:
-        eval_all = pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS])
+        eval_all = pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS, "budget_end"])
     runs["source"] = SOURCE_RUNS
     eval_all["source"] = SOURCE_RUNS
     return Results(root=root, runs=runs, eval=eval_all, problems=problems, benches=benches)

@@ -60,7 +60,7 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
         score, frame, last = math.nan, math.nan, math.nan
         if rows is not None and not rows.empty:
             last = float(rows["frame"].max())
-            within = rows[rows["frame"] <= budget]
+            within = _at_budget(rows, "frame", budget)
             if not within.empty:
                 pick = within.loc[within["frame"].idxmax()]
                 frame = float(pick["frame"])
@@ -85,7 +85,7 @@ def _offline_score(run: Any, rows: pd.DataFrame | None) -> dict[str, Any]:
         return out
     budget = run.offline_updates
     last = float(rows["update"].max())
-    within = rows if pd.isna(budget) else rows[rows["update"] <= budget]
+    within = rows if pd.isna(budget) else _at_budget(rows, "update", budget)
     out["last_update"] = last
     if within.empty:
         return out
@@ -96,6 +96,23 @@ def _offline_score(run: Any, rows: pd.DataFrame | None) -> dict[str, Any]:
                score_reference=None if pd.isna(reference) else str(reference),
                reached=bool(run.status == "done" and not pd.isna(budget) and last >= budget))
     return out
+
+
+def on_grid(rows: pd.DataFrame) -> pd.DataFrame:
+    """``rows`` without those only a shorter budget's end produced (analysis.load.budget_end_rows): the rows of a
+    run trained to its budget in one go."""
+    if "budget_end" not in rows.columns or rows.empty:
+        return rows
+    return rows[~rows["budget_end"].fillna(False).astype(bool)]
+
+
+def _at_budget(rows: pd.DataFrame, x: str, budget: float) -> pd.DataFrame:
+    """The rows a run has up to ``budget`` (its prefix): the grid rows and a budget's-end row exactly at it, so a
+    run extended past a budget scores there as the same run stopped at it."""
+    within = rows[rows[x] <= budget]
+    if "budget_end" not in within.columns:
+        return within
+    return within[~within["budget_end"].fillna(False).astype(bool) | (within[x] == budget)]
 
 
 def common_grid(eval_df: pd.DataFrame, step: int | None = None, max_frame: float | None = None) -> np.ndarray:
@@ -122,7 +139,7 @@ def learning_curves(results: Results, grid: np.ndarray | None = None, step: int 
     no curve here.
     """
     cols = [*IDENTITY, "frame", "value"]
-    online = results.eval[results.eval["frame"].notna()] if not results.eval.empty else results.eval
+    online = on_grid(results.eval[results.eval["frame"].notna()]) if not results.eval.empty else results.eval
     if online.empty:
         return pd.DataFrame(columns=cols)
     if grid is None:

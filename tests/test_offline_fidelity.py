@@ -247,14 +247,15 @@ NEW_KEYS = [("agent", "stddev_schedule", "step_scale"), ("agent", "cql", "clip_p
 
 
 def _pre_issue_16_run(tmp_path, overrides: list[str]):
-    """A run directory whose config.yaml lacks the keys issue 16 added (as one written before it)."""
+    """A run directory whose config.yaml lacks the keys issue 16 added (as one written before it: format 1, every
+    learner's section)."""
     import yaml
+    from omegaconf import OmegaConf
 
-    from repro.runs.rundir import CONFIG, write_config
+    from repro.runs.rundir import CONFIG
 
     cfg = compose(overrides + [f"runtime.results_root={tmp_path}"])
-    write_config(tmp_path, cfg)
-    data = yaml.safe_load((tmp_path / CONFIG).read_text())
+    data = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
     for a, b, c in NEW_KEYS:
         data[a][b].pop(c)
     (tmp_path / CONFIG).write_text(yaml.safe_dump(data))
@@ -276,7 +277,7 @@ def test_a_run_written_before_issue_16_is_not_resumed_with_the_new_behaviour(tmp
     from repro.runs.rundir import config_diff
 
     cfg = _pre_issue_16_run(tmp_path, overrides)
-    assert sorted(d.partition(":")[0] for d in config_diff(tmp_path, cfg)) == refused
+    assert sorted(d.path for d in config_diff(tmp_path, cfg)) == refused
 
 
 # ----------------------------------------------------------------------------- IQL reward scaling (JAX code)

@@ -12,7 +12,15 @@ from typing import cast
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from repro.config.schema import LearnerName, ObjectiveName, RunConfig, choice_fields, is_offline
+from repro.config.schema import (
+    BUDGET_KEYS,
+    LearnerName,
+    ObjectiveName,
+    RunConfig,
+    choice_fields,
+    is_offline,
+    unread_keys,
+)
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -146,6 +154,7 @@ def validate(raw: DictConfig) -> DictConfig:
     for key in positive:
         if OmegaConf.select(cfg, key) < 1:
             raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
+    _check_ranges(cfg)
     if cfg.seed < 0:
         raise ConfigError(f"seed must be >= 0 (got {cfg.seed}).")
     if cfg.env.distracting_dims < 0 or cfg.train.eval_episodes < 0:
@@ -157,6 +166,47 @@ def validate(raw: DictConfig) -> DictConfig:
             raise ConfigError(f"unknown objective '{name}'." + close_matches(str(name), sorted(ObjectiveName.values())))
     _check_learner(cfg)
     return cfg
+
+
+# Ranges that torch's optimizers (or the networks) would otherwise reject with a traceback after the run directory
+# is written: key -> (lowest allowed, whether the lowest is allowed itself).
+RANGES: dict[str, tuple[float, bool]] = {
+    "agent.lr": (0.0, False),
+    "agent.feature_dim": (1, True),
+    "agent.hidden_dim": (1, True),
+    "agent.action_hidden_dim": (1, True),
+    "agent.discount": (0.0, True),
+    "agent.critic_target_tau": (0.0, True),
+    "agent.stddev_clip": (0.0, True),
+    "agent.dt.lr": (0.0, False),
+    "agent.dt.weight_decay": (0.0, True),
+    "agent.dt.grad_clip": (0.0, False),
+    "agent.dt.batch_size": (1, True),
+    "agent.dt.context": (1, True),
+    "agent.dt.embed_dim": (1, True),
+    "agent.dt.n_layers": (1, True),
+    "agent.dt.n_heads": (1, True),
+    "agent.dt.warmup_steps": (1, True),
+    "agent.cql.n_samples": (1, True),
+    "agent.cql.temperature": (0.0, False),
+    "env.image_size": (16, True),
+}
+
+
+def _check_ranges(cfg: DictConfig) -> None:
+    """One line for a value out of its range (:data:`RANGES`), before anything is built or written."""
+    for key, (low, inclusive) in RANGES.items():
+        value = OmegaConf.select(cfg, key)
+        if value is None:
+            continue
+        if value < low or (value == low and not inclusive):
+            bound = f">= {low}" if inclusive else f"> {low}"
+            raise ConfigError(f"{key} must be {bound} (got {value}).")
+    if not 0.0 <= cfg.agent.discount <= 1.0 or not 0.0 <= cfg.agent.critic_target_tau <= 1.0:
+        raise ConfigError("agent.discount and agent.critic_target_tau must be in [0, 1].")
+    latent = cfg.agent.latent_action_dim
+    if latent is not None and latent < 1:
+        raise ConfigError(f"agent.latent_action_dim must be null (from |A|) or >= 1 (got {latent}).")
 
 
 def _check_learner(cfg: DictConfig) -> None:
@@ -212,19 +262,43 @@ def typed(cfg: DictConfig) -> RunConfig:
 NON_IDENTITY_KEYS = ("train.save_video", "train.video_every", "train.video_size")
 
 
-def drop_non_identity(data: dict) -> dict:
-    """``data`` (a config as plain containers) without ``runtime`` and :data:`NON_IDENTITY_KEYS`, in place."""
-    data.pop("runtime", None)
-    for key in NON_IDENTITY_KEYS:
-        section, _, leaf = key.partition(".")
-        node = data.get(section)
-        if isinstance(node, dict):
-            node.pop(leaf, None)
+def pop_key(data: dict, dotted: str) -> None:
+    """Remove the dotted key (a leaf or a whole section) from the nested dict ``data``, in place; absent: nothing."""
+    *parents, leaf = dotted.split(".")
+    node: object = data
+    for part in parents:
+        node = node.get(part) if isinstance(node, dict) else None
+    if isinstance(node, dict):
+        node.pop(leaf, None)
+
+
+def prune_unread(data: dict) -> dict:
+    """``data`` (a config as plain containers) without the keys its learner does not read
+    (:func:`repro.config.schema.unread_keys`), in place: what a run's config.yaml holds."""
+    learner = str((data.get("agent") or {}).get("learner", LearnerName.actor_critic))
+    for key in unread_keys(learner):
+        pop_key(data, key)
     return data
 
 
-def identity(cfg: DictConfig) -> dict:
-    """The part of the config that defines a run (everything but ``runtime`` and the video switches)."""
+def drop_non_identity(data: dict) -> dict:
+    """``data`` (a config as plain containers) without ``runtime``, the format number, :data:`NON_IDENTITY_KEYS`
+    and the budget (:data:`repro.config.schema.BUDGET_KEYS`), in place."""
+    data.pop("runtime", None)
+    data.pop("format", None)
+    for key in (*NON_IDENTITY_KEYS, *BUDGET_KEYS):
+        pop_key(data, key)
+    return data
+
+
+def run_keys(cfg: DictConfig) -> dict:
+    """The config as plain containers with only what its learner reads (a Choice as its value): config.yaml."""
     data = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)  # a Choice's name is its value
     assert isinstance(data, dict)
-    return drop_non_identity(data)
+    return prune_unread(data)
+
+
+def identity(cfg: DictConfig) -> dict:
+    """The part of the config that defines a run: what its learner reads, less ``runtime``, the video switches
+    and the budget (a larger budget extends the same run)."""
+    return drop_non_identity(run_keys(cfg))

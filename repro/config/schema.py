@@ -53,6 +53,38 @@ def is_offline(learner: str) -> bool:
     return learner not in ONLINE_LEARNERS
 
 
+# What a run reads, as data (issue 24): a run's config.yaml and identity hold every key but those its learner does
+# not read. A learner's own sections (below) are read by it alone; the online-loop keys by the online learners alone.
+LEARNER_SECTIONS: dict[LearnerName, tuple[str, ...]] = {
+    LearnerName.actor_critic: (),
+    LearnerName.bc: ("offline",),
+    LearnerName.td3bc: ("agent.td3bc", "offline"),
+    LearnerName.cql: ("agent.cql", "offline"),
+    LearnerName.iql: ("agent.iql", "offline"),
+    LearnerName.dt: ("agent.dt", "offline"),
+}
+# Keys only the online loop reads (repro/train/online.py, the replay it fills); an offline run reads none of them.
+ONLINE_LOOP_KEYS = ("train.frames", "train.seed_frames", "train.explore_steps", "train.update_every_steps",
+                    "train.eval_every_frames", "train.eval_episodes", "train.checkpoint_every_episodes",
+                    "train.save_frames", "replay.capacity")
+# The budget of a run: how far it trains, not what it is. A run re-run with a larger budget continues (extends);
+# task.frames is the task's default train.frames. Never part of a run's identity.
+BUDGET_KEYS = ("train.frames", "task.frames", "offline.updates")
+
+
+def unread_keys(learner: str) -> tuple[str, ...]:
+    """Dotted config keys (sections or leaves) that ``learner`` never reads: other learners' sections and, for an
+    offline learner, the online loop's keys. Left out of its run's config.yaml and identity."""
+    own = LEARNER_SECTIONS[LearnerName(learner)]
+    others = [s for sections in LEARNER_SECTIONS.values() for s in sections if s not in own]
+    return tuple(dict.fromkeys([*others, *(ONLINE_LOOP_KEYS if is_offline(learner) else ())]))
+
+
+def budget_key(learner: str) -> str:
+    """The config key that is the budget of a run of ``learner``: ``offline.updates`` offline, else ``train.frames``."""
+    return "offline.updates" if is_offline(learner) else "train.frames"
+
+
 class ObjectiveName(Choice):
     """The keys of ``agent.objectives``: the auxiliary objectives (repro/agent/objectives/ checks them at import)."""
 
@@ -326,6 +358,7 @@ class RuntimeConfig:
     threads: Optional[int]
     record: bool
     tensorboard: bool
+    keep_replay: bool
 
 
 @dataclass

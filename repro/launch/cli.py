@@ -24,8 +24,8 @@ if TYPE_CHECKING:
 
 # The same flags as `repro status`, `figures` and `report`.
 RESULTS_FLAGS = ("--results-root", "--results", "-r")
-STATE_STYLE = {"done": "green", "partial": "yellow", "absent": "dim", "mismatch": "red", "running": "cyan",
-               "queued": "blue", "failed": "red", "pending": "dim", "waiting": "magenta"}
+STATE_STYLE = {"done": "green", "partial": "yellow", "extend": "yellow", "absent": "dim", "mismatch": "red",
+               "running": "cyan", "queued": "blue", "failed": "red", "pending": "dim", "waiting": "magenta"}
 WATCH_SECONDS = 10.0  # `repro status --watch` without N
 # `repro status --watch` stops once every run is in one of these (a waiting run needs its dataset made and the
 # sweep launched again: watching cannot change it)
@@ -72,7 +72,7 @@ def print_plan(planned: list[PlannedRun], spec: SweepSpec, root: Path, force: bo
         con.print(f"[{style}]{state:<9}[/] {escape(_rel(p.run_dir, root))}  {escape(_shown_overrides(p))}{why}",
                   highlight=False)
     by_state = {s: sum(1 for p in planned if p.state == s and not p.waiting)
-                for s in ("done", "partial", "absent", "mismatch")}
+                for s in ("done", "partial", "extend", "absent", "mismatch")}
     by_state["waiting"] = sum(1 for p in planned if p.waiting)
     datasets = len({p.run.dataset for p in planned if p.run.dataset})
     dims = (f"{len({p.run.task for p in planned})} task(s) x {len({p.run.agent for p in planned})} agent(s) x "

@@ -20,6 +20,7 @@ from repro.launch.local import LaunchReport
 from repro.launch.runner import claim
 from repro.launch.spec import PlannedRun, SweepError, close_matches
 from repro.launch.state import RunRecord, read_record, write_record
+from repro.runs.rundir import run_budget
 
 ENV_CLUSTER_CONFIG = "REPRO_SLURM_CONFIG"
 USER_CLUSTER_CONFIG = Path("~/.config/taco-repro/slurm.yaml")
@@ -109,6 +110,7 @@ class JobRun:
     lock_path: str
     token: str
     state_dir: str
+    budget: int | None = None  # the run's budget in this sweep (RunRecord.budget)
 
 
 class TrainJob(submitit.helpers.Checkpointable):
@@ -122,7 +124,7 @@ class TrainJob(submitit.helpers.Checkpointable):
             return "skipped: the run is held by another launcher"
         paths = env.paths
         record = RunRecord(key=job.key, run_dir=job.run_dir, overrides=list(job.overrides), launcher="slurm",
-                           status="running", job_id=env.job_id, pid=os.getpid(),
+                           status="running", job_id=env.job_id, pid=os.getpid(), budget=job.budget,
                            log=str(paths.stdout).replace("%t", "0"), stderr=str(paths.stderr).replace("%t", "0"))
         write_record(sdir, record)
         cpus = os.environ.get("SLURM_CPUS_PER_TASK")
@@ -202,7 +204,8 @@ def submit(planned: Sequence[PlannedRun], sweep: str, sdir: Path, cluster: Clust
         for start in range(0, len(claims), size):
             chunk = claims[start:start + size]
             tasks = [JobRun(key=c.planned.key, run_dir=str(c.planned.run_dir), overrides=c.planned.overrides,
-                            lock_path=str(c.lock_path), token=c.info.token, state_dir=str(sdir))  # type: ignore[union-attr]
+                            lock_path=str(c.lock_path), token=c.info.token, state_dir=str(sdir),  # type: ignore[union-attr]
+                            budget=run_budget(c.planned.cfg))
                      for c in chunk]
             jobs = executor.map_array(TrainJob(), tasks)
             submitted += len(chunk)
@@ -229,4 +232,5 @@ def _queued(sdir: Path, c, job_id: str, paths) -> None:
     if existing is None or existing.job_id != job_id:
         write_record(sdir, RunRecord(
             key=c.planned.key, run_dir=str(c.planned.run_dir), overrides=list(c.planned.overrides),
-            launcher="slurm", status="queued", job_id=job_id, log=str(paths.stdout), stderr=str(paths.stderr)))
+            launcher="slurm", status="queued", job_id=job_id, log=str(paths.stdout), stderr=str(paths.stderr),
+            budget=run_budget(c.planned.cfg)))

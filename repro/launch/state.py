@@ -67,6 +67,7 @@ class RunRecord:
     pid: int | None = None
     updated: float = field(default_factory=time.time)
     error: str | None = None
+    budget: int | None = None  # the run's budget in this sweep (frames online, updates offline): done when reached
 
 
 def record_path(sdir: Path, key: str) -> Path:

@@ -77,8 +77,9 @@ def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
     """The run's status; ``waiting`` (why its dataset is not usable yet) makes a run that is neither done
     nor held ``waiting``, even one whose earlier attempt failed."""
     frame, ret = progress(run_dir)
-    state = run_state(run_dir)
     record = read_record(sdir, key)
+    budget = record.budget if record is not None else None  # done at the sweep's budget, even while extended beyond
+    state = run_state(run_dir, budget)
     owner = _lock_owner(results_root, run_dir)
     job = (owner.job_id if owner and owner.job_id else None) or (record.job_id if record else None)
 
@@ -103,6 +104,8 @@ def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
             failed = make("failed", why)
             failed.log = record.stderr or record.log
             return failed
+    if state == STATE_PARTIAL and run_state(run_dir) == STATE_DONE:
+        return make("pending", f"done at a smaller budget: extends to {budget}")
     return make("pending", "partial: resumes from checkpoint" if state == STATE_PARTIAL else "not started")
 
 

@@ -20,8 +20,9 @@ from typing import Any
 import yaml
 from omegaconf import DictConfig, OmegaConf
 
-from repro.config.compose import compose_base, drop_non_identity, identity
-from repro.config.schema import Choice, LearnerName, RunConfig, is_offline
+from repro.config.compose import compose_base, drop_non_identity, identity, run_keys, validate
+from repro.config.schema import RunConfig, budget_key, is_offline, unread_keys
+from repro.runs import migrate
 from repro.runs.fsutil import atomic_write_text, named_os_error
 from repro.runs.runformat import (
     CHECKPOINT,
@@ -32,11 +33,14 @@ from repro.runs.runformat import (
     RESOLVED,
     WRITER_LOCK,
     resolved_json,
+    read_done,
+    reached_budgets,
     run_path,
     run_state,
 )
 
 __all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "REPLAY", "RESOLVED", "WRITER_LOCK", "RunDirMismatch",
+           "config_text", "read_done", "run_budget", "read_meta", "read_saved_config", "reached_budgets", "saved_config",
            "RunLocked", "WriterLock", "acquire_writer_lock", "config_diff", "config_matches", "lock_holder",
            "locked_message", "resolved_values", "run_dir", "run_state", "write_config", "write_done", "write_meta",
            "write_resolved", "writer_lock_holder"]
@@ -56,84 +60,65 @@ def run_dir(cfg: DictConfig) -> Path:
                     dataset=None if dataset is None else str(dataset))
 
 
-def saved_identity(path: str | Path) -> dict | None:
+def run_budget(cfg: DictConfig) -> int:
+    """The budget of the run ``cfg`` describes: train.frames online, offline.updates offline (schema.budget_key)."""
+    return int(OmegaConf.select(cfg, budget_key(str(cfg.agent.learner))))
+
+
+def read_saved_config(path: str | Path) -> dict | None:
+    """The run directory's config.yaml in the current format (repro/runs/migrate.py); None when it has none."""
     file = Path(path) / CONFIG
     if not file.exists():
         return None
-    return drop_non_identity(yaml.safe_load(file.read_text()) or {})
+    data = yaml.load(file.read_text(encoding="utf-8"), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)) or {}
+    if not isinstance(data, dict):
+        raise migrate.FormatError(f"{file} is not a mapping")
+    return migrate.migrate_config(data)
 
 
-def config_diff(path: str | Path, cfg: DictConfig) -> list[str]:
-    """Dotted keys whose values differ between the saved run config and ``cfg`` (runtime ignored)."""
+def saved_identity(path: str | Path) -> dict | None:
+    """The identity (compose.identity) of the run saved in ``path``, migrated to the current format."""
+    saved = read_saved_config(path)
+    return None if saved is None else drop_non_identity(saved)
+
+
+def config_diff(path: str | Path, cfg: DictConfig) -> list[migrate.Diff]:
+    """Where the identity of the saved run and that of ``cfg`` differ (path, old, new): the keys both runs' learner
+    reads, less runtime, the video switches and the budget. Empty when ``path`` holds no run."""
     saved = saved_identity(path)
     if saved is None:
         return []
-    new = identity(cfg)
-    diffs: list[str] = []
-
-    def walk(a, b, prefix: str) -> None:
-        if isinstance(a, dict) and isinstance(b, dict):
-            for k in sorted(set(a) | set(b), key=str):
-                walk(a.get(k, "<absent>"), b.get(k, "<absent>"), f"{prefix}{k}.")
-        elif a != b:
-            diffs.append(f"{prefix[:-1]}: {a!r} -> {b!r}")
-
-    walk(saved, new, "")
-    learner = str(OmegaConf.select(cfg, "agent.learner", default=""))
-    return [d for d in diffs if not _still_same(d, learner)]
-
-
-# Keys that came with a change of behaviour (issue 16): a run of these learners written before the key existed
-# behaved as the value here, not as the new default, so it is not the same run and is not resumed; for any
-# other learner the key changes nothing.
-# The old behaviours are plain values (compared with the saved run's YAML text), not Enum members.
-_L = LearnerName
-ADDED_WITH_OLD_BEHAVIOUR: dict[str, tuple[tuple[LearnerName, ...], object]] = {
-    "agent.stddev_schedule.step_scale": ((_L.td3bc, _L.cql, _L.iql), 1),
-    "agent.cql.clip_policy_samples": ((_L.cql,), False),
-    "agent.iql.value_for_targets": ((_L.iql,), "actor before, critic after the value step"),
-    "agent.dt.activation": ((_L.dt,), "gelu"),
-    "agent.dt.init": ((_L.dt,), "torch"),
-    "agent.dt.ff_dropout": ((_L.dt,), True),
-    "agent.dt.action_pad": ((_L.dt,), 0.0),
-}
-
-
-def _still_same(diff: str, learner: str) -> bool:
-    """A difference that is none: a key of :data:`ADDED_WITH_OLD_BEHAVIOUR` absent from the saved run, when
-    ``learner`` does not read it or its old behaviour equals the new value; else a key added at its default."""
-    key, _, change = diff.partition(": ")
-    old, _, new = change.partition(" -> ")
-    if old == repr("<absent>") and key in ADDED_WITH_OLD_BEHAVIOUR:
-        learners, before = ADDED_WITH_OLD_BEHAVIOUR[key]
-        return learner not in learners or repr(before) == new
-    return _added_at_default(diff)
-
-
-def _added_at_default(diff: str) -> bool:
-    """A key that a newer version added, absent from the saved run and at its default now, is no difference
-    (so runs written before the key existed still resume)."""
-    key, _, change = diff.partition(": ")
-    old, _, new = change.partition(" -> ")
-    if old != repr("<absent>"):
-        return False
-    if key.startswith(("agent.objectives.", "agent.objective_params.")):
-        return False  # a name in a free mapping, not a field a newer version added
-    # The default is the packaged YAML's value (the schema has types only): the config with no overrides.
-    default = OmegaConf.select(compose_base(), key, default="<no default>")
-    if isinstance(default, DictConfig):
-        default = OmegaConf.to_container(default, resolve=True, enum_to_str=True)
-    elif isinstance(default, Choice):  # as identity() has it: the plain value
-        default = default.value
-    return repr(default) == new
+    return migrate.diff(saved, identity(cfg))
 
 
 def config_matches(path: str | Path, cfg: DictConfig) -> bool:
     return not config_diff(path, cfg)
 
 
+def config_text(cfg: DictConfig) -> str:
+    """The text of config.yaml for ``cfg``: the format number, then what the run's learner reads."""
+    return OmegaConf.to_yaml(OmegaConf.create({"format": migrate.CONFIG_FORMAT, **run_keys(cfg)}))
+
+
 def write_config(path: Path, cfg: DictConfig) -> None:
-    atomic_write_text(path / CONFIG, OmegaConf.to_yaml(cfg, resolve=True))
+    atomic_write_text(path / CONFIG, config_text(cfg))
+
+
+def saved_config(path: str | Path) -> DictConfig:
+    """The saved run's config as a full, validated config (for code that reads typed values of a finished run,
+    e.g. ``repro dataset make``): the keys its learner does not read are today's defaults."""
+    saved = read_saved_config(path)
+    if saved is None:
+        raise FileNotFoundError(f"{Path(path) / CONFIG} does not exist")
+    saved.pop("format", None)
+    base = OmegaConf.to_container(compose_base(), resolve=True, enum_to_str=True)
+    assert isinstance(base, dict)
+    for key in unread_keys(str(saved["agent"]["learner"])):
+        value = migrate.get_key(base, key)
+        if value is not migrate.ABSENT:
+            migrate.set_key(saved, key, value)
+    saved["runtime"] = {**base["runtime"], **(saved.get("runtime") or {})}  # runtime keys added since
+    return validate(OmegaConf.create(saved))
 
 
 def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
@@ -202,27 +187,59 @@ def device_name(device: str) -> str:
     return "cpu"
 
 
-def write_meta(path: Path, device: str, resumed: bool) -> dict:
-    """Create meta.json on the first start; append to its ``resumes`` list on each resume."""
+def read_meta(path: str | Path) -> dict | None:
+    """The run directory's meta.json in the current format (migrate.migrate_meta); None when it has none."""
+    file = Path(path) / META
+    if not file.exists():
+        return None
+    meta = json.loads(file.read_text(encoding="utf-8"))
+    if not isinstance(meta, dict):
+        raise migrate.FormatError(f"{file} is not a JSON object")
+    return migrate.migrate_meta(meta, read_done(path))
+
+
+def write_meta(path: Path, device: str, resumed: bool, extension: tuple[int, int] | None = None,
+               config_from: int | None = None) -> dict:
+    """Create meta.json on the first start; append to its ``resumes`` list on each resume, and to ``extensions``
+    (``extension``: the budget reached and the new one) when a done run is extended. ``config_from``: the format
+    config.yaml had before this start rewrote it (recorded under ``migrations`` when older than today's)."""
     file = path / META
     now = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     entry = {"time": now, "host": socket.gethostname(), "command": sys.argv, "device": device_name(device)}
-    if file.exists():
-        meta = json.loads(file.read_text())
+    old = read_meta(path)
+    if old is not None:
+        meta = old
+        before = json.loads(file.read_text(encoding="utf-8")).get("format", 1)
+        if before != migrate.META_FORMAT:
+            meta["migrations"].append({"file": META, "from": before, "to": migrate.META_FORMAT, "time": now})
         if resumed:
             meta.setdefault("resumes", []).append(entry)
     else:
         sha = _git("rev-parse", "HEAD")
         status = _git("status", "--porcelain", "--untracked-files=no")
-        meta = {"git_sha": sha, "git_dirty": bool(status) if status is not None else None,
+        meta = {"format": migrate.META_FORMAT, "git_sha": sha,
+                "git_dirty": bool(status) if status is not None else None,
                 "versions": _versions(), "host": socket.gethostname(), "user": getpass.getuser(),
                 "device": device_name(device), "cpu": _cpu_model(), "command": sys.argv, "started": now,
-                "platform": platform.platform(), "resumes": []}
+                "platform": platform.platform(), "resumes": [], "budgets": [], "extensions": [], "migrations": []}
+    if config_from is not None and config_from != migrate.CONFIG_FORMAT:
+        meta["migrations"].append({"file": CONFIG, "from": config_from, "to": migrate.CONFIG_FORMAT, "time": now})
+    if extension is not None:
+        meta["extensions"].append({"from": extension[0], "to": extension[1], "time": now})
     atomic_write_text(file, json.dumps(meta, indent=2) + "\n")
     return meta
 
 
-def write_done(path: Path, summary: dict) -> None:
+def write_done(path: Path, summary: dict, budget: int | None = None) -> None:
+    """Record ``budget`` (default: the summary's ``frame`` or ``update``) as reached in meta.json, then write DONE
+    (last: a run is done when DONE exists)."""
+    if budget is None:
+        budget = summary.get("frame", summary.get("update"))
+    meta = read_meta(path)
+    if meta is not None and isinstance(budget, int):
+        if budget not in {b.get("budget") for b in meta["budgets"]}:
+            meta["budgets"].append({"budget": budget, "finished": summary.get("finished")})
+        atomic_write_text(path / META, json.dumps(meta, indent=2) + "\n")
     atomic_write_text(path / DONE, json.dumps(summary, indent=2) + "\n")
 
 

@@ -78,12 +78,49 @@ STATE_DONE, STATE_PARTIAL, STATE_ABSENT = "done", "partial", "absent"
 RUN_STATES = (STATE_DONE, STATE_PARTIAL, STATE_ABSENT)
 
 
-def run_state(path: str | Path) -> str:
-    """``done`` (DONE exists), ``partial`` (a config or checkpoint but no DONE: resumable) or ``absent``."""
+def read_done(path: str | Path) -> dict | None:
+    """The run's DONE file as JSON (None when the run has none or it is unreadable)."""
+    try:
+        data = json.loads((Path(path) / DONE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def reached_budgets(path: str | Path) -> list[int]:
+    """Every budget the run has reached (frames online, updates offline), ascending: meta.json's ``budgets``
+    (format 2) and the DONE file's ``frame`` / ``update`` (any format)."""
+    reached: set[int] = set()
+    try:
+        meta = json.loads((Path(path) / META).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        meta = {}
+    for entry in (meta.get("budgets") or []) if isinstance(meta, dict) else []:
+        if isinstance(entry, dict) and _is_int(entry.get("budget")):
+            reached.add(int(entry["budget"]))
+    done = read_done(path)
+    if done is not None:
+        value = done.get("frame", done.get("update"))
+        if _is_int(value):
+            reached.add(int(value))
+    return sorted(reached)
+
+
+def run_state(path: str | Path, budget: int | None = None) -> str:
+    """``done``, ``partial`` (a config or checkpoint: resumable) or ``absent``.
+
+    Without ``budget``: done iff DONE exists (the run reached the budget it was last started with). With one (frames
+    online, updates offline): done iff the run has reached that budget or a larger one, even while it is being
+    extended beyond it; a DONE run of a smaller budget is ``partial`` (a start extends it)."""
     path = Path(path)
-    if (path / DONE).exists():
+    done = (path / DONE).exists()
+    if budget is None and done:
         return STATE_DONE
-    if (path / CHECKPOINT).exists() or (path / CONFIG).exists():
+    if budget is not None and (done or (path / META).exists()):
+        reached = reached_budgets(path)
+        if reached and reached[-1] >= budget:
+            return STATE_DONE
+    if done or (path / CHECKPOINT).exists() or (path / CONFIG).exists():
         return STATE_PARTIAL
     return STATE_ABSENT
 

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import pickle
+import shutil
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, TypeVar, cast
 
 import torch
-from omegaconf import DictConfig
+import yaml
+from omegaconf import DictConfig, OmegaConf
 
 from repro.config.compose import compose, typed
-from repro.config.schema import Device, RunConfig, is_offline
+from repro.config.schema import Device, RunConfig, budget_key, is_offline
 from repro.data.episodes import EpisodeStore
 from repro.data.offline_replay import (
     DatasetError,
@@ -33,7 +36,7 @@ from repro.learners import (
     build_learner,
     samples_episodes,
 )
-from repro.runs import rundir
+from repro.runs import migrate, rundir
 from repro.runs.checkpoint import load_checkpoint, save_checkpoint
 from repro.runs.fsutil import remove_torn_temporaries
 from repro.runs.logger import RunLogger
@@ -87,16 +90,33 @@ def build_agent(rc: RunConfig, obs_shape: tuple[int, int, int], action_dim: int,
     return build_learner(rc.agent, obs_shape, action_dim, device, explore_steps=rc.train.explore_steps)
 
 
+class BudgetError(ValueError):
+    """A budget that cannot be honoured for the run directory (one line)."""
+
+
+@dataclass(frozen=True)
+class Start:
+    """How a start proceeds: the run's budget (frames online, updates offline) and its unit, the budgets it reached
+    before (their evaluations and checkpoints are kept on the way), and the budget a done run is extended from."""
+
+    budget: int
+    unit: str
+    reached: tuple[int, ...]
+    extend_from: int | None = None
+
+
 def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress: bool | None = None) -> Path:
-    """Train (or resume, or skip if done) the run described by ``cfg``; return its run directory.
+    """Train (or resume, extend, or skip if done) the run described by ``cfg``; return its run directory.
 
     Everything that can refuse the run is checked before anything is written (the config against the run
-    directory's, the devices, the dataset, a checkpoint's dataset), so a refusal leaves the run directory
-    byte-identical. The run directory then has one writer: its writer lock is taken before the first write
-    and the state is read again under it (RunLocked when another process holds it)."""
+    directory's, the budget, the devices, the dataset, a checkpoint's dataset), so a refusal leaves the run
+    directory byte-identical. The run directory then has one writer: its writer lock is taken before the first
+    write and the state is read again under it (RunLocked when another process holds it). A failure before the
+    run's first checkpoint removes a run directory this call created (nothing in it could be resumed)."""
     rc = typed(cfg)
     path = rundir.run_dir(cfg)
-    if _refuse_other_config_or_done(path, cfg, echo):
+    start = _plan_start(path, cfg, echo)
+    if start is None:
         return path
     device = resolve_device(rc.runtime.device, "runtime.device")
     resolve_device(rc.replay.device, "replay.device")
@@ -106,6 +126,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     # An offline run reads and checks its whole dataset before anything is written.
     data = _load_dataset(rc) if is_offline(rc.agent.learner) else None
     state = _load_state(path, data)
+    _check_progress(path, start, state, rc.env.action_repeat)
     created = not path.exists()
     path.mkdir(parents=True, exist_ok=True)
     try:
@@ -116,37 +137,96 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         raise
     with lock:
         # Under the lock: another writer may have finished, started or changed the run since the checks above.
-        if _refuse_other_config_or_done(path, cfg, echo):
+        start = _plan_start(path, cfg, echo)
+        if start is None:
             return path
         if (state is None) != (not (path / rundir.CHECKPOINT).exists()) or (
                 state is not None and _checkpoint_changed(path, state)):
             state = _load_state(path, data)
-        remove_torn_temporaries(path)
-        remove_torn_temporaries(path / rundir.REPLAY)
-        resuming = state is not None
-        if not (path / rundir.CONFIG).exists():
-            rundir.write_config(path, cfg)
-        if rc.runtime.threads:
-            torch.set_num_threads(int(rc.runtime.threads))
-        rundir.write_meta(path, device, resumed=resuming)
-        if data is not None:
-            _train_offline(rc, path, data, device, state, echo, progress)
-        else:
-            _train_online(rc, path, device, state, echo, progress)
+        _check_progress(path, start, state, rc.env.action_repeat)
+        try:
+            _start(rc, cfg, path, start, device, data, state, echo, progress)
+        except Exception:
+            if created and not (path / rundir.CHECKPOINT).exists():
+                shutil.rmtree(path, ignore_errors=True)  # failed before anything resumable: leave no directory
+            raise
     return path
 
 
-def _refuse_other_config_or_done(path: Path, cfg: DictConfig, echo: Callable[[str], None]) -> bool:
-    """RunDirMismatch when ``path`` holds a run of another config; else whether it is done (said in a line)."""
+def _start(rc: RunConfig, cfg: DictConfig, path: Path, start: Start, device: str, data: OfflineData | None,
+           state: dict | None, echo: Callable[[str], None], progress: bool | None) -> None:
+    """Under the writer lock: write config.yaml (today's format, the new budget) and meta.json, drop DONE of a run
+    being extended, and train."""
+    remove_torn_temporaries(path)
+    remove_torn_temporaries(path / rundir.REPLAY)
+    resuming = state is not None
+    saved = (path / rundir.CONFIG).exists()
+    before = _config_format(path) if saved else None
+    rundir.write_config(path, cfg)  # the budget may have changed, and an older format is rewritten in today's
+    if rc.runtime.threads:
+        torch.set_num_threads(int(rc.runtime.threads))
+    extension = (start.extend_from, start.budget) if start.extend_from is not None else None
+    rundir.write_meta(path, device, resumed=resuming, extension=extension, config_from=before)
+    if start.extend_from is not None:
+        (path / rundir.DONE).unlink(missing_ok=True)
+        echo(f"extending from {start.extend_from} to {start.budget} {start.unit}: {path}")
+    ends = tuple(b for b in start.reached if b < start.budget)
+    if data is not None:
+        _train_offline(rc, path, data, device, state, echo, progress, ends)
+    else:
+        _train_online(rc, path, device, state, echo, progress, ends)
+
+
+def _config_format(path: Path) -> int | None:
+    try:
+        return migrate.config_version(yaml.safe_load((path / rundir.CONFIG).read_text(encoding="utf-8")) or {})
+    except (OSError, yaml.YAMLError, migrate.FormatError):
+        return None
+
+
+def _plan_start(path: Path, cfg: DictConfig, echo: Callable[[str], None]) -> Start | None:
+    """RunDirMismatch when ``path`` holds a run of another config; None (said in a line) when the run has reached
+    the budget of ``cfg`` already; else how it starts (afresh, resumed, or a done run extended)."""
     diff = rundir.config_diff(path, cfg)
     if diff:
         raise rundir.RunDirMismatch(f"{path} holds a run with another config ({diff[0]}"
                                     f"{f' and {len(diff) - 1} more' if len(diff) > 1 else ''}); "
                                     "use another experiment/variant name or move it away.")
-    if rundir.run_state(path) == "done":
-        echo(f"already done: {path}")
-        return True
-    return False
+    learner = str(cfg.agent.learner)
+    key = budget_key(learner)
+    budget = int(OmegaConf.select(cfg, key))
+    unit = "updates" if is_offline(learner) else "frames"
+    reached = tuple(rundir.reached_budgets(path))
+    done = (path / rundir.DONE).exists()
+    if reached and reached[-1] >= budget:
+        echo(f"already done: {path} (trained to {reached[-1]} {unit}; {key}={budget} asks no more)")
+        return None
+    if done:
+        if not (path / rundir.CHECKPOINT).exists():
+            raise BudgetError(f"{path} is done at {reached[-1] if reached else '?'} {unit} and has no "
+                              f"{rundir.CHECKPOINT}, so it cannot be extended to {budget}; train it under another "
+                              "experiment/variant name")
+        dropped = rundir.read_done(path) or {}
+        if not is_offline(learner) and (dropped.get("replay_dropped") or not (path / rundir.REPLAY).is_dir()):
+            raise BudgetError(f"{path} dropped its replay when it finished (runtime.keep_replay=false), so it cannot "
+                              f"be extended from {reached[-1] if reached else '?'} to {budget} {unit}; train it "
+                              "under another experiment/variant name")
+        return Start(budget, unit, reached, extend_from=reached[-1] if reached else None)
+    return Start(budget, unit, reached)
+
+
+def _check_progress(path: Path, start: Start, state: dict | None, action_repeat: int) -> None:
+    """BudgetError when the checkpoint is past ``start.budget`` (a smaller budget than a run being trained to a
+    larger one has passed, and that the run never stopped at)."""
+    if state is None:
+        return
+    if "offline" in state:
+        at = int(state["offline"]["update"])
+    else:
+        at = int(state["counters"]["step"]) * action_repeat
+    if at > start.budget:
+        raise BudgetError(f"{path} has trained past {start.budget} {start.unit} (its checkpoint is at {at}) without "
+                          f"stopping there; re-run it with a budget of at least {at}")
 
 
 def _load_state(path: Path, data: OfflineData | None) -> dict | None:
@@ -183,7 +263,7 @@ def _remove_empty(path: Path) -> None:
 
 
 def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, echo: Callable[[str], None],
-                  progress: bool | None) -> None:
+                  progress: bool | None, ends: tuple[int, ...] = ()) -> None:
     ckpt_file = path / rundir.CHECKPOINT
     env = build_env(rc, rc.seed)
     eval_env = build_env(rc, rc.seed + 10_000)
@@ -204,14 +284,17 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
         trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
                           lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
                           save_frames=lambda frames: _save_frames(path / "frames.npz", frames), recorder=recorder,
-                          videos=eval_videos(rc, path, "frame"))
+                          videos=eval_videos(rc, path, "frame"), budget_ends=ends)
 
         def resumed(saved: dict) -> None:
             episodes.prune({rec[0] for rec in saved["buffer"]["episodes"]})
             echo(f"resumed {path} at frame {trainer.frame}")
 
         _restore_run_finish(path, trainer, state, resumed, bar, logger,
-                            lambda c: {"frame": c.step * rc.env.action_repeat, "step": c.step, "episode": c.episode})
+                            lambda c: {"frame": c.step * rc.env.action_repeat, "step": c.step, "episode": c.episode},
+                            rc.train.frames)
+        if not rc.runtime.keep_replay:
+            _drop_replay(path, rc.train.frames)
     finally:
         env.close()
         eval_env.close()
@@ -232,10 +315,11 @@ class _Closing(Protocol):
 
 
 def _restore_run_finish(path: Path, trainer: _Loop[T], state: dict | None, resumed: Callable[[dict], None],
-                        bar: _Progress | None, logger: _Closing, done: Callable[[T], dict[str, Any]]) -> None:
+                        bar: _Progress | None, logger: _Closing, done: Callable[[T], dict[str, Any]],
+                        budget: int) -> None:
     """What an online and an offline run share once built: restore ``state`` (then ``resumed(state)``), run
     the loop, close the progress bar and the logger even when the loop fails, and mark the run done with
-    ``done(result)`` followed by its total time and finishing time."""
+    ``done(result)`` followed by its total time and finishing time, ``budget`` recorded as reached."""
     if state is not None:
         trainer.restore(state)
         resumed(state)
@@ -246,7 +330,15 @@ def _restore_run_finish(path: Path, trainer: _Loop[T], state: dict | None, resum
             bar.close()
         logger.close()
     rundir.write_done(path, {**done(result), "total_time": round(trainer.total_time(), 3),
-                             "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+                             "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, budget)
+
+
+def _drop_replay(path: Path, budget: int) -> None:
+    """runtime.keep_replay=false: remove the done run's replay folder (an extension of it is then refused); DONE
+    says so."""
+    done = rundir.read_done(path) or {}
+    rundir.write_done(path, {**done, "replay_dropped": True}, budget)
+    shutil.rmtree(path / rundir.REPLAY, ignore_errors=True)
 
 
 def eval_videos(rc: RunConfig, path: Path, unit: str) -> EvalVideos | None:
@@ -280,7 +372,7 @@ def run_action_dim(rc: RunConfig) -> int:
 
 
 def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, state: dict | None,
-                   echo: Callable[[str], None], progress: bool | None) -> None:
+                   echo: Callable[[str], None], progress: bool | None, ends: tuple[int, ...] = ()) -> None:
     ckpt_file = path / rundir.CHECKPOINT
     eval_env = build_env(rc, rc.seed + 10_000)
     try:
@@ -301,10 +393,11 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, st
                                  _batch_source(learner, data, rc.seed), logger, lambda s: save_checkpoint(ckpt_file, s),
                                  reference=score_reference(rc.task.name, data.manifest.source),
                                  dataset_digest=data.digest, progress=bar.update if bar else None,
-                                 dataset_best_return=data.best_return, videos=eval_videos(rc, path, "update"))
+                                 dataset_best_return=data.best_return, videos=eval_videos(rc, path, "update"),
+                                 budget_ends=ends)
         _restore_run_finish(path, trainer, state, lambda _: echo(f"resumed {path} at update {trainer.update}"), bar,
                             logger, lambda updates: {"update": updates, "dataset": str(data.directory),
-                                                     "dataset_sha256": data.digest})
+                                                     "dataset_sha256": data.digest}, rc.offline.updates)
     finally:
         eval_env.close()
 

@@ -36,7 +36,7 @@ import torch
 import yaml
 
 from repro.agent.networks import Actor, Encoder
-from repro.config.compose import CONF_DIR, ConfigError, typed, validate
+from repro.config.compose import CONF_DIR, ConfigError, typed
 from repro.config.schema import RunConfig
 from repro.data.dataset import KINDS, MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
 from repro.data.record import EPISODES, SNAPSHOTS, load_snapshot, record_dir, snapshot_path, snapshot_steps
@@ -110,10 +110,7 @@ def open_source(run_dir: str | Path, task: str | None = None) -> Source:
     if not (run_dir / rundir.CONFIG).is_file():
         raise MakeError(f"{run_dir} is not a run directory (no {rundir.CONFIG})")
     try:
-        raw = yaml.safe_load((run_dir / rundir.CONFIG).read_text())
-        from omegaconf import OmegaConf
-
-        cfg = typed(validate(OmegaConf.create(raw)))
+        cfg = typed(rundir.saved_config(run_dir))
     except (ConfigError, yaml.YAMLError, ValueError) as exc:
         raise MakeError(f"{run_dir}/{rundir.CONFIG} cannot be read: {exc}") from None
     if task is not None and cfg.task.name != task:

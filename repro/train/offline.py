@@ -6,6 +6,10 @@ log_every_updates and a checkpoint every checkpoint_every_updates. A resume from
 the CSVs to the offsets stored in it and recomputes everything after, so the files equal an uninterrupted
 run's in every non-wall-clock column.
 
+Nothing depends on the budget but where the run stops: a run extended from a budget it reached (``budget_ends``)
+evaluates, logs and checkpoints there again as when it stopped there, and a train.csv row at a budget's end off the
+log grid keeps the metrics summing, so every other row equals a run trained to the larger budget in one go.
+
 Batches come from a ReplayBuffer of single transitions or, for a ``SequenceLearner`` (Decision
 Transformer), from the learner's own sampler over the dataset's episodes; either way the batch source's RNG
 is checkpointed. A ``ReturnConditioned`` learner is evaluated at two target returns (see ``evaluate``).
@@ -67,13 +71,17 @@ class OfflineTrainer:
                  buffer: BatchSource, logger: OfflineLogger, save_checkpoint: Callable[[dict], None],
                  reference: tuple[float | None, str], dataset_digest: str,
                  progress: Callable[[int, float | None], None] | None = None,
-                 dataset_best_return: float | None = None, videos: EvalVideos | None = None):
+                 dataset_best_return: float | None = None, videos: EvalVideos | None = None,
+                 budget_ends: tuple[int, ...] = ()):
         self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
         self.eval_env, self.learner, self.buffer, self.logger = eval_env, learner, buffer, logger
         self._save, self.progress = save_checkpoint, progress
         self.reference_return, self.reference_kind = reference
         self.dataset_digest = dataset_digest
         self.videos = videos  # train.save_video: an MP4 of the first evaluation episode, named by update
+        # Budgets (updates) this run reached before it was extended: evaluated, logged and checkpointed there again
+        # as when it stopped there.
+        self.budget_ends = frozenset(budget_ends)
         self.has_success = eval_env.spec.has_success
         self.dataset_best_return = dataset_best_return  # a ReturnConditioned learner's second target
         self.batch_size = int(getattr(learner, "batch_size", learner.cfg.batch_size))  # DT: agent.dt.batch_size
@@ -153,19 +161,23 @@ class OfflineTrainer:
             "reference_return": self.reference_return, "score_reference": self.reference_kind,
             "total_time": round(self.total_time(), 3)})
 
-    def _log_train(self) -> None:
+    def _log_train(self, reset: bool = True) -> None:
+        """A train.csv row of the metrics since the last row on the grid; ``reset=False`` (a budget's end off the
+        grid) keeps them summing, so the next grid row equals a run that never stopped there."""
         row: dict[str, Any] = {"update": self.update,
                                "updates_per_s": round(self._n / max(self._window_seconds, 1e-9), 3),
                                "total_time": round(self.total_time(), 3)}
         row.update({k: self._sums[k] / self._n for k in self.learner.metric_names() if k in self._sums})
         self.logger.log_train(row)
-        self._sums, self._n, self._window_seconds = {}, 0, 0.0
+        if reset:
+            self._sums, self._n, self._window_seconds = {}, 0, 0.0
 
     # ----------------------------------------------------------------- loop
     def run(self) -> int:
         cfg = self.cfg
         while True:
-            if self.update % cfg.eval_every_updates == 0 or self.update >= cfg.updates:
+            at_end = self.update >= cfg.updates or self.update in self.budget_ends
+            if self.update % cfg.eval_every_updates == 0 or at_end:
                 if cfg.eval_episodes > 0:
                     self.evaluate()
             if self.progress is not None:
@@ -180,8 +192,10 @@ class OfflineTrainer:
                 self._sums[k] = self._sums.get(k, 0.0) + v
             self._n += 1
             self._window_seconds += time.time() - started
-            if self.update % cfg.log_every_updates == 0 or self.update >= cfg.updates:
-                self._log_train()
-            if self.update % cfg.checkpoint_every_updates == 0 or self.update >= cfg.updates:
+            at_end = self.update >= cfg.updates or self.update in self.budget_ends
+            on_grid = self.update % cfg.log_every_updates == 0
+            if on_grid or at_end:
+                self._log_train(reset=on_grid)
+            if self.update % cfg.checkpoint_every_updates == 0 or at_end:
                 self._save(self.checkpoint_state())
         return self.update

@@ -37,7 +37,7 @@ class Trainer:
                  buffer: ReplayBuffer, logger: RunLogger, episodes: EpisodeStore,
                  save_checkpoint: Callable[[dict], None], progress=None,
                  save_frames: Callable[[np.ndarray], None] | None = None, recorder: Recorder | None = None,
-                 videos: EvalVideos | None = None):
+                 videos: EvalVideos | None = None, budget_ends: tuple[int, ...] = ()):
         self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
         self.env, self.eval_env, self.agent, self.buffer = env, eval_env, agent, buffer
         self.logger, self.episodes, self._save = logger, episodes, save_checkpoint
@@ -45,6 +45,9 @@ class Trainer:
         self.save_frames = save_frames
         self.recorder = recorder  # runtime.record: keeps every episode and a policy snapshot per evaluation
         self.videos = videos  # train.save_video: an MP4 of the first evaluation episode
+        # Budgets (frames) this run reached before it was extended: it evaluates there again, as it did when it
+        # stopped there (an evaluation draws no training random number, so the trajectory is unchanged).
+        self.budget_end_steps = frozenset(self._steps(f) for f in budget_ends)
         self.counters = Counters()
         self.batch_size = agent.cfg.batch_size
         self.has_success = env.spec.has_success
@@ -137,7 +140,8 @@ class Trainer:
         sums: dict[str, float] = {}
         n_updates = 0
         while True:
-            if self.counters.step % eval_every == 0 or self.counters.step >= total_steps:
+            if (self.counters.step % eval_every == 0 or self.counters.step >= total_steps
+                    or self.counters.step in self.budget_end_steps):
                 if cfg.eval_episodes > 0:
                     self.evaluate(final=self.counters.step >= total_steps)
             if self.progress is not None:

@@ -14,7 +14,7 @@ from repro.launch.spec.errors import SweepError
 from repro.launch.spec.grid import Run
 from repro.launch.spec.overrides import hydra_quote, merge_overrides
 from repro.launch.waiting import DatasetNeed, dataset_need, missing_reason
-from repro.runs.rundir import config_diff, run_dir, run_state
+from repro.runs.rundir import config_diff, run_budget, run_dir, run_state
 
 
 @dataclass
@@ -25,7 +25,7 @@ class PlannedRun:
     cfg: DictConfig
     run_dir: Path
     results_root: Path
-    state: str  # done | partial | absent | mismatch
+    state: str  # done | partial | extend (done at a smaller budget) | absent | mismatch
     diff: list[str] = field(default_factory=list)
     need: DatasetNeed | None = None  # the dataset an offline run reads
     waiting: str | None = None  # why a not-done run cannot start yet (its dataset is not complete), or None
@@ -95,7 +95,9 @@ def plan(runs: Sequence[Run]) -> list[PlannedRun]:
         overrides = merge_overrides(run.overrides, [f"runtime.results_root={hydra_quote(str(root))}"])
         run = Run(run.agent, run.variant, run.task, run.seed, overrides, run.dataset)
         path = run_dir(cfg)
-        state = run_state(path)
+        state = run_state(path, run_budget(cfg))
+        if state == "partial" and run_state(path) == "done":
+            state = "extend"  # done at a smaller budget: a start continues it from its checkpoint
         diff = config_diff(path, cfg) if state != "absent" else []
         need = dataset_need(cfg)
         if need is not None and need not in reasons:
