@@ -595,6 +595,9 @@ def next_runs_paragraph(rows: Sequence[PowerRow], max_seeds: int = DEFAULT_MAX_S
         elif r.more_80 > 0:
             lines.append(f"- `{r.id}` ({r.verdict or 'no verdict'}): P(supported) {r.now.supported:.2f} given the "
                          f"{r.done_seeds} seed(s) done; {r.more_80} more seed(s) per cell reach 80%.")
+    if not any(r.now is not None for r in rows):
+        return ("What to run next: no runs yet. If the paper's numbers are the truth, column 'Seeds for 80%' gives "
+                "the seeds per cell that each simulated claim needs.")
     if not lines:
-        return "Every simulated claim already reaches 80% power with the seeds done, or none is simulated."
+        return "Every simulated claim already reaches 80% power with the seeds done."
     return "What to run next (if the paper's numbers are the truth):\n\n" + "\n".join(lines)
