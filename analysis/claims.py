@@ -133,19 +133,39 @@ def labelled(df: pd.DataFrame) -> pd.DataFrame:
     return df.drop(columns=["method"], errors="ignore").rename(columns={"label": "method"}) if "label" in df else df
 
 
+def online_rows(ctx: Context) -> pd.DataFrame:
+    """The runs of the main online experiment, with the label as the method (the rows of the Table 1 claims)."""
+    return labelled(select.online_main(ctx.scores, ctx.experiment_map))
+
+
+# The rules below take a claim's cells (a ``means`` table, score matrices or per-cell summaries) instead of the
+# runs, so that the power simulation (analysis.power) applies them, unchanged, to simulated cells.
+GAIN_BAR = 1.3  # online_avg_gain: about 1.4x, tolerance 0.1
+REPR_TASKS = ("quadruped_run", "walker_run", "hopper_hop", "reacher_hard", "acrobot_swingup")
+OFFLINE_DATASETS = ("medium", "medium-replay", "full-replay")
+OFFLINE_PRINTED = {"TD3+BC+TACO": 71.0, "TD3+BC": 68.2, "CQL+TACO": 72.1, "CQL": 66.7}
+MODEL_BASED = ("DreamerV3", "TD-MPC")
+
+
 # ---------------------------------------------------------------- checks
 @check("online_avg_gain", "mean over the 9 tasks of TACO / DrQ-v2 >= 1.3 (about 1.4x, tolerance 0.1); CI by rliable "
        "bootstrap")
 def _online_avg_gain(ctx: Context) -> tuple[str, str]:
-    df = labelled(select.online_main(ctx.scores, ctx.experiment_map))
+    df = online_rows(ctx)
     table = means(df, ["task", "method"])
     require(ctx, table, [(t, m) for t in DMC9 for m in ("TACO", "DrQ-v2")])
     ok = df[df["reached"].astype(bool)]
     x, _ = score_matrix(ok[ok["method"] == "TACO"], DMC9)
     y, _ = score_matrix(ok[ok["method"] == "DrQ-v2"], DMC9)
     assert x is not None and y is not None  # require() saw runs on every task
+    return avg_gain_rule(ctx, x, y)
+
+
+def avg_gain_rule(ctx: Context, x: np.ndarray, y: np.ndarray) -> tuple[str, str]:
+    """online_avg_gain on TACO's and DrQ-v2's (runs x 9 tasks) score matrices: the verdict reads the ratio of
+    means, the CI is evidence (``ctx.reps`` 0: no CI)."""
     r, lo, hi = ratio_of_means(x, y, ctx.reps, ctx.seed)
-    verdict = SUPPORTED if r >= 1.3 else REFUTED
+    verdict = SUPPORTED if r >= GAIN_BAR else REFUTED
     return verdict, f"TACO/DrQ-v2 = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); paper: 1.4x (Table 1 gives 1.397)"
 
 
@@ -157,7 +177,7 @@ PUBLISHED_GAIN_RULE = ("mean over the 9 tasks of TACO (your runs) / DrQ-v2 (the 
 
 def _online_avg_gain_published(ctx: Context) -> tuple[str, str]:
     """online_avg_gain with the DrQ-v2 authors' published curves as the baseline (no DrQ-v2 runs needed)."""
-    df = labelled(select.online_main(ctx.scores, ctx.experiment_map))
+    df = online_rows(ctx)
     table = means(df, ["task", "method"])
     require(ctx, table, [(t, "TACO") for t in DMC9])
     ok = df[df["reached"].astype(bool)]
@@ -167,8 +187,15 @@ def _online_avg_gain_published(ctx: Context) -> tuple[str, str]:
     ys = [published_values(ctx.published, t, frame) for t in DMC9]
     if any(len(y) < ctx.min_seeds for y in ys):
         raise NotEnoughData(f"the published DrQ-v2 curves do not cover {ctx.budget_text()} on every task")
+    return published_gain_rule(ctx, x, ys)
+
+
+def published_gain_rule(ctx: Context, x: np.ndarray, ys: Sequence[np.ndarray]) -> tuple[str, str]:
+    """online_avg_gain_vs_published on TACO's (runs x 9 tasks) matrix and the published DrQ-v2 values per task
+    at the budget; the verdict reads the ratio, the CI is evidence (``ctx.reps`` 0: no CI)."""
+    frame = float(ctx.budget)
     r, lo, hi = ratio_to_task_means(x, ys, ctx.reps, ctx.seed)
-    verdict = SUPPORTED if r >= 1.3 else REFUTED
+    verdict = SUPPORTED if r >= GAIN_BAR else REFUTED
     return verdict, (f"TACO/DrQ-v2 (published curves at {frames_text(frame)}) = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); "
                      f"published DrQ-v2 9-task mean {np.mean([np.mean(y) for y in ys]):.1f}; paper: 1.4x (Table 1 "
                      "gives 1.397 with its own DrQ-v2)")
@@ -176,19 +203,27 @@ def _online_avg_gain_published(ctx: Context) -> tuple[str, str]:
 
 @check("online_beats_drqv2_all", "TACO mean > DrQ-v2 mean on each of the 9 tasks")
 def _beats_drqv2(ctx: Context) -> tuple[str, str]:
-    table = means(labelled(select.online_main(ctx.scores, ctx.experiment_map)), ["task", "method"])
+    return beats_drqv2_rule(ctx, means(online_rows(ctx), ["task", "method"]))
+
+
+def beats_drqv2_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
+    """online_beats_drqv2_all on a (task, method) ``means`` table."""
     return universal(ctx, table, [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9])
 
 
 @check("online_beats_model_based", "TACO mean > both DreamerV3 and TD-MPC on >= 6 of 9 tasks (baselines from runs, "
        "else the paper's Table 1)")
 def _beats_model_based(ctx: Context) -> tuple[str, str]:
-    table = means(labelled(select.online_main(ctx.scores, ctx.experiment_map)), ["task", "method"])
+    return beats_model_based_rule(ctx, means(online_rows(ctx), ["task", "method"]))
+
+
+def beats_model_based_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
+    """online_beats_model_based on a (task, method) ``means`` table (a baseline it lacks: Table 1's value)."""
     require(ctx, table, [(t, "TACO") for t in DMC9])
     wins, used_paper, lines = 0, False, []
     for t in DMC9:
         base = []
-        for m in ("DreamerV3", "TD-MPC"):
+        for m in MODEL_BASED:
             v = get(ctx, table, t, m)
             if v is None:
                 printed = ctx.paper.online_value(t, m)
@@ -352,9 +387,13 @@ def _objectives(ctx: Context) -> tuple[str, str]:
 
 @check("vs_repr_objectives", "TACO mean > SPR, ATC and DRIML (where the paper has DRIML) on each of the 5 tasks")
 def _vs_repr(ctx: Context) -> tuple[str, str]:
-    table = means(labelled(select.repr_objectives(ctx.scores, ctx.experiment_map)), ["task", "method"])
-    tasks = ["quadruped_run", "walker_run", "hopper_hop", "reacher_hard", "acrobot_swingup"]
-    pairs = [((t, "TACO"), (t, m), f"{t} vs {m}") for t in tasks for m in ("SPR", "ATC", "DRIML")
+    return vs_repr_rule(ctx, means(labelled(select.repr_objectives(ctx.scores, ctx.experiment_map)),
+                                   ["task", "method"]))
+
+
+def vs_repr_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
+    """vs_repr_objectives on a (task, method) ``means`` table."""
+    pairs = [((t, "TACO"), (t, m), f"{t} vs {m}") for t in REPR_TASKS for m in ("SPR", "ATC", "DRIML")
              if m != "DRIML" or ctx.paper.repr_value(t, "DRIML") is not None]
     return universal(ctx, table, pairs)
 
@@ -379,8 +418,13 @@ def _offline_table(ctx: Context, value: str = "score") -> tuple[dict, pd.DataFra
 @check("offline_gain", "return of X+TACO > X for X in TD3+BC, CQL on each of the 12 task/dataset pairs")
 def _offline_gain(ctx: Context) -> tuple[str, str]:
     table, _ = _offline_table(ctx)
+    return offline_gain_rule(ctx, table)
+
+
+def offline_gain_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
+    """offline_gain on a (task, dataset, method) ``means`` table of returns."""
     pairs = [((t, d, f"{x}+TACO"), (t, d, x), f"{t}/{d} {x}") for t in OFFLINE_TASKS
-             for d in ("medium", "medium-replay", "full-replay") for x in ("TD3+BC", "CQL")]
+             for d in OFFLINE_DATASETS for x in ("TD3+BC", "CQL")]
     return universal(ctx, table, pairs)
 
 
@@ -388,16 +432,24 @@ def _offline_gain(ctx: Context) -> tuple[str, str]:
        "95% CI of the reproduced average normalised score over the 12 pairs")
 def _offline_average(ctx: Context) -> tuple[str, str]:
     table, df = _offline_table(ctx, "normalized")
-    printed = {"TD3+BC+TACO": 71.0, "TD3+BC": 68.2, "CQL+TACO": 72.1, "CQL": 66.7}
-    pairs = [(t, d) for t in OFFLINE_TASKS for d in ("medium", "medium-replay", "full-replay")]
-    require(ctx, table, [(t, d, m) for t, d in pairs for m in printed])
-    ok, lines = True, []
-    for m, p in printed.items():
+    pairs = [(t, d) for t in OFFLINE_TASKS for d in OFFLINE_DATASETS]
+    require(ctx, table, [(t, d, m) for t, d in pairs for m in OFFLINE_PRINTED])
+    matrices = {}
+    for m in OFFLINE_PRINTED:
         rows = df[(df["method"] == m) & df["reached"].astype(bool)]
         rows = rows.assign(task=rows["task"] + "/" + rows["dataset"])
         matrix, _ = score_matrix(rows, [f"{t}/{d}" for t, d in pairs], value="normalized")
         assert matrix is not None  # require() saw runs on every pair
-        mean, lo, hi = grand_mean_ci(matrix, ctx.reps, ctx.seed)
+        matrices[m] = matrix
+    return offline_average_rule(ctx, matrices)
+
+
+def offline_average_rule(ctx: Context, matrices: dict[str, np.ndarray]) -> tuple[str, str]:
+    """offline_average on each printed method's (runs x 12 pairs) matrix of normalised scores: the verdict
+    reads the bootstrap CI (``ctx.reps`` repetitions)."""
+    ok, lines = True, []
+    for m, p in OFFLINE_PRINTED.items():
+        mean, lo, hi = grand_mean_ci(matrices[m], ctx.reps, ctx.seed)
         inside = lo <= p <= hi
         ok &= inside
         lines.append(f"{m} {mean:.1f} [{lo:.1f}, {hi:.1f}] vs {p}{'' if inside else ' (outside)'}")
@@ -469,16 +521,20 @@ def _seeds(ctx: Context) -> tuple[str, str]:
     df = select.online_main(ctx.scores, ctx.experiment_map)
     df = df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df
     spread = seed_spread(df)
+    return seed_robustness_rule(ctx, spread.set_index(["task", "label"]).to_dict("index"))
+
+
+def seed_robustness_rule(ctx: Context, spread: dict[tuple, dict]) -> tuple[str, str]:
+    """seed_robustness on per-cell spreads ((task, label) -> analysis.robustness.cell_spread)."""
     need = ctx.min_seeds
-    got = spread[spread["n"] >= need]
-    tasks = [t for t in DMC9 if set(got[got["task"] == t]["label"]) >= {"TACO", "DrQ-v2"}]
+    got = {k: v for k, v in spread.items() if v["n"] >= need}
+    tasks = [t for t in DMC9 if (t, "TACO") in got and (t, "DrQ-v2") in got]
     if len(tasks) < 9:
         raise NotEnoughData(f"need >= {need} seeds of TACO and DrQ-v2 on all 9 tasks (have {len(tasks)})")
-    s = got.set_index(["task", "label"])
-    less = sum(s.loc[(t, "TACO"), "std"] < s.loc[(t, "DrQ-v2"), "std"] for t in tasks)
-    broken = int(got[got["label"] == "DrQ-v2"]["broken"].sum())
+    less = sum(got[(t, "TACO")]["std"] < got[(t, "DrQ-v2")]["std"] for t in tasks)
+    broken = int(sum(v["broken"] for k, v in got.items() if k[1] == "DrQ-v2"))
     ok = less >= 7 and broken >= 1
-    taco_broken = int(got[got["label"] == "TACO"]["broken"].sum())
+    taco_broken = int(sum(v["broken"] for k, v in got.items() if k[1] == "TACO"))
     return (SUPPORTED if ok else REFUTED), (f"TACO's std lower on {less}/9 tasks; DrQ-v2 broken seeds: {broken}; "
                                             f"TACO broken seeds: {taco_broken}")
 
@@ -488,19 +544,24 @@ def _seeds(ctx: Context) -> tuple[str, str]:
 def _manipulator(ctx: Context) -> tuple[str, str]:
     curves = select.manipulator(ctx.curves, ctx.experiment_map)
     solved = solved_counts(curves, ctx.budget)
-    s = solved.set_index("label") if not solved.empty else solved
-    if "DrQ-v2" in s.index and s.loc["DrQ-v2", "solved"] > 0:
-        return REFUTED, f"DrQ-v2 solves {int(s.loc['DrQ-v2', 'solved'])} seeds"
-    if "TACO" not in s.index or "DrQ-v2" not in s.index or min(s["runs"]) < ctx.min_seeds:
+    return manipulator_rule(ctx, solved.set_index("label").to_dict("index"))
+
+
+def manipulator_rule(ctx: Context, s: dict[str, dict]) -> tuple[str, str]:
+    """manipulator on solved counts per label (label -> runs, solved, last_frame; analysis.robustness)."""
+    if "DrQ-v2" in s and s["DrQ-v2"]["solved"] > 0:
+        return REFUTED, f"DrQ-v2 solves {int(s['DrQ-v2']['solved'])} seeds"
+    if "TACO" not in s or "DrQ-v2" not in s or min(v["runs"] for v in s.values()) < ctx.min_seeds:
         raise NotEnoughData("need TACO and DrQ-v2 runs on manipulator_bring_ball")
-    taco_frac = s.loc["TACO", "solved"] / s.loc["TACO", "runs"]
-    ev = (f"TACO {int(s.loc['TACO', 'solved'])}/{int(s.loc['TACO', 'runs'])}, "
-          f"DrQ-v2 0/{int(s.loc['DrQ-v2', 'runs'])} solved")
+    taco_frac = s["TACO"]["solved"] / s["TACO"]["runs"]
+    ev = (f"TACO {int(s['TACO']['solved'])}/{int(s['TACO']['runs'])}, "
+          f"DrQ-v2 0/{int(s['DrQ-v2']['runs'])} solved")
     if taco_frac >= 1 / 3:
         return SUPPORTED, ev
-    if min(s["last_frame"]) >= ctx.budget:
+    last = min(v["last_frame"] for v in s.values())
+    if last >= ctx.budget:
         return REFUTED, ev
-    raise NotEnoughData(ev + f"; runs reach only {frames_text(min(s['last_frame']))} of {ctx.budget_text()}")
+    raise NotEnoughData(ev + f"; runs reach only {frames_text(last)} of {ctx.budget_text()}")
 
 
 # ---------------------------------------------------------------- entry points

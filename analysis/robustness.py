@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 BROKEN_FRACTION = 0.5  # a seed is "broken" if its score is below half the median of its cell's seeds
@@ -13,20 +14,19 @@ def seed_spread(df: pd.DataFrame, keys: tuple[str, ...] = ("task", "label")) -> 
     rows = []
     ok = df[df["reached"].astype(bool)] if not df.empty else df
     for key, cell in ok.groupby(list(keys)) if not ok.empty else []:
-        s = cell["score"].astype(float)
-        med = s.median()
-        rows.append(
-            {
-                **dict(zip(keys, key if isinstance(key, tuple) else (key,))),
-                "n": len(s),
-                "mean": s.mean(),
-                "std": s.std(ddof=1) if len(s) > 1 else float("nan"),
-                "min": s.min(),
-                "max": s.max(),
-                "broken": int((s < BROKEN_FRACTION * med).sum()) if med > 0 else 0,
-            }
-        )
+        rows.append({**dict(zip(keys, key if isinstance(key, tuple) else (key,))),
+                     **cell_spread(cell["score"].to_numpy(dtype=float))})
     return pd.DataFrame(rows, columns=[*keys, "n", "mean", "std", "min", "max", "broken"])
+
+
+def cell_spread(values: np.ndarray) -> dict[str, float]:
+    """One cell's seeds: n, mean, std (ddof=1; NaN for one seed), min, max and broken seeds (below
+    :data:`BROKEN_FRACTION` of the cell's median)."""
+    s = np.asarray(values, dtype=float)
+    med = float(np.median(s))
+    return {"n": len(s), "mean": float(s.mean()), "std": float(s.std(ddof=1)) if len(s) > 1 else float("nan"),
+            "min": float(s.min()), "max": float(s.max()),
+            "broken": int((s < BROKEN_FRACTION * med).sum()) if med > 0 else 0}
 
 
 def solved_counts(curves_or_eval: pd.DataFrame, max_frame: float, threshold: float = SOLVED_RETURN,

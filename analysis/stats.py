@@ -175,7 +175,13 @@ def performance_profiles(
 def _interval(scores: np.ndarray | list[np.ndarray], statistic: Callable[..., np.ndarray], reps: int,
               seed: int) -> tuple[float, float, float]:
     """One scalar ``statistic`` of ``scores`` (a runs x tasks matrix, or a list of them passed as its arguments)
-    with its 95% percentile stratified-bootstrap CI by rliable: (value, ci_low, ci_high)."""
+    with its 95% percentile stratified-bootstrap CI by rliable: (value, ci_low, ci_high).
+
+    ``reps`` 0: the value alone, as rliable computes it (``statistic`` of the data), with a NaN CI; the power
+    simulation (analysis.power) reads rules whose verdict is the point estimate this way."""
+    if reps == 0:
+        value = statistic(*scores) if isinstance(scores, list) else statistic(scores)
+        return float(value[0]), math.nan, math.nan
     with seeded(seed) as rs:
         points, cis = rly.get_interval_estimates(
             {"value": scores}, statistic, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
@@ -222,12 +228,13 @@ def poi_interval(
 def ratio_of_means(
     x: np.ndarray, y: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
 ) -> tuple[float, float, float]:
-    """mean(x) / mean(y) over all runs and tasks, with a 95% stratified-bootstrap CI (rliable)."""
+    """mean(x) / mean(y) over all runs and tasks, with a 95% stratified-bootstrap CI (rliable; ``reps`` 0: the
+    ratio alone)."""
+    return _interval([x, y], _ratio_of_means, reps, seed)
 
-    def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return np.array([np.mean(a) / np.mean(b)])
 
-    return _interval([x, y], ratio, reps, seed)
+def _ratio_of_means(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.array([np.mean(a) / np.mean(b)])
 
 
 def score_matrix(
@@ -287,15 +294,12 @@ def ratio_to_task_means(
 
     ``x`` is a (n_runs x n_tasks) matrix; ``ys`` one array of values over seeds per task, each with its own
     number of seeds (no seed is dropped to balance them); every array is resampled independently over its
-    own seeds. A one-row ``x`` (e.g. a paper's printed means) is a constant numerator."""
+    own seeds. A one-row ``x`` (e.g. a paper's printed means) is a constant numerator. ``reps`` 0: the ratio
+    alone."""
     num = np.asarray(x, dtype=float)
     dens = [np.asarray(y, dtype=float).reshape(-1, 1) for y in ys]
+    return _interval([num, *dens], _ratio_to_task_means, reps, seed)
 
-    def ratio(a: np.ndarray, *bs: np.ndarray) -> np.ndarray:
-        return np.array([np.mean(a) / np.mean([np.mean(b) for b in bs])])
 
-    with seeded(seed) as rs:
-        points, cis = rly.get_interval_estimates(
-            {"ratio": [num, *dens]}, ratio, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
-        )
-    return float(points["ratio"][0]), float(cis["ratio"][0][0]), float(cis["ratio"][1][0])
+def _ratio_to_task_means(a: np.ndarray, *bs: np.ndarray) -> np.ndarray:
+    return np.array([np.mean(a) / np.mean([np.mean(b) for b in bs])])

@@ -13,7 +13,7 @@ from repro.bench import cli as bench
 from repro.data.cli import dataset_app
 from repro.launch import cli as launch_cli
 from repro.train import make_dataset_cli as make_cli
-from repro_app import analysis_cli, reproduce, watch_cli
+from repro_app import analysis_cli, plan_cli, reproduce, watch_cli
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -106,7 +106,7 @@ def _console():
     return Console(width=max(120, shutil.get_terminal_size((120, 24)).columns))
 
 
-for _commands in (launch_cli, analysis_cli, bench, reproduce, watch_cli):
+for _commands in (launch_cli, analysis_cli, plan_cli, bench, reproduce, watch_cli):
     _commands.register(app)
 make_cli.register(dataset_app)  # `repro dataset make` (training layer: it rolls out policies)
 app.add_typer(dataset_app, name="dataset")

@@ -17,7 +17,8 @@ from analysis.calibration import CalibrationRow, calibrate, calibration_frames, 
 from analysis.claims import claims_frame, evaluate_claims, verdict_counts, write_claims
 from analysis.context import Context
 from analysis.io import atomic_write_text
-from analysis.tables import to_markdown
+from analysis.power import REPORT_MAX_SEEDS, REPORT_SIMS, next_runs_paragraph, power_rows, write_power
+from analysis.tables import TableOutput, to_markdown
 from paper_figures.catalog import ordered_ids, resolve
 from paper_figures.render import render_artifacts
 
@@ -66,10 +67,19 @@ def _section(title: str, body: str) -> str:
 
 
 def build_markdown(ctx: Context, artifacts, verdicts, findings,
-                   calibration: tuple[list[CalibrationRow], list[str]] | None = None) -> str:
-    """REPORT.md: the header, the claims, the audit, the calibration, every artifact and the provenance."""
+                   calibration: tuple[list[CalibrationRow], list[str]] | None = None,
+                   power: tuple[TableOutput, str] | None = None) -> str:
+    """REPORT.md: the header, the claims, the claims' power and what to run next, the audit, the calibration,
+    every artifact and the provenance."""
     lines = _header(ctx, verdicts, findings)
     lines.append(_claims_section(ctx, verdicts))
+    if power is not None:
+        table, next_runs = power
+        lines.append(_section("Statistical power of the claims and what to run next",
+                              f"{next_runs}\n\n{table.markdown()}\nFiles: "
+                              + ", ".join(f"[{p.suffix[1:]}]({p.name})" for p in table.files)
+                              + "; the truth assumed per cell: [plan_power_cells.md](plan_power_cells.md). "
+                              "`repro plan --claims` adds what the seeds for 80% cost on your hardware."))
     lines += _audit_sections(findings)
     if calibration is not None:
         lines.append(_calibration_section(ctx, *calibration))
@@ -189,7 +199,11 @@ def build_report(ctx: Context, progress: Callable[[str], None] | None = None) ->
     write_audit(ctx.out_dir, findings)
     rows, notes = calibrate(ctx.results, ctx.published, ctx.reps, ctx.seed)
     write_calibration(ctx.out_dir, rows, notes, ctx.reps, ctx.seed)
-    md = build_markdown(ctx, artifacts, verdicts, findings, (rows, notes))
+    conditioned = not ctx.no_runs
+    prow = power_rows(ctx, REPORT_SIMS, REPORT_MAX_SEEDS, verdicts, conditioned, bootstrap_claims=False)
+    power_table, _ = write_power(ctx.out_dir, prow, REPORT_SIMS, ctx.seed, REPORT_MAX_SEEDS, conditioned=conditioned)
+    md = build_markdown(ctx, artifacts, verdicts, findings, (rows, notes),
+                        (power_table, next_runs_paragraph(prow, REPORT_MAX_SEEDS)))
     md_path = atomic_write_text(ctx.out_dir / "REPORT.md", md)
     html_path = atomic_write_text(ctx.out_dir / "REPORT.html", markdown_to_html(md))
     return md_path, html_path

@@ -53,6 +53,13 @@ class ReplayBuffer:
         tensors = (self.frames, self.actions, self.rewards, self.discounts)
         return sum(t.numel() * t.element_size() for t in tensors) + self.ep_id.nbytes + self.pos.nbytes
 
+    @staticmethod
+    def bytes_for(capacity: int, frame_shape: tuple[int, int, int], action_dim: int) -> int:
+        """What :meth:`nbytes` is for a buffer of ``capacity`` (allocated in full at construction), without
+        building one: uint8 frames, float32 actions, rewards and discounts, int64 episode ids and positions."""
+        frame = int(np.prod(frame_shape))
+        return capacity * (frame + 4 * action_dim + 4 + 4 + 8 + 8)
+
     def frame_bytes(self) -> int:
         return self.frames.numel() * self.frames.element_size()
 

@@ -1,0 +1,153 @@
+"""``repro plan``: what sweeps cost on your hardware (repro_app/plan.py) and each claim's statistical power if the
+paper's numbers are the truth (analysis/power.py). Bad input: one line, exit 2. Documented in docs/plan.md."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import NoReturn, Optional
+
+import typer
+
+from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
+
+DEFAULT_RESULTS = Path("runs")
+
+
+def _fail(message: str) -> NoReturn:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code=2)
+
+
+def _print(display, title: str, notes: list[str]) -> None:
+    """A display frame as a rich table, with its notes under it."""
+    import shutil
+
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    con = Console(width=max(160, shutil.get_terminal_size((160, 24)).columns))
+    table = Table(title=escape(title), title_justify="left")
+    for col in display.columns:
+        table.add_column(escape(str(col)), overflow="fold")
+    for row in display.itertuples(index=False):
+        table.add_row(*(escape(str(v)) for v in row))
+    con.print(table)
+    for note in notes:
+        con.print(escape(note), highlight=False)
+
+
+def plan_cmd(
+    sweeps: Optional[list[str]] = typer.Argument(None, help="Sweep names (see `repro sweeps`) or sweep YAML paths."),
+    all_: bool = typer.Option(False, "--all", help="Every sweep of sweeps/."),
+    claims: bool = typer.Option(False, "--claims", help="Each claim's statistical power (with runs under --results: "
+                                "given the runs done) and the seeds for 80% power."),
+    results: Path = typer.Option(DEFAULT_RESULTS, "--results", "-r", help="Results root: its runs (what is done) "
+                                 "and its bench/ folder."),
+    out: Path = typer.Option(Path("results/report"), "--out", "-o", help="Folder for plan.{csv,md,tex} and "
+                             "plan_power*.{csv,md,tex}."),
+    bench_file: Optional[Path] = typer.Option(None, "--bench", help="A `repro bench` JSON (default: the newest "
+                                              "RESULTS/bench/bench-*-DEVICE.json)."),
+    device: str = typer.Option("cuda", "--device", help="The device the bench timed: cuda or cpu."),
+    devices: int = typer.Option(1, "--devices", help="Devices the runs share (the local wall-clock)."),
+    cluster_config: Optional[Path] = typer.Option(None, "--cluster-config", help="SLURM launcher YAML (default: "
+                                                  "$REPRO_SLURM_CONFIG or ~/.config/taco-repro/slurm.yaml)."),
+    device_memory_gb: Optional[float] = typer.Option(None, "--device-memory-gb", help="The device's memory (runs "
+                                                     "per device; default: the bench JSON's device_memory_bytes)."),
+    sims: int = typer.Option(2000, "--sims", help="Simulated draws per claim and seed count."),
+    max_seeds: int = typer.Option(50, "--max-seeds", help="Largest seeds per cell searched for 80% power."),
+    seed: int = typer.Option(DEFAULT_SEED, "--seed", help="Random state of the simulation (and of the bootstraps)."),
+    reps: int = typer.Option(DEFAULT_REPS, "--reps", help="Bootstrap repetitions of the current verdicts' CIs."),
+    min_seeds: int = typer.Option(2, "--min-seeds", help="As `repro claims --min-seeds`."),
+) -> None:
+    """Plan a reproduction before paying for it: each sweep's runs, frames, memory, device-hours and wall-clock
+    on your hardware (from your `repro bench` JSON); with --claims each claim's power and the seeds it needs."""
+    from repro.launch.spec import SweepError
+    from repro_app.plan import PlanError
+
+    if not sweeps and not all_ and not claims:
+        _fail("name sweeps (e.g. 'repro plan main'), or pass --all or --claims")
+    if devices < 1 or sims < 10 or max_seeds < 2 or reps < 1 or min_seeds < 1 or (
+            device_memory_gb is not None and device_memory_gb <= 0):
+        _fail("--devices must be >= 1, --sims >= 10, --max-seeds >= 2, --reps and --min-seeds >= 1, "
+              "--device-memory-gb > 0")
+    if device not in ("cuda", "cpu"):
+        _fail(f"--device must be cuda or cpu (got {device!r})")
+    try:
+        if sweeps or all_:
+            _plan_sweeps(sweeps or [], all_, results, out, bench_file, device, devices, cluster_config,
+                         device_memory_gb)
+        if claims:
+            _plan_claims(results, out, bench_file, device, sims, max_seeds, seed, reps, min_seeds)
+    except (PlanError, SweepError) as exc:
+        _fail(str(exc))
+
+
+def _cluster(cluster_config: Optional[Path]):
+    from repro.launch.slurm import cluster_config_path, load_cluster_config
+
+    path = cluster_config_path(cluster_config)
+    return load_cluster_config(path), (f"launcher config {path}" if path else "no launcher config: SLURM defaults")
+
+
+def _plan_sweeps(names: list[str], all_: bool, results: Path, out: Path, bench_file: Optional[Path], device: str,
+                 devices: int, cluster_config: Optional[Path], device_memory_gb: Optional[float]) -> None:
+    from repro.launch import spec as specs
+    from repro_app.plan import GB, find_bench, plan_notes, plan_sweeps, totals, write_plan
+
+    bench = find_bench(results, device, bench_file)  # PlanError (one line naming `repro bench`) without one
+    cluster, where = _cluster(cluster_config)
+    chosen = specs.sweep_names() if all_ else names
+    root = results.expanduser().absolute()
+    costs = plan_sweeps(chosen, bench, results_root=root)
+    slots, limit = cluster.array_parallelism, cluster.time_min
+    rows = [totals(n, [c for c in costs if c.sweep == specs.load(n).name], devices, slots, limit) for n in chosen]
+    rows.append(totals("Total", costs, devices, slots, limit))
+    memory = int(device_memory_gb * GB) if device_memory_gb else bench.device_memory_bytes
+    notes = plan_notes(bench, costs, devices, slots, where, memory)
+    table = write_plan(out, rows, notes, memory, devices, slots)
+    from repro_app.plan import plan_frames
+
+    _print(plan_frames(rows, memory, devices, slots)[1], table.caption, notes)
+    typer.echo(f"Wrote {', '.join(str(p) for p in table.files)}")
+
+
+def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: str, sims: int, max_seeds: int,
+                 seed: int, reps: int, min_seeds: int) -> None:
+    from analysis.claims import evaluate_claims
+    from analysis.power import power_rows, write_power
+    from repro.launch import spec as specs
+    from repro_app.analysis_cli import make_context
+    from repro_app.plan import PlanError, find_bench, plan_sweeps, seeds_cost
+
+    ctx = make_context(results, out, 1_000_000, reps, seed, min_seeds)
+    conditioned = not ctx.no_runs
+    verdicts = evaluate_claims(ctx) if conditioned else None
+    extra: list[str] = []
+    try:
+        bench = find_bench(results, device, bench_file)
+    except PlanError as exc:
+        bench = None
+        extra.append(f"Cost of those seeds in frames only: {exc}.")
+    rows = power_rows(ctx, sims, max_seeds, verdicts, conditioned)
+    by_experiment = {s.experiment: s for s in specs.load_all()}
+    needed = sorted({by_experiment[e].name for r in rows if r.seeds_80 for e in r.experiments if e in by_experiment})
+    costs = plan_sweeps(needed, bench, results_root=results.expanduser().absolute(), memory=False)
+    sweep_seeds = {by_experiment[e].name: len(by_experiment[e].seeds) for e in by_experiment}
+    row_of = {r.id: r for r in rows}
+
+    def cost(claim: str, n: int) -> str:
+        r = row_of[claim]
+        names = {by_experiment[e].name for e in r.experiments if e in by_experiment}
+        return seeds_cost([c for c in costs if c.sweep in names], r.tasks or None, sweep_seeds, n)
+
+    extra.append("Cost of those seeds: the runs of the claim's sweeps on its tasks, scaled from the sweep's seeds "
+                 "to the seeds for 80%, at each run's full budget.")
+    table, cells = write_power(out, rows, sims, seed, max_seeds, cost, conditioned, extra)
+    _print(table.display, table.caption, table.notes)
+    typer.echo(f"Wrote {', '.join(str(p) for p in table.files + cells.files)}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``plan`` to ``app``."""
+    app.command("plan")(plan_cmd)
