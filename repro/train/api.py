@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import os
 import pickle
 import sys
 import time
@@ -10,7 +12,7 @@ from pathlib import Path
 from typing import Any, Protocol, TypeVar, cast
 
 import torch
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from repro.config.compose import compose, typed
 from repro.config.schema import Device, RunConfig, is_offline
@@ -38,6 +40,7 @@ from repro.runs.checkpoint import load_checkpoint, save_checkpoint
 from repro.runs.fsutil import remove_torn_temporaries
 from repro.runs.logger import RunLogger
 from repro.runs.video import VIDEO_DIR, EvalVideos
+from repro.runs.wblog import WandbRun, check_wandb
 from repro.train.offline import BatchSource, OfflineLogger, OfflineTrainer, check_resume_dataset
 from repro.train.online import Trainer
 
@@ -100,6 +103,9 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         return path
     device = resolve_device(rc.runtime.device, "runtime.device")
     resolve_device(rc.replay.device, "replay.device")
+    wandb = wandb_run(rc, cfg, path) if rc.runtime.wandb else None
+    if wandb is not None:
+        check_wandb()  # WandbError (one line) without the package
     holder = rundir.writer_lock_holder(path)  # refuse a running run before reading a large dataset for nothing
     if holder is not None:
         raise rundir.RunLocked(rundir.locked_message(path, holder))
@@ -130,10 +136,28 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
             torch.set_num_threads(int(rc.runtime.threads))
         rundir.write_meta(path, device, resumed=resuming)
         if data is not None:
-            _train_offline(rc, path, data, device, state, echo, progress)
+            _train_offline(rc, path, data, device, state, echo, progress, wandb)
         else:
-            _train_online(rc, path, device, state, echo, progress)
+            _train_online(rc, path, device, state, echo, progress, wandb)
     return path
+
+
+def wandb_run(rc: RunConfig, cfg: DictConfig, path: Path) -> WandbRun:
+    """runtime.wandb: the W&B run of the run directory ``path``, named by its identity (its folder under the
+    results root), grouped by experiment/agent/variant/task (and dataset), tagged with the sweep and the seed;
+    its config is the run's resolved config."""
+    name = Path(os.path.relpath(path, rc.runtime.results_root)).as_posix()
+    tags = ([f"sweep={rc.runtime.sweep}"] if rc.runtime.sweep else []) + [f"seed={rc.seed}"]
+    config = OmegaConf.to_container(cfg, resolve=True)
+    assert isinstance(config, dict)
+    return WandbRun(mode=str(rc.runtime.wandb_mode), project=rc.runtime.wandb_project, entity=rc.runtime.wandb_entity,
+                    group=name.rsplit("/", 1)[0], name=name, tags=tuple(tags),
+                    config={str(k): v for k, v in config.items()})
+
+
+def _with_resolved(wandb: WandbRun | None, values: dict[str, Any]) -> WandbRun | None:
+    """The W&B config with the run's resolved values (resolved.json) beside the config."""
+    return None if wandb is None else dataclasses.replace(wandb, config={**wandb.config, "resolved": values})
 
 
 def _refuse_other_config_or_done(path: Path, cfg: DictConfig, echo: Callable[[str], None]) -> bool:
@@ -183,14 +207,15 @@ def _remove_empty(path: Path) -> None:
 
 
 def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, echo: Callable[[str], None],
-                  progress: bool | None) -> None:
+                  progress: bool | None, wandb: WandbRun | None = None) -> None:
     ckpt_file = path / rundir.CHECKPOINT
     env = build_env(rc, rc.seed)
     eval_env = build_env(rc, rc.seed + 10_000)
     try:
         spec = env.spec
         agent = cast(OnlineLearner, build_agent(rc, spec.obs_shape, spec.action_dim, device))  # not is_offline
-        rundir.write_resolved(path, rundir.resolved_values(rc, agent))
+        values = rundir.resolved_values(rc, agent)
+        rundir.write_resolved(path, values)
         replay_device = resolve_device(rc.replay.device)
         buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
                               rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device)
@@ -199,7 +224,7 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
             episodes.prune(set())
         recorder = Recorder.open(path, rc.agent, spec.obs_shape, spec.action_dim, state) if rc.runtime.record else None
         logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo,
-                           tensorboard=rc.runtime.tensorboard)
+                           tensorboard=rc.runtime.tensorboard, wandb=_with_resolved(wandb, values))
         bar = _progress(rc, progress)
         trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
                           lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
@@ -280,7 +305,7 @@ def run_action_dim(rc: RunConfig) -> int:
 
 
 def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, state: dict | None,
-                   echo: Callable[[str], None], progress: bool | None) -> None:
+                   echo: Callable[[str], None], progress: bool | None, wandb: WandbRun | None = None) -> None:
     ckpt_file = path / rundir.CHECKPOINT
     eval_env = build_env(rc, rc.seed + 10_000)
     try:
@@ -295,7 +320,7 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, st
         rundir.write_resolved(path, values)
         logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo,
                                return_conditioned=isinstance(learner, ReturnConditioned),
-                               tensorboard=rc.runtime.tensorboard)
+                               tensorboard=rc.runtime.tensorboard, wandb=_with_resolved(wandb, values))
         bar = _progress(rc, progress, total=rc.offline.updates, unit="updates/s")
         trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner,
                                  _batch_source(learner, data, rc.seed), logger, lambda s: save_checkpoint(ckpt_file, s),
