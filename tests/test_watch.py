@@ -119,6 +119,24 @@ def test_wandb_mirror_equals_csv_and_a_resume_rebuilds_it_without_repeated_steps
     assert record["config"]["agent"] == {"K": 3} and record["config"]["seed"] == 1
 
 
+def test_wandb_mirror_logs_only_the_steps_the_w_and_b_run_lacks(tmp_path: Path):
+    """What an online resume does at the server's next step (``first_step``, from W&B's ``starting_step``): the
+    truncated CSVs' rows from it on are logged, and live rows before it are not logged again."""
+    from repro.runs.wblog import WandbMirror
+
+    log = RunLogger(tmp_path, METRICS, echo=lambda s: None)
+    for frame in (100, 200):
+        log.log_train(_train_row(frame, 0.5))
+    log.close()
+    mirror = WandbMirror(tmp_path, WB, echo=lambda s: None)
+    mirror.first_step = 150  # the server has steps 0..149 from the killed process
+    assert mirror.rebuild({"train": tmp_path / "train.csv"}) == 1
+    mirror.add_row("eval", _eval_row(100))  # already on the server
+    mirror.add_row("eval", _eval_row(200))
+    mirror.close()
+    assert [(row["_step"], "eval/episode_reward" in row) for row in read_history(tmp_path)] == [(200, True)]
+
+
 def test_offline_wandb_mirror_steps_are_updates(tmp_path: Path):
     from repro.train.offline import OfflineLogger
 
