@@ -26,12 +26,19 @@ $(STAMP): requirements.txt pyproject.toml
 
 setup: $(STAMP)
 
+# The optional W&B mirror (runtime.wandb, pyproject's [wandb] extra): lint and the tests install it, so CI checks
+# the mirror for real; `make repro` does not need it.
+WANDB_STAMP := $(VENV)/.installed-wandb
+$(WANDB_STAMP): $(STAMP)
+	$(BIN)/pip install -q -e '.[wandb]'
+	touch $(WANDB_STAMP)
+
 # The main job: a tiny end-to-end reproduction on the defaults.
 repro: $(STAMP)
 	$(BIN)/repro reproduce
 
 # Static checks on the packages (ruff: pyproject [tool.ruff]; mypy: pyproject [tool.mypy]).
-lint: $(STAMP)
+lint: $(STAMP) $(WANDB_STAMP)
 	$(BIN)/ruff check repro analysis paper_figures repro_app tests benchmarks
 	$(BIN)/mypy
 
@@ -43,7 +50,7 @@ test: lint
 	$(BIN)/python -m pytest -q -ra $(XDIST) --durations=15 $(PYTEST_ARGS)
 
 # The inner loop: unit tests only (no end-to-end runs, no SLURM), a few minutes.
-test-fast: $(STAMP)
+test-fast: $(STAMP) $(WANDB_STAMP)
 	$(BIN)/python -m pytest -q -ra $(XDIST) -m "not slow and not slurm" $(PYTEST_ARGS)
 
 bench: $(STAMP)

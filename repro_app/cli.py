@@ -44,11 +44,12 @@ def train(ctx: typer.Context,
     from repro.data.offline_replay import DatasetError
     from repro.runs.fsutil import write_error_message
     from repro.runs.rundir import RunDirMismatch, RunLocked
+    from repro.runs.wblog import WandbError
     from repro.train.api import CheckpointError, DeviceError, train_config
 
     try:
         path = train_config(cfg, echo=typer.echo, progress=progress)
-    except (RunDirMismatch, DatasetError, DeviceError, CheckpointError, RunLocked) as exc:
+    except (RunDirMismatch, DatasetError, DeviceError, CheckpointError, RunLocked, WandbError) as exc:
         fail(str(exc))
     except OSError as exc:  # a full disk or a file size limit: every file is written atomically or truncated on resume
         fail(write_error_message(exc), code=1)

@@ -1,4 +1,4 @@
-"""``repro tensorboard`` and ``repro plot``: look at runs while they train (docs/watching.md).
+"""``repro tensorboard``, ``repro wandb sync`` and ``repro plot``: look at runs while they train (docs/watching.md).
 
 Bad input (no runs, unknown metric or --by column, a missing folder) prints one line and exits 2.
 """
@@ -14,7 +14,9 @@ from typing import TYPE_CHECKING, Optional
 
 import typer
 
+from repro.runs.runformat import DONE
 from repro.runs.tblog import TB_DIR
+from repro.runs.wblog import RUN_ID, WANDB_DIR, offline_folders
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -25,16 +27,27 @@ def _fail(message: str) -> None:
     raise typer.Exit(code=2)
 
 
+def _tool(name: str) -> str:
+    """The command ``name`` on PATH, else beside this Python (an unactivated venv), else the bare name."""
+    exe = shutil.which(name) or str(Path(sys.executable).with_name(name))
+    return exe if Path(exe).exists() else name
+
+
 def tensorboard_command(root: Path, port: Optional[int] = None) -> list[str]:
     """``tensorboard --logdir ROOT`` (TensorBoard finds every run's ``tb`` folder below ROOT)."""
-    exe = shutil.which("tensorboard") or str(Path(sys.executable).with_name("tensorboard"))
-    cmd = [exe if Path(exe).exists() else "tensorboard", "--logdir", str(root)]
+    cmd = [_tool("tensorboard"), "--logdir", str(root)]
     return cmd + (["--port", str(port)] if port is not None else [])
 
 
+wandb_app = typer.Typer(add_completion=False, no_args_is_help=True,
+                        help="The W&B mirror of runs trained with runtime.wandb=true (docs/watching.md).")
+
+
 def register(app: typer.Typer) -> None:
-    """Add ``tensorboard`` and ``plot`` to ``app``."""
+    """Add ``tensorboard``, ``wandb sync`` and ``plot`` to ``app``."""
     app.command("tensorboard")(tensorboard_cmd)
+    wandb_app.command("sync")(wandb_sync_cmd)
+    app.add_typer(wandb_app, name="wandb")
     app.command("plot")(plot_cmd)
 
 
@@ -56,6 +69,46 @@ def tensorboard_cmd(
     if n == 0:
         _fail(f"no event files under {root} (train with runtime.tensorboard=true)")
     raise typer.Exit(subprocess.call(cmd))
+
+def wandb_runs(paths: list[Path]) -> list[Path]:
+    """The run directories at or under ``paths`` that have a W&B mirror (``wandb/run_id``), sorted, each once."""
+    found: set[Path] = set()
+    for path in paths:
+        if (path / WANDB_DIR / RUN_ID).exists():
+            found.add(path)
+        found.update(f.parent.parent for f in path.rglob(f"{WANDB_DIR}/{RUN_ID}"))
+    return sorted(found)
+
+
+def wandb_sync_cmd(
+    paths: list[Path] = typer.Argument(..., help="Results roots (a whole sweep) and/or run directories."),
+    run: bool = typer.Option(False, "--run", help="Run `wandb sync` instead of printing the command."),
+    unfinished: bool = typer.Option(False, "--unfinished", help="Also runs that are not done (a resume "
+                                    "rebuilds their W&B folder: sync them again once they are done)."),
+) -> None:
+    """Print (or --run) the `wandb sync` command that sends the offline W&B runs under PATHS (runtime.wandb=true)."""
+    for path in paths:
+        if not path.is_dir():
+            _fail(f"{path} does not exist or is not a directory")
+    runs = wandb_runs(paths)
+    done = [r for r in runs if unfinished or (r / DONE).exists()]
+    folders = [f for r in done for f in offline_folders(r)]
+    if not folders:
+        why = (" (train with runtime.wandb=true)" if not runs else
+               f"; {len(runs) - len(done)} not done (--unfinished)" if len(done) < len(runs) else
+               " (runtime.wandb_mode=online runs were sent as they trained)")
+        _fail(f"no offline W&B run to sync under {', '.join(map(str, paths))}{why}")
+    cmd = [_tool("wandb"), "sync", *map(str, folders)]
+    if not run:
+        left = len(runs) - len(done)
+        typer.echo(shlex.join(cmd))
+        typer.echo(f"# {len(folders)} offline W&B run(s)" + (f", {left} not done left out (--unfinished)" if left
+                                                            else ""), err=True)
+        return
+    if shutil.which(cmd[0]) is None and not Path(cmd[0]).exists():
+        _fail("wandb not found: pip install '.[wandb]' (or run the printed command where it is installed)")
+    raise typer.Exit(subprocess.call(cmd))
+
 
 def plot_cmd(
     paths: list[Path] = typer.Argument(..., help="Results roots and/or run directories."),

@@ -27,6 +27,8 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+# The W&B mirror (runtime.wandb) of the tests is offline: no test needs the network, whatever a run's config says.
+os.environ.update(WANDB_MODE="offline", WANDB_SILENT="true", WANDB_ERROR_REPORTING="false")
 
 import pytest  # noqa: E402
 import torch  # noqa: E402

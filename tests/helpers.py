@@ -25,12 +25,13 @@ from repro.launch.cli import register as register_launch
 from repro.runs.logger import WALLCLOCK_COLUMNS
 from repro.runs.runformat import EVAL, TRAIN
 from repro.runs.tblog import read_scalars
+from repro.runs.wblog import read_offline_run
 
 # The tiny online run several modules share (conftest's session fixtures train it once).
 TINY = ["profile=tiny", "task=cheetah_run", "seed=3", "runtime.threads=1"]
 REL = Path("default/taco/base/cheetah_run/seed_3")  # its run directory under a results root
-# Its recorded, watched twin: recording, TensorBoard and videos are runtime keys (not identity, not logs).
-WATCH = ["runtime.tensorboard=true", "train.save_video=true", "train.video_size=64"]
+# Its recorded, watched twin: recording, TensorBoard, W&B and videos are runtime keys (not identity, not logs).
+WATCH = ["runtime.tensorboard=true", "runtime.wandb=true", "train.save_video=true", "train.video_size=64"]
 RECORD = ["runtime.record=true"]
 # pytest-xdist groups: the tests that use one session run (conftest) run on one worker, so it is made once.
 TINY_TACO = "tiny_taco"
@@ -95,14 +96,36 @@ def csv_series(run: Path) -> dict[str, list[tuple[int, float]]]:
     return out
 
 
-def assert_mirrors_csv(run: Path) -> None:
-    tb, expected = read_scalars(run), csv_series(run)
-    assert set(tb) == set(expected)
+def _assert_same_series(got: dict[str, list[tuple[int, float]]], expected: dict[str, list[tuple[int, float]]]) -> None:
+    assert set(got) == set(expected)
     for tag, points in expected.items():
-        steps = [s for s, _ in tb[tag]]
+        steps = [s for s, _ in got[tag]]
         assert len(steps) == len(set(steps)), f"{tag}: a step twice {steps}"
         assert steps == [s for s, _ in points], tag
-        np.testing.assert_allclose([v for _, v in tb[tag]], [v for _, v in points], rtol=1e-6, err_msg=tag)
+        np.testing.assert_allclose([v for _, v in got[tag]], [v for _, v in points], rtol=1e-6, err_msg=tag)
+
+
+def assert_mirrors_csv(run: Path) -> None:
+    """The run's TensorBoard event files (read by TensorBoard) hold every CSV point once."""
+    _assert_same_series(read_scalars(run), csv_series(run))
+
+
+def assert_wandb_mirrors_csv(run: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The run's offline W&B history (read by wandb's own reader) holds every CSV point once: one history row per
+    frame of either CSV, at W&B step = frame; returns the W&B run record and the history."""
+    record, history = read_offline_run(run)
+    steps = [row["_step"] for row in history]
+    assert steps == sorted(set(steps)), f"a W&B step twice or out of order: {steps}"
+    assert all(row["frame"] == row["_step"] for row in history)
+    expected = csv_series(run)
+    assert set(steps) == {s for points in expected.values() for s, _ in points}
+    got: dict[str, list[tuple[int, float]]] = {}
+    for row in history:
+        for key, value in row.items():
+            if key.startswith(("eval/", "train/")):  # W&B's own _step, _runtime, _timestamp and the frame aside
+                got.setdefault(key, []).append((int(row["frame"]), float(value)))
+    _assert_same_series(got, expected)
+    return record, history
 
 
 # Sweeps of tiny runs (the local and SLURM launcher tests).

@@ -21,11 +21,26 @@ def repro(*args: str, timeout: int = 300) -> subprocess.CompletedProcess:
 def test_the_command_line_starts_without_torch():
     """`repro --help`, `status`, `sweep` (the launcher itself) and bad input need no torch: the commands that train or
     time import it when they run (about 2 s of every start otherwise). Fails when a CLI module imports torch (or a
-    module that does) at the top."""
+    module that does) at the top. Nor wandb (about 1 s): only runtime.wandb=true loads it."""
     code = ("import sys, repro_app.cli; "
-            "print(sorted(m for m in ('torch', 'dm_control', 'matplotlib') if m in sys.modules))")
+            "print(sorted(m for m in ('torch', 'dm_control', 'matplotlib', 'wandb') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_a_run_without_runtime_wandb_does_not_import_wandb(tmp_path):
+    """The trainer, both loops and their loggers (TensorBoard on) write rows without loading wandb; with
+    runtime.wandb=true the same logger does (so this test can fail)."""
+    code = ("import sys, pathlib; from repro.train import api, online, offline; "
+            "from repro.runs.logger import RunLogger; pathlib.Path(sys.argv[1]).mkdir(); "
+            "from repro.runs.wblog import WandbRun; wb = WandbRun('offline', 'p', None, 'g', 'g/n', ('seed=1',)); "
+            "log = RunLogger(sys.argv[1], [], echo=lambda s: None, tensorboard=True, "
+            "wandb=wb if sys.argv[2] == 'on' else None); log.log_train({'frame': 100}); log.close(); "
+            "print('wandb' in sys.modules)")
+    for switch, loaded in (("off", "False"), ("on", "True")):
+        out = subprocess.run([sys.executable, "-c", code, str(tmp_path / switch), switch], capture_output=True,
+                             text=True, timeout=120)
+        assert out.returncode == 0 and out.stdout.strip() == loaded, out.stdout + out.stderr
 
 
 def test_tasks_lists_every_task_with_action_dim_and_defaults():

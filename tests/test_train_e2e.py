@@ -25,6 +25,7 @@ from helpers import (
     TINY_TACO,
     assert_mirrors_csv,
     assert_same_recording,
+    assert_wandb_mirrors_csv,
     deterministic,
     kill_when,
     rows,
@@ -34,6 +35,7 @@ from repro.runs import rundir
 from repro.runs.logger import WALLCLOCK_COLUMNS
 from repro.runs.runformat import CHECKPOINT, DONE, EVAL, TRAIN
 from repro.runs.tblog import TB_DIR, read_scalars
+from repro.runs.wblog import RUN_ID, WANDB_DIR, offline_folders
 from repro.train import api
 
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group(TINY_TACO)]
@@ -73,11 +75,12 @@ def test_run_directory_contract(tiny_taco: Path):
 
 def test_same_seed_gives_identical_logs_and_recording_or_watching_changes_no_number(tiny_taco: Path,
                                                                                     tiny_taco_watched: Path):
-    """The watched twin is a second run of the same seed and config, with recording, TensorBoard and videos on."""
+    """The watched twin is a second run of the same seed and config, with recording, TensorBoard, W&B and videos
+    on."""
     for name in (EVAL, TRAIN):
         pd.testing.assert_frame_equal(deterministic(tiny_taco_watched / name), deterministic(tiny_taco / name))
     assert set(WALLCLOCK_COLUMNS) <= set(pd.read_csv(tiny_taco_watched / TRAIN).columns)
-    for extra in ("record", TB_DIR, "videos"):
+    for extra in ("record", TB_DIR, WANDB_DIR, "videos"):
         assert (tiny_taco_watched / extra).is_dir() and not (tiny_taco / extra).exists(), extra
 
 
@@ -86,12 +89,13 @@ def _count(folder: Path, pattern: str) -> int:
 
 
 def test_sigkill_and_resume_matches_uninterrupted_run(tiny_taco: Path, tiny_taco_watched: Path, tmp_path: Path):
-    """Killed twice, then resumed: the logs, the recording and the event files are those of the uninterrupted
-    runs, and `train.video_every=last` leaves the final evaluation's video only."""
+    """Killed twice, then resumed: the logs, the recording, the event files and the W&B history are those of the
+    uninterrupted runs (the W&B run keeps its id), and `train.video_every=last` leaves the final evaluation's
+    video only."""
     run = tmp_path / REL
     snaps, eps = run / "record" / "snapshots", run / "record" / "episodes"
-    cmd = train_cmd(tmp_path, "runtime.record=true", "runtime.tensorboard=true", "train.save_video=true",
-                    "train.video_size=32", "train.video_every=last")
+    cmd = train_cmd(tmp_path, "runtime.record=true", "runtime.tensorboard=true", "runtime.wandb=true",
+                    "train.save_video=true", "train.video_size=32", "train.video_every=last")
     # 1st kill: after the first evaluation row and its snapshot, before any checkpoint (everything recorded goes)
     kill_when(cmd, lambda: rows(run / EVAL) >= 1 and _count(snaps, "step_*.pt") >= 1
               and not (run / CHECKPOINT).exists())
@@ -111,6 +115,7 @@ def test_sigkill_and_resume_matches_uninterrupted_run(tiny_taco: Path, tiny_taco
     kill_when(cmd, ready)
     assert not (run / DONE).exists() and rows(run / TRAIN) == 2
     assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200]  # the point the resume rewrites
+    run_id = (run / WANDB_DIR / RUN_ID).read_text()
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     assert "resumed" in out.stdout
@@ -121,6 +126,10 @@ def test_sigkill_and_resume_matches_uninterrupted_run(tiny_taco: Path, tiny_taco
     assert_same_recording(run, tiny_taco_watched)
     assert_mirrors_csv(run)
     assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200, 400]
+    record, history = assert_wandb_mirrors_csv(run)  # each frame once, though frame 200 was mirrored twice
+    assert [row["_step"] for row in history] == [0, 100, 200, 300, 400]
+    assert (run / WANDB_DIR / RUN_ID).read_text() == run_id and record["id"] == run_id.strip()
+    assert len(offline_folders(run)) == 1
     assert [v.name for v in (run / "videos").iterdir()] == ["frame_000000400.mp4"]
 
 

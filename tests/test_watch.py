@@ -1,7 +1,9 @@
-"""Watching runs (issue 12): TensorBoard mirror of the CSVs, evaluation videos, `repro plot`, `repro status --watch`."""
+"""Watching runs (issue 12): TensorBoard mirror of the CSVs, evaluation videos, `repro plot`, `repro status --watch`;
+the W&B mirror and `repro wandb sync` (issue 28)."""
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from pathlib import Path
@@ -12,13 +14,14 @@ import pytest
 from typer.testing import CliRunner
 
 from analysis_fixtures import FRAMES, write_run
-from helpers import TINY_TACO, assert_mirrors_csv
+from helpers import REL, TINY_TACO, assert_mirrors_csv, assert_wandb_mirrors_csv, write_sweep
 from repro.launch.state import record_launch, state_dir
 from repro.runs import rundir
 from repro.runs.logger import RunLogger
-from repro.runs.runformat import DONE, EVAL
+from repro.runs.runformat import DONE, EVAL, RESOLVED
 from repro.runs.tblog import TB_DIR, read_scalars
 from repro.runs.video import count_frames, write_mp4
+from repro.runs.wblog import RUN_ID, WANDB_DIR, WandbRun, offline_folders, read_history
 from repro_app.cli import app
 
 METRICS = ["critic_loss"]
@@ -86,6 +89,82 @@ def test_mirror_is_off_by_default(tmp_path: Path):
     assert not (tmp_path / TB_DIR).exists()
 
 
+# ----------------------------------------------------------------------------- W&B mirror
+WB = WandbRun(mode="offline", project="taco-test", entity=None, group="e/taco/base/cheetah_run",
+              name="e/taco/base/cheetah_run/seed_1", tags=("sweep=s", "seed=1"), config={"seed": 1, "agent": {"K": 3}})
+
+
+def test_wandb_mirror_equals_csv_and_a_resume_rebuilds_it_without_repeated_steps(tmp_path: Path, monkeypatch):
+    monkeypatch.setenv("WANDB_MODE", "online")  # runtime.wandb_mode decides, not the environment
+    log = RunLogger(tmp_path, METRICS, echo=lambda s: None, wandb=WB)
+    run_id = (tmp_path / WANDB_DIR / RUN_ID).read_text()
+    log.log_eval(_eval_row(0))
+    log.log_train(_train_row(100, None))
+    checkpoint = log.offsets()
+    log.log_train(_train_row(200, 0.25))  # written after the checkpoint, then the process dies
+    log.log_eval(_eval_row(200))
+    log.close()
+    resumed = RunLogger(tmp_path, METRICS, offsets=checkpoint, echo=lambda s: None, wandb=WB)
+    resumed.log_train(_train_row(200, 0.5))  # the resumed run writes the same frames again
+    resumed.log_eval(_eval_row(200))
+    resumed.log_train(_train_row(300, 0.75))
+    resumed.close()
+    record, history = assert_wandb_mirrors_csv(tmp_path)
+    assert [row["_step"] for row in history] == [0, 100, 200, 300]
+    assert history[2]["train/critic_loss"] == 0.5 and "eval/episode_reward" in history[2]  # one row per frame
+    assert "train/critic_loss" not in history[1]  # an empty cell is no point
+    assert len(offline_folders(tmp_path)) == 1 and (tmp_path / WANDB_DIR / RUN_ID).read_text() == run_id
+    assert record["id"] == run_id.strip() and record["project"] == "taco-test"
+    assert (record["group"], record["name"], record["tags"]) == (WB.group, WB.name, list(WB.tags))
+    assert record["config"]["agent"] == {"K": 3} and record["config"]["seed"] == 1
+
+
+def test_wandb_mirror_logs_only_the_steps_the_w_and_b_run_lacks(tmp_path: Path):
+    """What an online resume does at the server's next step (``first_step``, from W&B's ``starting_step``): the
+    truncated CSVs' rows from it on are logged, and live rows before it are not logged again."""
+    from repro.runs.wblog import WandbMirror
+
+    log = RunLogger(tmp_path, METRICS, echo=lambda s: None)
+    for frame in (100, 200):
+        log.log_train(_train_row(frame, 0.5))
+    log.close()
+    mirror = WandbMirror(tmp_path, WB, echo=lambda s: None)
+    mirror.first_step = 150  # the server has steps 0..149 from the killed process
+    assert mirror.rebuild({"train": tmp_path / "train.csv"}) == 1
+    mirror.add_row("eval", _eval_row(100))  # already on the server
+    mirror.add_row("eval", _eval_row(200))
+    mirror.close()
+    assert [(row["_step"], "eval/episode_reward" in row) for row in read_history(tmp_path)] == [(200, True)]
+
+
+def test_offline_wandb_mirror_steps_are_updates(tmp_path: Path):
+    from repro.train.offline import OfflineLogger
+
+    log = OfflineLogger(tmp_path, ["actor_loss"], echo=lambda s: None, wandb=WB)
+    for update in (0, 1000):
+        log.log_eval({"update": update, "episode_reward": update / 10, "episode_reward_std": 0.0,
+                      "episode_length": 100.0, "success": None, "eval_episodes": 1, "normalized_score": None,
+                      "reference_return": None, "score_reference": "none", "total_time": 1.0})
+    log.log_train({"update": 1000, "updates_per_s": 5.0, "total_time": 1.0, "actor_loss": -0.5})
+    log.close()
+    history = read_history(tmp_path)
+    assert [(row["_step"], row["update"], row["eval/episode_reward"]) for row in history] == [(0, 0, 0),
+                                                                                                (1000, 1000, 100)]
+    assert history[1]["train/actor_loss"] == -0.5
+    assert not any("eval/score_reference" in row or "eval/normalized_score" in row for row in history)
+
+
+def test_wandb_without_the_package_is_one_line_before_anything_is_written(tmp_path: Path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "wandb", None)  # `import wandb` fails as it does when it is not installed
+    code, _, err = cli("train", "profile=tiny", "runtime.wandb=true", f"runtime.results_root={tmp_path}")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "pip install '.[wandb]'" in err, err
+    assert list(tmp_path.iterdir()) == []
+    sweep = write_sweep(tmp_path, "wb", ["cheetah_run"], {"a": []}, 1)
+    code, out, err = cli("sweep", str(sweep), "--set", "runtime.wandb=true", "--results", str(tmp_path / "r"))
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "pip install '.[wandb]'" in err, out + err
+    assert not (tmp_path / "r").exists()
+
+
 # ----------------------------------------------------------------------------- videos
 def test_video_decodes_to_the_frames_written(tmp_path: Path):
     frames = np.random.default_rng(0).integers(0, 255, size=(23, 32, 48, 3), dtype=np.uint8)
@@ -127,8 +206,8 @@ def test_render_view_leaves_observations_unchanged(task: str):
     assert views[0].shape == (64, 64, 3) and views[0].dtype == np.uint8 and views[0].std() > 0
 
 
-# conftest's session run `tiny_taco_watched` (TensorBoard, videos of every evaluation); that its logs equal the
-# plain run's, `video_every=last` and the SIGKILL-and-resume of the event files are checked by
+# conftest's session run `tiny_taco_watched` (TensorBoard, W&B, videos of every evaluation); that its logs equal the
+# plain run's, `video_every=last` and the SIGKILL-and-resume of the event files and of the W&B run are checked by
 # tests/test_train_e2e.py.
 @pytest.mark.slow
 @pytest.mark.xdist_group(TINY_TACO)
@@ -145,6 +224,42 @@ def test_tiny_run_writes_videos_and_event_files(tiny_taco_watched: Path):
         assert count_frames(video) == n + 1  # the reset frame and one per step
         meta = next(imageio_ffmpeg.read_frames(str(video)))
         assert tuple(meta["size"]) == (64, 64)
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group(TINY_TACO)
+def test_tiny_run_w_and_b_history_equals_its_csvs_and_repro_wandb_sync_names_it(tiny_taco_watched: Path):
+    import json
+
+    watched = tiny_taco_watched
+    record, history = assert_wandb_mirrors_csv(watched)  # every eval.csv and train.csv point once, at its frame
+    ev = pd.read_csv(watched / EVAL)
+    evals = [row for row in history if "eval/episode_reward" in row]
+    assert [row["frame"] for row in evals] == list(ev["frame"]) == [0, 200, 400]
+    np.testing.assert_allclose([row["eval/episode_reward"] for row in evals], ev["episode_reward"], rtol=1e-6)
+    assert record["name"] == REL.as_posix() and record["group"] == REL.parent.as_posix()
+    assert record["tags"] == ["seed=3"] and record["project"] == "taco-repro"  # no sweep: `repro train`
+    config = record["config"]
+    assert config["seed"] == 3 and config["agent"]["name"] == "taco" and config["runtime"]["wandb"] is True
+    assert config["resolved"] == {k: v for k, v in json.loads((watched / RESOLVED).read_text()).items()
+                                  if k != "format"}
+    root = watched.parents[len(REL.parts) - 1]
+    code, out, err = cli("wandb", "sync", str(root))
+    (folder,) = offline_folders(watched)
+    assert code == 0 and out.split()[1:] == ["sync", str(folder)] and "1 offline W&B run(s)" in err, out + err
+
+
+def test_wandb_sync_bad_input_is_one_line(tmp_path: Path):
+    for target, message in ((tmp_path / "missing", "does not exist"), (tmp_path, "runtime.wandb=true")):
+        code, _, err = cli("wandb", "sync", str(target))
+        assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, err
+    run = tmp_path / "e" / "seed_1"
+    (run / WANDB_DIR / "offline-run-1-x").mkdir(parents=True)
+    (run / WANDB_DIR / RUN_ID).write_text("x" * 16)
+    code, _, err = cli("wandb", "sync", str(tmp_path), "--run")  # not done: nothing sent, nothing started
+    assert code == 2 and "1 not done (--unfinished)" in err and len(err.strip().splitlines()) == 1, err
+    code, out, _ = cli("wandb", "sync", str(tmp_path), "--unfinished")
+    assert code == 0 and out.strip().endswith(str(run / WANDB_DIR / "offline-run-1-x"))
 
 
 # ----------------------------------------------------------------------------- repro tensorboard

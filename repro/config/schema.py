@@ -118,6 +118,13 @@ class Device(Choice):
     auto = "auto"  # cuda when available, else cpu
 
 
+class WandbMode(Choice):
+    """``runtime.wandb_mode``: where the W&B mirror's run goes."""
+
+    offline = "offline"  # a W&B run folder under {run}/wandb only; nothing leaves the machine (`repro wandb sync`)
+    online = "online"  # streamed to the W&B server as the run trains
+
+
 class VideoEvery(Choice):
     """``train.video_every``: which evaluations get a video."""
 
@@ -359,6 +366,11 @@ class RuntimeConfig:
     record: bool
     tensorboard: bool
     keep_replay: bool
+    wandb: bool
+    wandb_mode: WandbMode
+    wandb_project: str
+    wandb_entity: Optional[str]
+    sweep: Optional[str]
 
 
 @dataclass

@@ -50,7 +50,7 @@ def _fail(message: str, code: int = 2) -> typer.Exit:
 
 
 def _shown_overrides(p: PlannedRun) -> str:
-    return " ".join(o for o in p.overrides if not o.startswith("runtime.results_root="))
+    return " ".join(o for o in p.overrides if not o.startswith(("runtime.results_root=", "runtime.sweep=")))
 
 
 def _rel(path: Path, root: Path) -> str:
@@ -176,6 +176,7 @@ def sweep_cmd(
             return
         if any(p.state == "mismatch" for p in planned) and not force:
             raise SweepError(_mismatch_error(planned, root))
+        _check_wandb(planned)
         report = _launch(spec, planned, root, launcher, max_parallel, force, cluster_config, warm_start)
     except SweepError as exc:
         raise _fail(str(exc)) from None
@@ -184,6 +185,17 @@ def sweep_cmd(
         raise typer.Exit(130)
     if report.failed or report.mismatch:
         raise typer.Exit(1)
+
+
+def _check_wandb(planned: list[PlannedRun]) -> None:
+    """runtime.wandb=true without the wandb package: one line (SweepError) before any run starts."""
+    if any(p.cfg.runtime.wandb and p.state != "done" for p in planned):
+        from repro.runs.wblog import WandbError, check_wandb
+
+        try:
+            check_wandb()
+        except WandbError as exc:
+            raise SweepError(str(exc)) from None
 
 
 def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: Launcher, max_parallel: Optional[int],

@@ -11,6 +11,7 @@ from typing import Any
 from repro.runs.fsutil import named_os_error
 from repro.runs.runformat import EVAL, EVAL_COLUMNS, TRAIN, TRAIN_COLUMNS, WALLCLOCK_COLUMNS, train_columns
 from repro.runs.tblog import TensorBoardMirror
+from repro.runs.wblog import WandbMirror, WandbRun
 
 __all__ = ["CsvLog", "RunLogger", "format_row", "header_line", "EVAL_COLUMNS", "TRAIN_COLUMNS", "WALLCLOCK_COLUMNS"]
 
@@ -78,50 +79,63 @@ class CsvLog:
 
 
 class CsvPairLogger:
-    """A run's ``eval.csv`` and ``train.csv`` (opened at the checkpoint's offsets) and, with ``tensorboard``
-    (runtime.tensorboard), TensorBoard scalars at ``step_column`` (repro/runs/tblog.py), rebuilt from the CSVs once
-    they are truncated to the checkpoint, so a resumed run never holds a point twice. Subclasses say what an
-    evaluation prints."""
+    """A run's ``eval.csv`` and ``train.csv`` (opened at the checkpoint's offsets) and their mirrors at
+    ``step_column``: with ``tensorboard`` (runtime.tensorboard), TensorBoard scalars (repro/runs/tblog.py); with
+    ``wandb`` (runtime.wandb), a W&B run (repro/runs/wblog.py). Both are rebuilt from the CSVs once they are
+    truncated to the checkpoint (a resume, a requeued job, a budget extension), so a resumed run never holds a
+    point twice. Subclasses say what an evaluation prints."""
 
     def __init__(self, run_dir: str | os.PathLike, eval_columns: Sequence[str], train_cols: Sequence[str],
-                 offsets: dict[str, int] | None, echo: Callable[[str], None], tensorboard: bool, step_column: str):
+                 offsets: dict[str, int] | None, echo: Callable[[str], None], tensorboard: bool, step_column: str,
+                 wandb: WandbRun | None = None):
         run_dir = Path(run_dir)
         offsets = offsets or {}
         self.eval = CsvLog(run_dir / EVAL, eval_columns, offsets.get("eval"))
         self.train = CsvLog(run_dir / TRAIN, train_cols, offsets.get("train"))
         self.echo = echo
+        files = {"eval": self.eval.path, "train": self.train.path}
         self.tb: TensorBoardMirror | None = None
         if tensorboard:
             self.tb = TensorBoardMirror(run_dir, step_column=step_column)
-            self.tb.rebuild({"eval": self.eval.path, "train": self.train.path})
+            self.tb.rebuild(files)
+        self.wb: WandbMirror | None = None
+        if wandb is not None:
+            self.wb = WandbMirror(run_dir, wandb, step_column=step_column, echo=echo)
+            self.wb.rebuild(files)
 
     def offsets(self) -> dict[str, int]:
         return {"eval": self.eval.offset(), "train": self.train.offset()}
 
     def _write_eval(self, row: dict[str, Any]) -> None:
-        self.eval.write(row)
-        if self.tb is not None:
-            self.tb.add_row("eval", row)
+        self._write("eval", self.eval, row)
 
     def log_train(self, row: dict[str, Any]) -> None:
-        self.train.write(row)
+        self._write("train", self.train, row)
+
+    def _write(self, prefix: str, log: CsvLog, row: dict[str, Any]) -> None:
+        log.write(row)  # the CSV first: the mirrors follow it
         if self.tb is not None:
-            self.tb.add_row("train", row)
+            self.tb.add_row(prefix, row)
+        if self.wb is not None:
+            self.wb.add_row(prefix, row)
 
     def close(self) -> None:
         self.eval.close()
         self.train.close()
         if self.tb is not None:
             self.tb.close()
+        if self.wb is not None:
+            self.wb.close()
 
 
 class RunLogger(CsvPairLogger):
-    """The online run's logs: columns from repro.runs.runformat, TensorBoard step = frame."""
+    """The online run's logs: columns from repro.runs.runformat, TensorBoard and W&B step = frame."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
                  offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print,
-                 tensorboard: bool = False):
-        super().__init__(run_dir, EVAL_COLUMNS, train_columns(metric_names), offsets, echo, tensorboard, "frame")
+                 tensorboard: bool = False, wandb: WandbRun | None = None):
+        super().__init__(run_dir, EVAL_COLUMNS, train_columns(metric_names), offsets, echo, tensorboard, "frame",
+                         wandb)
 
     def log_eval(self, row: dict[str, Any]) -> None:
         self._write_eval(row)

@@ -29,9 +29,10 @@ DONE = "DONE"  # written last: the run reached its budget
 FRAMES = "frames.npz"  # the final evaluation's first episode (trajectory figures)
 REPLAY = "replay"  # folder of replay episodes, so that a resume does not rewrite the buffer
 TB = "tb"  # runtime.tensorboard: TensorBoard event files mirroring eval.csv and train.csv (repro/runs/tblog.py)
+WANDB = "wandb"  # runtime.wandb: the W&B run id and the offline W&B run folder mirroring the CSVs (repro/runs/wblog.py)
 VIDEOS = "videos"  # train.save_video: frame_XXXXXXXXX.mp4 (offline: update_...) per evaluation (repro/runs/video.py)
 WRITER_LOCK = ".writer.lock"  # flock()ed by the one process writing the run; names the last holder (repro/runs/rundir.py)
-FILES = (CONFIG, META, RESOLVED, EVAL, TRAIN, CHECKPOINT, DONE, FRAMES, REPLAY, TB, VIDEOS)
+FILES = (CONFIG, META, RESOLVED, EVAL, TRAIN, CHECKPOINT, DONE, FRAMES, REPLAY, TB, WANDB, VIDEOS)
 
 # ---------------------------------------------------------------- CSV columns
 EVAL_COLUMNS = ("frame", "step", "episode", "episode_reward", "episode_reward_std", "episode_length", "success",
@@ -101,8 +102,8 @@ def reached_budgets(path: str | Path) -> list[int]:
     done = read_done(path)
     if done is not None:
         value = done.get("frame", done.get("update"))
-        if _is_int(value):
-            reached.add(int(value))
+        if isinstance(value, int) and not isinstance(value, bool):
+            reached.add(value)
     return sorted(reached)
 
 

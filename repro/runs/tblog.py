@@ -12,16 +12,17 @@ import csv
 import math
 import os
 import shutil
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 from repro.runs.runformat import TB as TB_DIR
 
-__all__ = ["TB_DIR", "TensorBoardMirror", "read_scalars"]
+__all__ = ["TB_DIR", "TensorBoardMirror", "cell_number", "csv_rows", "read_scalars"]
 
 
-def _number(value: Any) -> float | None:
+def cell_number(value: Any) -> float | None:
+    """A CSV cell (or a logged value) as a float; None for an empty cell, text or NaN (no point)."""
     if value is None or value == "":
         return None
     try:
@@ -29,6 +30,17 @@ def _number(value: Any) -> float | None:
     except (TypeError, ValueError):
         return None
     return None if math.isnan(x) else x
+
+
+def csv_rows(csv_files: Mapping[str, str | os.PathLike]) -> Iterator[tuple[str, dict[str, str]]]:
+    """(prefix, row) for every row of the given CSV files (prefix -> path; a missing file has none), file by file."""
+    for prefix, path in csv_files.items():
+        path = Path(path)
+        if not path.exists():
+            continue
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                yield prefix, row
 
 
 class TensorBoardMirror:
@@ -45,13 +57,13 @@ class TensorBoardMirror:
 
     def add_row(self, prefix: str, row: Mapping[str, Any], flush: bool = True) -> None:
         """Write every numeric column of ``row`` as ``{prefix}/{column}`` at the row's step."""
-        step = _number(row.get(self.step_column))
+        step = cell_number(row.get(self.step_column))
         if step is None:
             return
         for key, value in row.items():
             if key == self.step_column:
                 continue
-            x = _number(value)
+            x = cell_number(value)
             if x is not None:
                 self._writer.add_scalar(f"{prefix}/{key}", x, global_step=int(step))
         if flush:
@@ -60,14 +72,9 @@ class TensorBoardMirror:
     def rebuild(self, csv_files: Mapping[str, str | os.PathLike]) -> int:
         """Write all rows of the given CSV files (prefix -> path) again; returns the number of rows."""
         rows = 0
-        for prefix, path in csv_files.items():
-            path = Path(path)
-            if not path.exists():
-                continue
-            with open(path, newline="") as f:
-                for row in csv.DictReader(f):
-                    self.add_row(prefix, row, flush=False)
-                    rows += 1
+        for prefix, row in csv_rows(csv_files):
+            self.add_row(prefix, row, flush=False)
+            rows += 1
         self._writer.flush()
         return rows
 

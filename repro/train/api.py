@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import os
 import pickle
 import shutil
 import sys
@@ -15,7 +17,7 @@ import torch
 import yaml
 from omegaconf import DictConfig, OmegaConf
 
-from repro.config.compose import compose, typed
+from repro.config.compose import compose, run_keys, typed
 from repro.config.schema import Device, RunConfig, budget_key, is_offline
 from repro.data.episodes import EpisodeStore
 from repro.data.offline_replay import (
@@ -41,6 +43,7 @@ from repro.runs.checkpoint import load_checkpoint, save_checkpoint
 from repro.runs.fsutil import remove_torn_temporaries
 from repro.runs.logger import RunLogger
 from repro.runs.video import VIDEO_DIR, EvalVideos
+from repro.runs.wblog import WandbRun, check_wandb
 from repro.train.offline import BatchSource, OfflineLogger, OfflineTrainer, check_resume_dataset
 from repro.train.online import Trainer
 
@@ -120,6 +123,9 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         return path
     device = resolve_device(rc.runtime.device, "runtime.device")
     resolve_device(rc.replay.device, "replay.device")
+    wandb = wandb_run(rc, cfg, path) if rc.runtime.wandb else None
+    if wandb is not None:
+        check_wandb()  # WandbError (one line) without the package
     holder = rundir.writer_lock_holder(path)  # refuse a running run before reading a large dataset for nothing
     if holder is not None:
         raise rundir.RunLocked(rundir.locked_message(path, holder))
@@ -145,7 +151,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
             state = _load_state(path, data)
         _check_progress(path, start, state, rc.env.action_repeat)
         try:
-            _start(rc, cfg, path, start, device, data, state, echo, progress)
+            _start(rc, cfg, path, start, device, data, state, echo, progress, wandb)
         except Exception:
             if created and not (path / rundir.CHECKPOINT).exists():
                 shutil.rmtree(path, ignore_errors=True)  # failed before anything resumable: leave no directory
@@ -154,7 +160,8 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
 
 
 def _start(rc: RunConfig, cfg: DictConfig, path: Path, start: Start, device: str, data: OfflineData | None,
-           state: dict | None, echo: Callable[[str], None], progress: bool | None) -> None:
+           state: dict | None, echo: Callable[[str], None], progress: bool | None,
+           wandb: WandbRun | None = None) -> None:
     """Under the writer lock: write config.yaml (today's format, the new budget) and meta.json, drop DONE of a run
     being extended, and train."""
     remove_torn_temporaries(path)
@@ -172,9 +179,26 @@ def _start(rc: RunConfig, cfg: DictConfig, path: Path, start: Start, device: str
         echo(f"extending from {start.extend_from} to {start.budget} {start.unit}: {path}")
     ends = tuple(b for b in start.reached if b < start.budget)
     if data is not None:
-        _train_offline(rc, path, data, device, state, echo, progress, ends)
+        _train_offline(rc, path, data, device, state, echo, progress, ends, wandb)
     else:
-        _train_online(rc, path, device, state, echo, progress, ends)
+        _train_online(rc, path, device, state, echo, progress, ends, wandb)
+
+
+def wandb_run(rc: RunConfig, cfg: DictConfig, path: Path) -> WandbRun:
+    """runtime.wandb: the W&B run of the run directory ``path``, named by its identity (its folder under the
+    results root), grouped by experiment/agent/variant/task (and dataset), tagged with the sweep and the seed;
+    its config is the run's resolved config."""
+    name = Path(os.path.relpath(path, rc.runtime.results_root)).as_posix()
+    tags = ([f"sweep={rc.runtime.sweep}"] if rc.runtime.sweep else []) + [f"seed={rc.seed}"]
+    config = run_keys(cfg)  # what config.yaml holds: the keys the run's learner reads
+    return WandbRun(mode=str(rc.runtime.wandb_mode), project=rc.runtime.wandb_project, entity=rc.runtime.wandb_entity,
+                    group=name.rsplit("/", 1)[0], name=name, tags=tuple(tags),
+                    config={str(k): v for k, v in config.items()})
+
+
+def _with_resolved(wandb: WandbRun | None, values: dict[str, Any]) -> WandbRun | None:
+    """The W&B config with the run's resolved values (resolved.json) beside the config."""
+    return None if wandb is None else dataclasses.replace(wandb, config={**wandb.config, "resolved": values})
 
 
 def _config_format(path: Path) -> int | None:
@@ -263,14 +287,15 @@ def _remove_empty(path: Path) -> None:
 
 
 def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, echo: Callable[[str], None],
-                  progress: bool | None, ends: tuple[int, ...] = ()) -> None:
+                  progress: bool | None, ends: tuple[int, ...] = (), wandb: WandbRun | None = None) -> None:
     ckpt_file = path / rundir.CHECKPOINT
     env = build_env(rc, rc.seed)
     eval_env = build_env(rc, rc.seed + 10_000)
     try:
         spec = env.spec
         agent = cast(OnlineLearner, build_agent(rc, spec.obs_shape, spec.action_dim, device))  # not is_offline
-        rundir.write_resolved(path, rundir.resolved_values(rc, agent))
+        values = rundir.resolved_values(rc, agent)
+        rundir.write_resolved(path, values)
         replay_device = resolve_device(rc.replay.device)
         buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
                               rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device)
@@ -279,7 +304,7 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
             episodes.prune(set())
         recorder = Recorder.open(path, rc.agent, spec.obs_shape, spec.action_dim, state) if rc.runtime.record else None
         logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo,
-                           tensorboard=rc.runtime.tensorboard)
+                           tensorboard=rc.runtime.tensorboard, wandb=_with_resolved(wandb, values))
         bar = _progress(rc, progress)
         trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
                           lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
@@ -372,7 +397,8 @@ def run_action_dim(rc: RunConfig) -> int:
 
 
 def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, state: dict | None,
-                   echo: Callable[[str], None], progress: bool | None, ends: tuple[int, ...] = ()) -> None:
+                   echo: Callable[[str], None], progress: bool | None, ends: tuple[int, ...] = (),
+                   wandb: WandbRun | None = None) -> None:
     ckpt_file = path / rundir.CHECKPOINT
     eval_env = build_env(rc, rc.seed + 10_000)
     try:
@@ -387,7 +413,7 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, st
         rundir.write_resolved(path, values)
         logger = OfflineLogger(path, learner.metric_names(), offsets=state["csv"] if state else None, echo=echo,
                                return_conditioned=isinstance(learner, ReturnConditioned),
-                               tensorboard=rc.runtime.tensorboard)
+                               tensorboard=rc.runtime.tensorboard, wandb=_with_resolved(wandb, values))
         bar = _progress(rc, progress, total=rc.offline.updates, unit="updates/s")
         trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner,
                                  _batch_source(learner, data, rc.seed), logger, lambda s: save_checkpoint(ckpt_file, s),

@@ -34,6 +34,7 @@ from repro.learners.base import Learner, ReturnConditioned, Sampler
 from repro.runs.logger import CsvPairLogger
 from repro.runs.runformat import OFFLINE_TRAIN_COLUMNS, offline_eval_columns
 from repro.runs.video import EvalVideos
+from repro.runs.wblog import WandbRun
 from repro.train.common import EvalResult, WallClock, rng_state, run_eval_episodes, set_rng_state
 
 BatchSource = Union[ReplayBuffer, Sampler]  # where update batches come from (both have ``rng`` and ``sample``)
@@ -48,13 +49,14 @@ def check_resume_dataset(state: dict, digest: str) -> None:
 
 
 class OfflineLogger(CsvPairLogger):
-    """eval.csv and train.csv of an offline run (columns: repro/runs/runformat.py), TensorBoard step = update."""
+    """eval.csv and train.csv of an offline run (columns: repro/runs/runformat.py), TensorBoard and W&B step =
+    update."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
                  offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print,
-                 return_conditioned: bool = False, tensorboard: bool = False):
+                 return_conditioned: bool = False, tensorboard: bool = False, wandb: WandbRun | None = None):
         super().__init__(run_dir, offline_eval_columns(return_conditioned),
-                         OFFLINE_TRAIN_COLUMNS + list(metric_names), offsets, echo, tensorboard, "update")
+                         OFFLINE_TRAIN_COLUMNS + list(metric_names), offsets, echo, tensorboard, "update", wandb)
 
     def log_eval(self, row: dict[str, Any]) -> None:
         self._write_eval(row)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from repro.launch.spec.errors import SweepError
 from repro.launch.spec.groups import check_sets, check_tasks, unavailable_reason
-from repro.launch.spec.overrides import merge_overrides, override_key, override_value
+from repro.launch.spec.overrides import hydra_quote, merge_overrides, override_key, override_value
 from repro.launch.spec.sweepfile import SweepSpec
 
 
@@ -63,10 +63,10 @@ def expand(spec: SweepSpec, sel: Selection = Selection()) -> list[Run]:
     """The sweep's grid: one Run per (agent, variant, task, seed), in a stable order.
 
     Override order (a later one wins for the same key): identity (experiment, agent, task, seed,
-    variant), the sweep's budget and eval schedule, ``common``, the variant's overrides, ``--set``,
-    ``--frames``. ``agent=`` or ``variant=`` inside a variant replace the defaults. When ``--set``
-    or ``common`` selects a ``profile``, the sweep's budget is left to the profile (``--frames`` still
-    applies).
+    variant; and ``runtime.sweep``, the sweep's name, which is not part of the run's identity), the sweep's
+    budget and eval schedule, ``common``, the variant's overrides, ``--set``, ``--frames``. ``agent=`` or
+    ``variant=`` inside a variant replace the defaults. When ``--set`` or ``common`` selects a ``profile``,
+    the sweep's budget is left to the profile (``--frames`` still applies).
     """
     reason = unavailable_reason(spec)
     if reason:
@@ -92,7 +92,7 @@ def expand(spec: SweepSpec, sel: Selection = Selection()) -> list[Run]:
                     if any(ex.matches(agent, variant, task, seed) for ex in spec.exclude):
                         continue
                     identity = (f"experiment={spec.experiment}", f"agent={agent}", f"task={task}",
-                                f"seed={seed}", f"variant={variant}")
+                                f"seed={seed}", f"variant={variant}", f"runtime.sweep={hydra_quote(spec.name)}")
                     overrides = merge_overrides(identity, budget, spec.common, vovers, sel.sets, extra)
                     dataset = _dataset_of(overrides)
                     where = (agent, variant, task, dataset, seed)

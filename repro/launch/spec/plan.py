@@ -14,6 +14,7 @@ from repro.launch.spec.errors import SweepError
 from repro.launch.spec.grid import Run
 from repro.launch.spec.overrides import hydra_quote, merge_overrides
 from repro.launch.waiting import DatasetNeed, dataset_need, missing_reason
+from repro.runs.migrate import Diff
 from repro.runs.rundir import config_diff, run_budget, run_dir, run_state
 
 
@@ -26,7 +27,7 @@ class PlannedRun:
     run_dir: Path
     results_root: Path
     state: str  # done | partial | extend (done at a smaller budget) | absent | mismatch
-    diff: list[str] = field(default_factory=list)
+    diff: list[Diff] = field(default_factory=list)
     need: DatasetNeed | None = None  # the dataset an offline run reads
     waiting: str | None = None  # why a not-done run cannot start yet (its dataset is not complete), or None
 
