@@ -16,6 +16,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from repro.launch import spec as specs
+from repro.launch.spec.sharing import SweepFrames, shared_frames
 from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 
 if TYPE_CHECKING:
@@ -101,18 +102,24 @@ def sweeps_cmd() -> None:
     """List the paper's experiment sweeps with their run counts."""
     con = _console()
     table = Table(title="Sweeps (sweeps/*.yaml)")
-    for col in ("name", "artifacts", "runs", "tasks", "agents", "variants", "seeds", "frames", "status"):
+    for col in ("name", "artifacts", "runs", "tasks", "agents", "variants", "seeds", "frames", "to train",
+                "status"):
         table.add_column(col, overflow="fold")
     try:
         all_specs = specs.load_all()
+        shared = shared_frames(all_specs)
     except SweepError as exc:
         raise _fail(str(exc)) from None
     for s in all_specs:
-        table.add_row(*_sweep_row(s))
+        table.add_row(*_sweep_row(s, shared.get(s.name)))
     con.print(table)
+    con.print("to train: the frames a sweep trains, summed over its runs, after sharing: a run directory that two "
+              "sweeps expand to is one run, trained to the smaller budget and extended to the larger, so a sweep "
+              "pays only the frames beyond another's (docs/sweeps.md). Offline sweeps count updates, not frames.",
+              highlight=False)
 
 
-def _sweep_row(s: SweepSpec) -> tuple[str, ...]:
+def _sweep_row(s: SweepSpec, frames_of: SweepFrames | None = None) -> tuple[str, ...]:
     """One row of ``repro sweeps``: a refused sweep's runs are counted without expanding it."""
     reason = specs.unavailable_reason(s)
     agents = {a for v in s.variants.values() for a in
@@ -126,8 +133,14 @@ def _sweep_row(s: SweepSpec) -> tuple[str, ...]:
         runs = len(specs.expand(s))
         status = "[green]ok[/]"
     frames = f"{s.frames:,}" if s.frames else "default"
+    if frames_of is None:
+        train = "-"
+    else:
+        train = f"{frames_of.to_train:,}"
+        if frames_of.to_train != frames_of.total:
+            train += f" (of {frames_of.total:,}; shares runs with {', '.join(frames_of.shared_with)})"
     return (s.name, ",".join(s.artifacts), str(runs), str(len(s.tasks)), ",".join(sorted(agents)),
-            str(len(s.variants)), str(len(s.seeds)), frames, status)
+            str(len(s.variants)), str(len(s.seeds)), frames, train, status)
 
 
 def sweep_cmd(
@@ -240,6 +253,8 @@ def status_cmd(
 
     try:
         root = (results_root or _default_results_root()).expanduser().absolute()
+        if results_root is not None and not root.is_dir():
+            raise SweepError(f"results root {root} does not exist or is not a directory")
         names = _launched_names(name, root)
         while names:
             if watch is not None:
