@@ -52,8 +52,9 @@ class RunBudget:
 
 
 def frames_to_train(runs: Iterable[RunBudget]) -> dict[Path, int]:
-    """Frames each run directory still has to train: a directory that several sweeps expand to counts once, at
-    the largest budget. (Run budgets that extend another sweep's runs, issue 24, replace this one function.)"""
+    """Frames each run directory still has to train: a directory that several sweeps expand to is one run, trained
+    to the smaller budget and extended to the largest (docs/run-format.md, "Budgets that extend"), so it counts once,
+    at the largest budget, less what it has trained (repro/launch/spec/sharing.py counts the same per sweep)."""
     best: dict[Path, RunBudget] = {}
     for r in runs:
         if r.run_dir not in best or r.frames > best[r.run_dir].frames:

@@ -38,6 +38,7 @@ FIXTURE_RUN = Path("fixture/taco/base/cheetah_run/seed_1")
 SMALL = ["profile=tiny", "env.image_size=32", "agent.feature_dim=16", "agent.hidden_dim=16",
          "agent.action_hidden_dim=16", "train.save_frames=false", "runtime.threads=1"]
 WALL = ("total_time", "fps", "updates_per_s")
+ONLINE_GROUP = pytest.mark.xdist_group("budgets_online")  # the tests of the module-scoped ``online`` runs: one worker
 
 
 def _train(root: Path, *extra: str) -> tuple[Path, list[str]]:
@@ -67,6 +68,7 @@ def online(tmp_path_factory) -> dict[str, object]:
 
 
 @pytest.mark.slow
+@ONLINE_GROUP
 def test_an_extension_equals_a_run_trained_to_the_larger_budget_in_one_go(online):
     ext, whole = Path(online["extended"]), Path(online["whole"])
     assert ext == online["short"] == online["again"]
@@ -85,6 +87,7 @@ def test_an_extension_equals_a_run_trained_to_the_larger_budget_in_one_go(online
 
 
 @pytest.mark.slow
+@ONLINE_GROUP
 def test_a_smaller_or_equal_budget_on_a_done_run_is_a_no_op_in_one_line(online):
     assert online["said_again"] == [f"already done: {online['extended']} (trained to 400 frames; train.frames=300 "
                                     "asks no more)"]
@@ -93,6 +96,7 @@ def test_a_smaller_or_equal_budget_on_a_done_run_is_a_no_op_in_one_line(online):
 
 
 @pytest.mark.slow
+@ONLINE_GROUP
 def test_analysis_marks_the_budget_end_row_and_reads_each_budget_s_prefix(online):
     res = load_results(online["root"])
     ev = res.eval.sort_values("frame")
@@ -107,6 +111,7 @@ def test_analysis_marks_the_budget_end_row_and_reads_each_budget_s_prefix(online
 
 
 @pytest.mark.slow
+@ONLINE_GROUP
 def test_a_changed_default_of_an_unread_section_leaves_the_run_resumable_and_done(online):
     """The issue's probe: cql.n_samples 10 -> 11 refused an online TACO run; an online run does not read agent.cql."""
     cfg = compose([*SMALL, "experiment=budgets", f"runtime.results_root={online['root']}", "train.frames=400",
@@ -120,6 +125,7 @@ def test_a_changed_default_of_an_unread_section_leaves_the_run_resumable_and_don
 
 
 @pytest.mark.slow
+@ONLINE_GROUP
 def test_a_changed_key_the_run_reads_is_still_refused(online):
     before = {p.name: p.read_bytes() for p in Path(online["extended"]).iterdir() if p.is_file()}
     with pytest.raises(rundir.RunDirMismatch, match=r"agent\.lr: 0\.0001 -> 0\.0002"):

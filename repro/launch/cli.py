@@ -16,8 +16,8 @@ from rich.markup import escape
 from rich.table import Table
 
 from repro.launch import spec as specs
-from repro.launch.spec.sharing import SweepFrames, shared_frames
 from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
+from repro.launch.spec.sharing import SweepFrames, shared_frames
 
 if TYPE_CHECKING:
     from repro.launch.local import LaunchReport
