@@ -162,7 +162,7 @@ UNIT_SECONDS = {
     "tests/test_sweeps.py::test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once": 90,
     "offline_train": 70,
     "budgets_online": 45,
-    "tests/test_budgets.py::test_a_sweep_that_extends_another_leaves_one_run_directory_with_every_frame_trained_once": 30,
+    "tests/test_budgets.py::test_a_sweep_extending_another_trains_every_frame_once": 30,
     "contract": 50,
     "tests/test_offline_sweep.py::test_tiny_offline_sweep_runs_every_learner_on_every_dataset_kind_then_t3": 50,
     "tests/test_speedups.py::test_compile_matches_plain_path": 48,

@@ -247,7 +247,7 @@ def test_a_v1_file_behaves_as_its_old_behaviour_for_the_learners_that_had_it():
 
 # ------------------------------------------------------------------------------------------ sweeps share runs
 @pytest.mark.slow
-def test_a_sweep_that_extends_another_leaves_one_run_directory_with_every_frame_trained_once(tmp_path):
+def test_a_sweep_extending_another_trains_every_frame_once(tmp_path):
     small = [o for o in SMALL if o != "profile=tiny" and o != "runtime.threads=1"]
     short = write_sweep(tmp_path, "share_a", ["cheetah_run"], {"base": small}, seeds=1, frames=200)
     data = yaml.safe_load(short.read_text())
