@@ -23,7 +23,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from analysis.identity import algo_key, enabled_objectives, method_label, normalize_dataset
-from repro.runs.migrate import migrate_config
+from repro.runs.migrate import ABSENT, get_key, migrate_config
 from repro.runs.runformat import (
     CONFIG,
     EVAL,
@@ -131,12 +131,8 @@ class ResultsRootError(FileNotFoundError):
 
 
 def _get(cfg: dict[str, Any], dotted: str, default: Any = None) -> Any:
-    node: Any = cfg
-    for part in dotted.split("."):
-        if not isinstance(node, dict) or part not in node:
-            return default
-        node = node[part]
-    return node
+    value = get_key(cfg, dotted)
+    return default if value is ABSENT else value
 
 
 def identity_from_config(cfg: dict[str, Any]) -> dict[str, Any]:

@@ -22,6 +22,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from analysis.load import load_results  # noqa: E402
 from analysis.scores import final_scores, learning_curves  # noqa: E402
+from helpers import launch_app, write_sweep  # noqa: E402
+from offline_fixtures import write_dataset  # noqa: E402
 from repro.config.compose import ConfigError, compose, compose_base  # noqa: E402
 from repro.config.schema import LEARNER_SECTIONS, LearnerName, unread_keys  # noqa: E402
 from repro.launch.spec import load_file  # noqa: E402
@@ -29,8 +31,6 @@ from repro.launch.spec.sharing import shared_frames  # noqa: E402
 from repro.runs import migrate, rundir  # noqa: E402
 from repro.runs.runformat import EVAL, META, TRAIN, run_state  # noqa: E402
 from repro.train import api  # noqa: E402
-from tests.helpers import launch_app, write_sweep  # noqa: E402
-from tests.offline_fixtures import write_dataset  # noqa: E402
 
 FIXTURE = Path(__file__).parent / "data" / "v1_runs"
 FIXTURE_RUN = Path("fixture/taco/base/cheetah_run/seed_1")

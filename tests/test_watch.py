@@ -7,6 +7,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -67,16 +68,21 @@ def test_mirror_equals_csv_and_a_resume_rebuilds_it_without_repeated_steps(tmp_p
     assert len(list((tmp_path / TB_DIR).iterdir())) == 1
 
 
-def test_offline_mirror_steps_are_updates(tmp_path: Path):
+def _offline_rows(tmp_path: Path, **mirror: Any) -> None:
+    """Two eval rows (updates 0 and 1000) and one train row of an offline run, through its logger's mirrors."""
     from repro.train.offline import OfflineLogger
 
-    log = OfflineLogger(tmp_path, ["actor_loss"], echo=lambda s: None, tensorboard=True)
+    log = OfflineLogger(tmp_path, ["actor_loss"], echo=lambda s: None, **mirror)
     for update in (0, 1000):
         log.log_eval({"update": update, "episode_reward": update / 10, "episode_reward_std": 0.0,
                       "episode_length": 100.0, "success": None, "eval_episodes": 1, "normalized_score": None,
                       "reference_return": None, "score_reference": "none", "total_time": 1.0})
     log.log_train({"update": 1000, "updates_per_s": 5.0, "total_time": 1.0, "actor_loss": -0.5})
     log.close()
+
+
+def test_offline_mirror_steps_are_updates(tmp_path: Path):
+    _offline_rows(tmp_path, tensorboard=True)
     tb = read_scalars(tmp_path)
     assert tb["eval/episode_reward"] == [(0, 0.0), (1000, 100.0)] and tb["train/actor_loss"] == [(1000, -0.5)]
     assert "eval/score_reference" not in tb and "eval/normalized_score" not in tb  # text and empty cells
@@ -138,15 +144,7 @@ def test_wandb_mirror_logs_only_the_steps_the_w_and_b_run_lacks(tmp_path: Path):
 
 
 def test_offline_wandb_mirror_steps_are_updates(tmp_path: Path):
-    from repro.train.offline import OfflineLogger
-
-    log = OfflineLogger(tmp_path, ["actor_loss"], echo=lambda s: None, wandb=WB)
-    for update in (0, 1000):
-        log.log_eval({"update": update, "episode_reward": update / 10, "episode_reward_std": 0.0,
-                      "episode_length": 100.0, "success": None, "eval_episodes": 1, "normalized_score": None,
-                      "reference_return": None, "score_reference": "none", "total_time": 1.0})
-    log.log_train({"update": 1000, "updates_per_s": 5.0, "total_time": 1.0, "actor_loss": -0.5})
-    log.close()
+    _offline_rows(tmp_path, wandb=WB)
     history = read_history(tmp_path)
     assert [(row["_step"], row["update"], row["eval/episode_reward"]) for row in history] == [(0, 0, 0),
                                                                                                 (1000, 1000, 100)]
