@@ -22,7 +22,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from analysis.load import load_results  # noqa: E402
 from analysis.scores import final_scores, learning_curves  # noqa: E402
-from helpers import launch_app, write_sweep  # noqa: E402
+from helpers import assert_wandb_mirrors_csv, launch_app, write_sweep  # noqa: E402
 from offline_fixtures import write_dataset  # noqa: E402
 from repro.config.compose import ConfigError, compose, compose_base  # noqa: E402
 from repro.config.schema import LEARNER_SECTIONS, LearnerName, unread_keys  # noqa: E402
@@ -248,26 +248,36 @@ def test_a_v1_file_behaves_as_its_old_behaviour_for_the_learners_that_had_it():
 # ------------------------------------------------------------------------------------------ sweeps share runs
 @pytest.mark.slow
 def test_a_sweep_extending_another_trains_every_frame_once(tmp_path):
+    """Two sweeps of one experiment, 200 then 400 frames, two seeds, mirrored to W&B: one run directory per run,
+    each extended once (every frame trained once), and one W&B run per run that the extension continues."""
     small = [o for o in SMALL if o != "profile=tiny" and o != "runtime.threads=1"]
-    short = write_sweep(tmp_path, "share_a", ["cheetah_run"], {"base": small}, seeds=1, frames=200)
+    short = write_sweep(tmp_path, "share_a", ["cheetah_run"], {"base": small}, seeds=2, frames=200)
     data = yaml.safe_load(short.read_text())
     longer = tmp_path / "share_b.yaml"
     longer.write_text(yaml.safe_dump({**data, "name": "share_b", "common": [*data["common"][:-1], "train.frames=400"]}))
     specs = [load_file(short), load_file(longer)]
     shared = shared_frames(specs)
-    assert (shared["share_a"].to_train, shared["share_b"].to_train, shared["share_b"].total) == (200, 200, 400)
+    assert (shared["share_a"].to_train, shared["share_b"].to_train, shared["share_b"].total) == (400, 400, 800)
     runner, app, root = CliRunner(), launch_app(), tmp_path / "runs"
+    ids = {}
     for path in (short, longer):
-        out = runner.invoke(app, ["sweep", str(path), "--results-root", str(root)])
+        out = runner.invoke(app, ["sweep", str(path), "--results-root", str(root), "--set", "runtime.wandb=true"])
         assert out.exit_code == 0, out.output
-    runs = [p.parent for p in root.rglob(rundir.CONFIG)]
-    assert len(runs) == 1, runs
-    meta = json.loads((runs[0] / META).read_text())
-    assert [(x["from"], x["to"]) for x in meta["extensions"]] == [(200, 400)] and meta["resumes"]
-    frames = pd.read_csv(runs[0] / TRAIN)["frame"]
-    assert frames.is_unique and frames.is_monotonic_increasing and frames.iloc[-1] == 400
+        ids[path.stem] = {p.parent.name: (p.parent / "wandb" / "run_id").read_text() for p in root.rglob(rundir.CONFIG)}
+    runs = sorted(p.parent for p in root.rglob(rundir.CONFIG))
+    assert [r.name for r in runs] == ["seed_1", "seed_2"], runs
+    assert ids["share_a"] == ids["share_b"] and len(set(ids["share_a"].values())) == 2  # the extension: same W&B run
+    for run in runs:
+        meta = json.loads((run / META).read_text())
+        assert [(x["from"], x["to"]) for x in meta["extensions"]] == [(200, 400)] and meta["resumes"]
+        frames = pd.read_csv(run / TRAIN)["frame"]
+        assert frames.is_unique and frames.is_monotonic_increasing and frames.iloc[-1] == 400
+        record, _ = assert_wandb_mirrors_csv(run)  # each frame once in W&B too, across the extension
+        rel = os.path.relpath(run, root)
+        assert (record["name"], record["group"]) == (rel, os.path.dirname(rel))
+        assert record["tags"] == ["sweep=share_b", f"seed={run.name[-1]}"]
     status = runner.invoke(app, ["status", "share_a", "--results-root", str(root)])
-    assert status.exit_code == 0 and "done" in status.output
+    assert status.exit_code == 0 and "2 done" in status.output, status.output
 
 
 # ------------------------------------------------------------------------------------------ bad input

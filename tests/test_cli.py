@@ -119,6 +119,9 @@ def test_sweep_short_results_flag_launches_under_root(tmp_path):
     result = runner.invoke(app, ["sweep", str(sweep), "-r", str(root), "--dry-run"], terminal_width=400)
     assert result.exit_code == 0, result.output
     assert "res/taco/base/reacher_hard/seed_1" in result.output and f"Results root: {root}\n" in result.output
+    missing = runner.invoke(app, ["status", "-r", str(root)], terminal_width=240)  # a dry run creates no root
+    assert missing.exit_code == 2 and "does not exist" in missing.output, missing.output
+    root.mkdir()
     status = runner.invoke(app, ["status", "-r", str(root)], terminal_width=240)
     assert status.exit_code == 0 and f"no sweep launched under {root}" in status.output, status.output
     assert not (tmp_path / "runs").exists()

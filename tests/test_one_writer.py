@@ -5,6 +5,7 @@ one line naming the file and a re-run resumes, and one dataset folder spelled se
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import resource
 import shutil
@@ -109,7 +110,9 @@ def test_a_refused_resume_leaves_every_file_byte_identical(tmp_path: Path):
     fast = OFFLINE + ["offline.updates=10", "offline.eval_every_updates=10", "offline.checkpoint_every_updates=5",
                       "offline.eval_episodes=0", f"runtime.results_root={tmp_path}"]
     run = api.train(fast, echo=lambda s: None)
-    (run / rundir.DONE).unlink()  # as if killed after its last checkpoint
+    (run / rundir.DONE).unlink()  # as if killed after its last checkpoint, before it recorded its budget:
+    meta = json.loads((run / rundir.META).read_text())
+    (run / rundir.META).write_text(json.dumps({**meta, "budgets": []}))
     shutil.rmtree(tmp_path / "datasets")
     _dataset(tmp_path, seed=1)  # another dataset at the same path
     before = _snapshot(run)

@@ -19,7 +19,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from helpers import assert_wandb_mirrors_csv, deterministic, launch_app, write_sweep
+from helpers import deterministic, launch_app, write_sweep
 from repro.launch import lock
 from repro.launch import spec as specs
 from repro.launch.runner import claim
@@ -270,12 +270,13 @@ def test_mismatched_run_dir_is_refused_unless_force(tmp_path):
     sel = specs.Selection(sets=(f"runtime.results_root={tmp_path}",))
     planned = specs.plan(specs.expand(specs.load(str(sweep)), sel))[0]
     planned.run_dir.mkdir(parents=True)
-    other = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=sel.sets, frames=300)))[0]
+    # another value of a key the run reads (a larger budget would extend the run, not mismatch it)
+    other = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=(*sel.sets, "agent.lr=0.0002"))))[0]
     write_config(planned.run_dir, other.cfg)
     code, out = run_cli("sweep", str(sweep), "--set", f"runtime.results_root={tmp_path}", "--dry-run")
     assert code == 0 and out.startswith("mismatch")
     code, out = run_cli("sweep", str(sweep), "--set", f"runtime.results_root={tmp_path}")
-    assert code == 2 and "--force" in out and "train.frames" in out and out.strip().count("\n") == 0
+    assert code == 2 and "--force" in out and "agent.lr" in out and out.strip().count("\n") == 0
     planned = specs.plan(specs.expand(specs.load(str(sweep)), sel))[0]
     assert claim(planned, "local", "mm", force=False).status == "mismatch"
     c = claim(planned, "local", "mm", force=True)
@@ -302,12 +303,12 @@ def _wait(pred, timeout: float, what: str) -> None:
 @pytest.mark.slow
 def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_path):
     """2 tasks x 2 variants: kill the launcher halfway (SIGKILL), then two launchers at once finish the grid;
-    every run ends DONE exactly once with complete, duplicate-free CSVs and its own W&B run (runtime.wandb)."""
+    every run ends DONE exactly once with complete, duplicate-free CSVs."""
     sweep = write_sweep(
         tmp_path, "grid", ["reacher_hard", "cheetah_run"], {"K1": ["agent.K=1"], "K3": ["agent.K=3"]}, 1
     )
     root = tmp_path / "results"
-    common = [str(sweep), "--set", f"runtime.results_root={root}", "--set", "runtime.wandb=true"]
+    common = [str(sweep), "--set", f"runtime.results_root={root}"]
     planned = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={root}",))))
     assert len(planned) == 4
     dirs = [p.run_dir for p in planned]
@@ -347,17 +348,6 @@ def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_
         assert_complete(p.run_dir, 100)
         resumes = json.loads((p.run_dir / "meta.json").read_text())["resumes"]
         assert len(resumes) == (1 if p.key in partial else 0), p.key
-
-    # one W&B run per run (runtime.wandb=true): grouped by experiment/agent/variant/task, named by the run's folder,
-    # tagged with the sweep and the seed; a resumed run's history holds each frame once
-    ids = set()
-    for p in planned:
-        record, _ = assert_wandb_mirrors_csv(p.run_dir)
-        rel = os.path.relpath(p.run_dir, root)
-        assert (record["name"], record["group"]) == (rel, os.path.dirname(rel))
-        assert record["tags"] == ["sweep=grid", "seed=1"]
-        ids.add(record["id"])
-    assert len(ids) == 4
 
     again = cli_proc("sweep", *common)
     out = again.communicate(timeout=120)[0]

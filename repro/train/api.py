@@ -42,6 +42,7 @@ from repro.runs import migrate, rundir
 from repro.runs.checkpoint import load_checkpoint, save_checkpoint
 from repro.runs.fsutil import remove_torn_temporaries
 from repro.runs.logger import RunLogger
+from repro.runs.runformat import TRAIN
 from repro.runs.video import VIDEO_DIR, EvalVideos
 from repro.runs.wblog import WandbRun, check_wandb
 from repro.train.offline import BatchSource, OfflineLogger, OfflineTrainer, check_resume_dataset
@@ -115,7 +116,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     directory's, the budget, the devices, the dataset, a checkpoint's dataset), so a refusal leaves the run
     directory byte-identical. The run directory then has one writer: its writer lock is taken before the first
     write and the state is read again under it (RunLocked when another process holds it). A failure before the
-    run's first checkpoint removes a run directory this call created (nothing in it could be resumed)."""
+    run's first update (no checkpoint, no train.csv row) removes a run directory this call created."""
     rc = typed(cfg)
     path = rundir.run_dir(cfg)
     start = _plan_start(path, cfg, echo)
@@ -153,8 +154,8 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
         try:
             _start(rc, cfg, path, start, device, data, state, echo, progress, wandb)
         except Exception:
-            if created and not (path / rundir.CHECKPOINT).exists():
-                shutil.rmtree(path, ignore_errors=True)  # failed before anything resumable: leave no directory
+            if created and not (path / rundir.CHECKPOINT).exists() and not _has_rows(path / TRAIN):
+                shutil.rmtree(path, ignore_errors=True)  # failed before its first update: leave no directory
             raise
     return path
 
@@ -199,6 +200,15 @@ def wandb_run(rc: RunConfig, cfg: DictConfig, path: Path) -> WandbRun:
 def _with_resolved(wandb: WandbRun | None, values: dict[str, Any]) -> WandbRun | None:
     """The W&B config with the run's resolved values (resolved.json) beside the config."""
     return None if wandb is None else dataclasses.replace(wandb, config={**wandb.config, "resolved": values})
+
+
+def _has_rows(csv: Path) -> bool:
+    """Whether a CSV has a row below its header (a train.csv row: the run has made updates)."""
+    try:
+        with csv.open("rb") as f:
+            return len(f.read(1 << 16).splitlines()) > 1
+    except OSError:
+        return False
 
 
 def _config_format(path: Path) -> int | None:
