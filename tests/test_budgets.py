@@ -305,3 +305,19 @@ def test_a_failure_before_the_first_checkpoint_leaves_no_run_directory(tmp_path,
 def test_status_of_a_missing_results_root_is_one_line_and_exit_2(tmp_path):
     out = CliRunner().invoke(launch_app(), ["status", "tiny", "--results", str(tmp_path / "missing")])
     assert out.exit_code == 2 and "does not exist" in out.output and "Traceback" not in out.output
+
+
+def test_a_dataset_made_from_a_v1_run_is_still_found_by_the_same_request():
+    """`repro dataset make` finds a dataset it made before: the manifest of one made from a format-1 run records the
+    run's hash of that time (every section), which counts as the same source; any other hash does not."""
+    from repro.train.make_dataset import _legacy_hash, _same_request, config_hash
+
+    run = FIXTURE / FIXTURE_RUN
+    legacy = _legacy_hash(run)
+    current = config_hash(rundir.saved_identity(run) or {})
+    assert legacy is not None and legacy != current
+    fields = {"task": "cheetah_run", "kind": "medium", "source": {"run_dir": str(run), "config_hash": current},
+              "rule": {"kind": "medium", "transitions": 10, "seed": 0}}
+    old = {**fields, "source": {**fields["source"], "config_hash": legacy}}
+    assert _same_request(fields, fields) and _same_request(old, fields, legacy)
+    assert not _same_request(old, fields) and not _same_request({**old, "source": {"config_hash": "x"}}, fields, legacy)

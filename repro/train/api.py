@@ -245,7 +245,7 @@ def _plan_start(path: Path, cfg: DictConfig, echo: Callable[[str], None]) -> Sta
             raise BudgetError(f"{path} dropped its replay when it finished (runtime.keep_replay=false), so it cannot "
                               f"be extended from {reached[-1] if reached else '?'} to {budget} {unit}; train it "
                               "under another experiment/variant name")
-        return Start(budget, unit, reached, extend_from=reached[-1] if reached else None)
+        return Start(budget, unit, reached, extend_from=reached[-1] if reached else 0)
     return Start(budget, unit, reached)
 
 

@@ -90,6 +90,9 @@ class Source:
     config_hash: str
     episodes: list[RecordedEpisode]
     snapshots: list[Snapshot]
+    # the hash a dataset made before config.yaml format 2 recorded for this run (its identity then: every section
+    # but runtime and the video switches), so an earlier make of the same request is still found
+    legacy_hash: str | None = None
 
     @property
     def task(self) -> str:
@@ -152,7 +155,21 @@ def open_source(run_dir: str | Path, task: str | None = None) -> Source:
         except (OSError, RuntimeError, ValueError, KeyError) as exc:
             raise MakeError(f"{path}: unreadable snapshot ({type(exc).__name__})") from None
     ident = rundir.saved_identity(run_dir) or {}
-    return Source(run_dir, cfg, config_hash(ident), episodes, snaps)
+    return Source(run_dir, cfg, config_hash(ident), episodes, snaps, legacy_hash=_legacy_hash(run_dir))
+
+
+def _legacy_hash(run_dir: Path) -> str | None:
+    """config_hash of a format-1 config.yaml as the code before format 2 computed it; None for a newer file."""
+    try:
+        raw = yaml.safe_load((run_dir / rundir.CONFIG).read_text())
+    except (OSError, yaml.YAMLError):
+        return None
+    if not isinstance(raw, dict) or "format" in raw:
+        return None
+    raw.pop("runtime", None)
+    for key in ("save_video", "video_every", "video_size"):
+        (raw.get("train") or {}).pop(key, None)
+    return config_hash(raw)
 
 
 def _ids(ids: list[int]) -> str:
@@ -316,9 +333,16 @@ def manifest_json(folder: str | Path) -> dict[str, Any]:
     return json.loads((Path(folder) / "manifest.json").read_text())
 
 
-def _same_request(manifest: dict, fields: dict) -> bool:
+def _same_request(manifest: dict, fields: dict, legacy_hash: str | None = None) -> bool:
+    """Whether ``manifest`` records this request; a dataset made before config.yaml format 2 recorded the source
+    run's ``legacy_hash`` (its identity then), which counts as the same source."""
     keys = ("task", "kind", "source", "rule")
-    return all(json.loads(json.dumps(manifest.get(k))) == json.loads(json.dumps(fields[k])) for k in keys)
+    recorded = json.loads(json.dumps({k: manifest.get(k) for k in keys}))
+    wanted = json.loads(json.dumps({k: fields[k] for k in keys}))
+    if legacy_hash is not None and isinstance(recorded.get("source"), dict) \
+            and recorded["source"].get("config_hash") == legacy_hash:
+        recorded["source"]["config_hash"] = wanted["source"]["config_hash"]
+    return recorded == wanted
 
 
 def _staging_of(staging: Path, fields: dict) -> bool:
@@ -374,7 +398,7 @@ def make(source_dir: str | Path, kind: str, transitions: int | None = None, medi
             else:
                 raise MakeError(f"{p.out} exists and holds no complete dataset; move it away or pass --out") from None
         else:
-            if _same_request(manifest, p.fields) and not check_dataset(p.out):
+            if _same_request(manifest, p.fields, source.legacy_hash) and not check_dataset(p.out):
                 echo(f"already made: {p.out}")
                 return p.out
             raise MakeError(f"{p.out} holds another dataset ({manifest.get('kind')} from "
