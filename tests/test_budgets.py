@@ -41,9 +41,13 @@ WALL = ("total_time", "fps", "updates_per_s")
 ONLINE_GROUP = pytest.mark.xdist_group("budgets_online")  # the tests of the module-scoped ``online`` runs: one worker
 
 
+# The extension tests' runs: SMALL with 50-frame episodes, updates from frame 50, evaluations every 100 frames.
+FAST = [*SMALL, "env.max_episode_frames=50", "train.seed_frames=50", "train.eval_every_frames=100"]
+
+
 def _train(root: Path, *extra: str) -> tuple[Path, list[str]]:
     said: list[str] = []
-    path = api.train([*SMALL, "experiment=budgets", f"runtime.results_root={root}", *extra], echo=said.append)
+    path = api.train([*FAST, "experiment=budgets", f"runtime.results_root={root}", *extra], echo=said.append)
     return path, said
 
 
@@ -55,14 +59,14 @@ def _csv(path: Path) -> pd.DataFrame:
 # ------------------------------------------------------------------------------------------ online extension
 @pytest.fixture(scope="module")
 def online(tmp_path_factory) -> dict[str, object]:
-    """A run trained to 250 frames (mid-episode: 100-frame episodes, evaluations every 200) and extended to 400, and
-    the same run trained to 400 in one go."""
+    """A run trained to 170 frames (mid-episode: 50-frame episodes, evaluations every 100) and extended to 200, and
+    the same run trained to 200 in one go."""
     ext, one = tmp_path_factory.mktemp("extended"), tmp_path_factory.mktemp("one_go")
-    short, said_short = _train(ext, "train.frames=250")
+    short, said_short = _train(ext, "train.frames=170")
     before = {f: (short / f).read_bytes() for f in (EVAL, TRAIN)}
-    extended, said_ext = _train(ext, "train.frames=400")
-    again, said_again = _train(ext, "train.frames=300")
-    whole, _ = _train(one, "train.frames=400")
+    extended, said_ext = _train(ext, "train.frames=200")
+    again, said_again = _train(ext, "train.frames=180")
+    whole, _ = _train(one, "train.frames=200")
     return {"short": short, "before": before, "extended": extended, "whole": whole, "said_short": said_short,
             "said_ext": said_ext, "said_again": said_again, "again": again, "root": ext, "one_root": one}
 
@@ -72,27 +76,27 @@ def online(tmp_path_factory) -> dict[str, object]:
 def test_an_extension_equals_a_run_trained_to_the_larger_budget_in_one_go(online):
     ext, whole = Path(online["extended"]), Path(online["whole"])
     assert ext == online["short"] == online["again"]
-    assert any(line.startswith("extending from 250 to 400 frames") for line in online["said_ext"]), online["said_ext"]
+    assert any(line.startswith("extending from 170 to 200 frames") for line in online["said_ext"]), online["said_ext"]
     pd.testing.assert_frame_equal(_csv(ext / TRAIN), _csv(whole / TRAIN))  # the training trajectory: unchanged
     e, w = _csv(ext / EVAL), _csv(whole / EVAL)
-    assert list(e["frame"]) == [0, 200, 250, 400] and list(w["frame"]) == [0, 200, 400]
-    pd.testing.assert_frame_equal(e[e["frame"] != 250].reset_index(drop=True), w)
+    assert list(e["frame"]) == [0, 100, 170, 200] and list(w["frame"]) == [0, 100, 200]
+    pd.testing.assert_frame_equal(e[e["frame"] != 170].reset_index(drop=True), w)
     # the short budget's final evaluation is kept, unchanged (re-evaluated on the way, as when the run stopped there)
     short_eval = pd.read_csv(pd.io.common.BytesIO(online["before"][EVAL])).drop(columns=["total_time"])
     pd.testing.assert_frame_equal(e.iloc[:3].reset_index(drop=True), short_eval)
     meta = json.loads((ext / META).read_text())
-    assert [b["budget"] for b in meta["budgets"]] == [250, 400] and meta["format"] == migrate.META_FORMAT
-    assert [(x["from"], x["to"]) for x in meta["extensions"]] == [(250, 400)]
-    assert yaml.safe_load((ext / rundir.CONFIG).read_text())["train"]["frames"] == 400
+    assert [b["budget"] for b in meta["budgets"]] == [170, 200] and meta["format"] == migrate.META_FORMAT
+    assert [(x["from"], x["to"]) for x in meta["extensions"]] == [(170, 200)]
+    assert yaml.safe_load((ext / rundir.CONFIG).read_text())["train"]["frames"] == 200
 
 
 @pytest.mark.slow
 @ONLINE_GROUP
 def test_a_smaller_or_equal_budget_on_a_done_run_is_a_no_op_in_one_line(online):
-    assert online["said_again"] == [f"already done: {online['extended']} (trained to 400 frames; train.frames=300 "
+    assert online["said_again"] == [f"already done: {online['extended']} (trained to 200 frames; train.frames=180 "
                                     "asks no more)"]
-    assert run_state(online["extended"], 250) == run_state(online["extended"], 400) == "done"
-    assert run_state(online["extended"], 401) == "partial"
+    assert run_state(online["extended"], 170) == run_state(online["extended"], 200) == "done"
+    assert run_state(online["extended"], 201) == "partial"
 
 
 @pytest.mark.slow
@@ -100,13 +104,13 @@ def test_a_smaller_or_equal_budget_on_a_done_run_is_a_no_op_in_one_line(online):
 def test_analysis_marks_the_budget_end_row_and_reads_each_budget_s_prefix(online):
     res = load_results(online["root"])
     ev = res.eval.sort_values("frame")
-    assert list(ev.loc[ev["budget_end"], "frame"]) == [250]
+    assert list(ev.loc[ev["budget_end"], "frame"]) == [170]
     whole = load_results(online["one_root"])
-    # at 400 the extended run scores as the one-go run; at 250 it scores its own row at 250; curves skip that row
-    for budget in (400, 300):
+    # at 200 the extended run scores as the one-go run; at 170 it scores its own row at 170; curves skip that row
+    for budget in (200, 180):
         a, b = final_scores(res, budget), final_scores(whole, budget)
         assert (a["score"].tolist(), a["frame"].tolist()) == (b["score"].tolist(), b["frame"].tolist())
-    assert final_scores(res, 250)["frame"].tolist() == [250.0]
+    assert final_scores(res, 170)["frame"].tolist() == [170.0]
     assert learning_curves(res)["value"].tolist() == learning_curves(whole)["value"].tolist()
 
 
@@ -114,7 +118,7 @@ def test_analysis_marks_the_budget_end_row_and_reads_each_budget_s_prefix(online
 @ONLINE_GROUP
 def test_a_changed_default_of_an_unread_section_leaves_the_run_resumable_and_done(online):
     """The issue's probe: cql.n_samples 10 -> 11 refused an online TACO run; an online run does not read agent.cql."""
-    cfg = compose([*SMALL, "experiment=budgets", f"runtime.results_root={online['root']}", "train.frames=400",
+    cfg = compose([*FAST, "experiment=budgets", f"runtime.results_root={online['root']}", "train.frames=200",
                    "agent.cql.n_samples=11", "agent.iql.expectile=0.9", "agent.dt.n_layers=5",
                    "offline.eval_episodes=3"])
     assert rundir.config_diff(online["extended"], cfg) == []
@@ -129,7 +133,7 @@ def test_a_changed_default_of_an_unread_section_leaves_the_run_resumable_and_don
 def test_a_changed_key_the_run_reads_is_still_refused(online):
     before = {p.name: p.read_bytes() for p in Path(online["extended"]).iterdir() if p.is_file()}
     with pytest.raises(rundir.RunDirMismatch, match=r"agent\.lr: 0\.0001 -> 0\.0002"):
-        _train(online["root"], "train.frames=400", "agent.lr=0.0002")
+        _train(online["root"], "train.frames=200", "agent.lr=0.0002")
     assert {p.name: p.read_bytes() for p in Path(online["extended"]).iterdir() if p.is_file()} == before
 
 
@@ -248,16 +252,16 @@ def test_a_v1_file_behaves_as_its_old_behaviour_for_the_learners_that_had_it():
 # ------------------------------------------------------------------------------------------ sweeps share runs
 @pytest.mark.slow
 def test_a_sweep_extending_another_trains_every_frame_once(tmp_path):
-    """Two sweeps of one experiment, 200 then 400 frames, two seeds, mirrored to W&B: one run directory per run,
+    """Two sweeps of one experiment, 100 then 200 frames, two seeds, mirrored to W&B: one run directory per run,
     each extended once (every frame trained once), and one W&B run per run that the extension continues."""
     small = [o for o in SMALL if o != "profile=tiny" and o != "runtime.threads=1"]
-    short = write_sweep(tmp_path, "share_a", ["cheetah_run"], {"base": small}, seeds=2, frames=200)
+    short = write_sweep(tmp_path, "share_a", ["cheetah_run"], {"base": small}, seeds=2, frames=100)
     data = yaml.safe_load(short.read_text())
     longer = tmp_path / "share_b.yaml"
-    longer.write_text(yaml.safe_dump({**data, "name": "share_b", "common": [*data["common"][:-1], "train.frames=400"]}))
+    longer.write_text(yaml.safe_dump({**data, "name": "share_b", "common": [*data["common"][:-1], "train.frames=200"]}))
     specs = [load_file(short), load_file(longer)]
     shared = shared_frames(specs)
-    assert (shared["share_a"].to_train, shared["share_b"].to_train, shared["share_b"].total) == (400, 400, 800)
+    assert (shared["share_a"].to_train, shared["share_b"].to_train, shared["share_b"].total) == (200, 200, 400)
     runner, app, root = CliRunner(), launch_app(), tmp_path / "runs"
     ids = {}
     for path in (short, longer):
@@ -269,9 +273,9 @@ def test_a_sweep_extending_another_trains_every_frame_once(tmp_path):
     assert ids["share_a"] == ids["share_b"] and len(set(ids["share_a"].values())) == 2  # the extension: same W&B run
     for run in runs:
         meta = json.loads((run / META).read_text())
-        assert [(x["from"], x["to"]) for x in meta["extensions"]] == [(200, 400)] and meta["resumes"]
+        assert [(x["from"], x["to"]) for x in meta["extensions"]] == [(100, 200)] and meta["resumes"]
         frames = pd.read_csv(run / TRAIN)["frame"]
-        assert frames.is_unique and frames.is_monotonic_increasing and frames.iloc[-1] == 400
+        assert frames.is_unique and frames.is_monotonic_increasing and frames.iloc[-1] == 200
         record, _ = assert_wandb_mirrors_csv(run)  # each frame once in W&B too, across the extension
         rel = os.path.relpath(run, root)
         assert (record["name"], record["group"]) == (rel, os.path.dirname(rel))
