@@ -35,7 +35,6 @@ from analysis.tables import TableOutput, fmt_ci, fmt_num, write_table
 MIN_SEEDS = 3
 BELOW, CONSISTENT, ABOVE, NOT_ENOUGH, NO_CURVE = "below", "consistent", "above", "not enough seeds", \
     "no published curve"
-PUBLISHED_NAME = "DrQ-v2 (published)"
 SOURCE_TEXT = ("the DrQ-v2 authors' published learning curves (facebookresearch/drqv2, curves/, commit c0c650b, MIT; "
                "packaged in analysis/reference_data/drqv2_curves)")
 INTERP_TEXT = ("published values between their evaluations (every 20K frames, 100K on humanoid) are linearly "
