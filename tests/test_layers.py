@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("repro", "analysis", "paper_figures", "repro_app")
+PACKAGES = ("repro", "repro_data", "analysis", "paper_figures", "repro_app")
 SCRIPT_DIRS = ("benchmarks",)  # plain scripts, not a package: app layer
 # The layers of docs/layers.md, lowest first: one folder per layer inside repro/.
 LAYERS = ("config/envs", "runs/agent", "data/learners", "train/bench", "launch", "analysis", "paper_figures", "app")
@@ -35,6 +35,7 @@ LAYER_OF = {
     "repro.train": TRAIN,
     "repro.bench": TRAIN,
     "repro.launch": LAUNCH,
+    "repro_data": CONFIG,  # files from outside the project and their paths (imports nothing of the project)
     "repro.__main__": APP,  # `python -m repro`: the entry shim of the app
     "analysis": ANALYSIS,
     "paper_figures": FIGURES,
