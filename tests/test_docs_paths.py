@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # The tracked top-level folders: a path that starts with one of them points into the repository.
 REPO_DIRS = ("docs", "repro", "repro_data", "analysis", "paper_figures", "repro_app", "benchmarks", "tests", "scripts",
              "sweeps")
-SCANNED_DIRS = ("repro", "repro_data", "analysis", "paper_figures", "repro_app", "benchmarks", "tests")
+SCANNED_DIRS = ("repro", "repro_data", "analysis", "paper_figures", "repro_app", "benchmarks", "tests", "sweeps")
 SCANNED_SUFFIXES = (".py", ".yaml", ".yml", ".md", ".txt", ".toml", ".sh")
 SKIPPED_DIRS = frozenset({"__pycache__", ".pytest_cache", ".mypy_cache", ".ruff_cache"})
 # A run of path characters (placeholders and glob characters included, so that a pattern is seen whole).
