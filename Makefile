@@ -39,7 +39,7 @@ repro: $(STAMP)
 
 # Static checks on the packages (ruff: pyproject [tool.ruff]; mypy: pyproject [tool.mypy]).
 lint: $(STAMP) $(WANDB_STAMP)
-	$(BIN)/ruff check repro analysis paper_figures repro_app tests benchmarks
+	$(BIN)/ruff check repro repro_data analysis paper_figures repro_app tests benchmarks
 	$(BIN)/mypy
 
 # Two pytest workers (this project's CI machine has 2 cores); the tests sharing one session run (tests/conftest.py)

@@ -1,5 +1,5 @@
 """Analysis of TACO reproduction runs: loading, scores, statistics, tables, claims, audit and report.
 
 The only inputs are run directories (``docs/run-format.md``) under a results root and the paper's own
-numbers (``analysis/paper_data``, a copy of ``shared/paper``; Tables 1 and 6 from ``repro/config/data``).
+numbers (``repro_data/paper``, a copy of ``shared/paper``; Tables 1 and 6 from ``repro/config/data``).
 """

@@ -1,6 +1,6 @@
 """Recompute every number the paper derives from other numbers and list each mismatch with both values.
 
-Inputs are only the paper's own files (``analysis/paper_data``): the CSV transcriptions of its tables,
+Inputs are only the paper's own files (``repro_data/paper``): the CSV transcriptions of its tables,
 claims.csv and the LaTeX source. Checks: printed averages vs the mean of their column, relative gains
 (the 1.4x / 40% claim, the 3.6x speed ratio, the action-representation percentages), entries repeated
 across tables (Table 1 vs Table 2, Table 4 vs Table 5), bold/shaded "best" marks, textual statements

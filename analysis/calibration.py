@@ -1,6 +1,6 @@
 """Baseline calibration: the user's DrQ-v2 runs held against the DrQ-v2 authors' published learning curves.
 
-The published curves (``analysis/reference_data/drqv2_curves``, loaded by :func:`analysis.load.load_published`
+The published curves (``repro_data/reference/drqv2_curves``, loaded by :func:`analysis.load.load_published`
 into a Results of their own, ``source`` = ``published``) are never mixed with the user's runs. This is about the
 baseline, not about a claim of the paper: it may be read at any budget.
 
@@ -35,9 +35,8 @@ from analysis.tables import TableOutput, fmt_ci, fmt_num, write_table
 MIN_SEEDS = 3
 BELOW, CONSISTENT, ABOVE, NOT_ENOUGH, NO_CURVE = "below", "consistent", "above", "not enough seeds", \
     "no published curve"
-PUBLISHED_NAME = "DrQ-v2 (published)"
 SOURCE_TEXT = ("the DrQ-v2 authors' published learning curves (facebookresearch/drqv2, curves/, commit c0c650b, MIT; "
-               "packaged in analysis/reference_data/drqv2_curves)")
+               "packaged in repro_data/reference/drqv2_curves)")
 INTERP_TEXT = ("published values between their evaluations (every 20K frames, 100K on humanoid) are linearly "
                "interpolated per seed, never extrapolated")
 ABOUT_TEXT = ("This is a calibration of the baseline, not a claim of the paper: it holds at any budget, long "

@@ -39,8 +39,6 @@ _TASK_NAMES: dict[str, str] = {
     "hand-insert": "Hand Insert",
 }
 
-DATASETS = ("medium", "medium-replay", "full-replay")
-
 
 def algo_key(name: Any) -> str:
     """Normalise an ``agent.name`` ("DrQ-v2", "drqv2", "td3_bc") to a lookup key ("drqv2", "td3bc")."""

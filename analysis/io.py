@@ -22,11 +22,6 @@ def atomic_write_text(path: Path | str, text: str) -> Path:
     return _atomic_replace(Path(path), lambda fh: fh.write(text.encode("utf-8")))
 
 
-def atomic_write_bytes(path: Path | str, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically."""
-    return _atomic_replace(Path(path), lambda fh: fh.write(data))
-
-
 def atomic_savefig(fig: Figure, path: Path | str, **kwargs) -> Path:
     """Save a matplotlib figure atomically; the format comes from the suffix of ``path``."""
     path = Path(path)

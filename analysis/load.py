@@ -46,6 +46,7 @@ from repro.runs.runformat import (
     read_resolved,
     run_state,
 )
+from repro_data import PUBLISHED_DIR
 
 # Identity columns of every row of the tidy tables (run_id is the run directory relative to the root):
 # the config's identity keys and the run's resolved values (repro/runs/runformat.py), plus labels and status.
@@ -80,7 +81,6 @@ RESOLVED_FROM_FILE, RESOLVED_FROM_CONFIG = RESOLVED, CONFIG  # the runs table's 
 # The ``source`` column of the runs and eval tables: the user's runs, or the DrQ-v2 authors' published curves
 # (:func:`load_published`). The two are loaded separately and never concatenated.
 SOURCE_RUNS, SOURCE_PUBLISHED = "runs", "published"
-PUBLISHED_DIR = Path(__file__).resolve().parent / "reference_data" / "drqv2_curves"
 PUBLISHED_EXPERIMENT = "published"
 PUBLISHED_REQUIRED = ("agent", "task", "seed", "frame", "episode_reward")
 PUBLISHED_ACTION_REPEAT = 2  # the DrQ-v2 authors' DMC setting; their ``frame`` counts frames after it
@@ -498,7 +498,7 @@ def _published_file(path: Path) -> pd.DataFrame:
 
 
 def load_published(root: Path | str = PUBLISHED_DIR) -> Results:
-    """The DrQ-v2 authors' published learning curves (``analysis/reference_data/drqv2_curves``) as a
+    """The DrQ-v2 authors' published learning curves (``repro_data/reference/drqv2_curves``) as a
     :class:`Results` of their own: one "run" per task and seed, with the identity and eval columns of
     :func:`load_results` (algo ``drqv2``, method ``DrQ-v2``, experiment ``published``, action repeat 2, status
     done, ``run_id`` ``published/{task}/seed{n}``) and ``source`` = ``published``, so every function of the

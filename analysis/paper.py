@@ -1,4 +1,4 @@
-"""The paper's own numbers (a copy of ``shared/paper`` in ``analysis/paper_data``), as printed.
+"""The paper's own numbers (a copy of ``shared/paper`` in ``repro_data/paper``), as printed.
 
 Table 1 and Table 6, which the training code reads too, have their one packaged copy in
 ``repro/config/data/`` and are read from there (``repro.config.paper_defaults``)."""
@@ -13,8 +13,7 @@ import pandas as pd
 
 from analysis.identity import normalize_dataset
 from repro.config.paper_defaults import ALPHA_TABLE, ONLINE_TABLE
-
-PAPER_DIR = Path(__file__).resolve().parent / "paper_data"
+from repro_data import PAPER_DIR
 
 # The nine DMC tasks of Table 1 in the paper's row order.
 DMC9 = (

@@ -110,17 +110,6 @@ def mean_cis(
     return out
 
 
-def cell_stats(cells: Mapping[object, Sequence[float]], reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED) -> dict:
-    """:class:`CellStats` for each key of ``cells`` (values over seeds)."""
-    keys = list(cells)
-    cis = mean_cis([np.asarray(cells[k], dtype=float) for k in keys], reps=reps, seed=seed)
-    out = {}
-    for key, (lo, hi) in zip(keys, cis):
-        n, mean, std = mean_std(cells[key])
-        out[key] = CellStats(n, mean, std, lo, hi)
-    return out
-
-
 def _aggregates(x: np.ndarray) -> np.ndarray:
     return np.array(
         [metrics.aggregate_iqm(x), metrics.aggregate_mean(x), metrics.aggregate_optimality_gap(x)]

@@ -5,8 +5,10 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 
-from paper_figures import (
-    common,  # noqa: F401  (first: it selects the Agg backend before any figure module imports pyplot)
+# Imported for their side effect: each artifact module registers its artifacts (one per module; F7a and F7b are two;
+# T3b is derived from T3). common comes first: it selects the Agg backend before any figure module imports pyplot.
+from paper_figures import (  # noqa: F401
+    common,
     f1_average,
     f3_action_repr,
     f4_curves_dmc,
@@ -29,13 +31,6 @@ from paper_figures import (
     t6_cql_alpha,
 )
 from paper_figures.registry import REGISTRY, Artifact, UnknownArtifactError, sorted_ids
-
-# The modules that register artifacts (one per artifact; F7a and F7b are two; T3b is derived from T3),
-# imported above.
-ARTIFACT_MODULES = (t1_online, t2_repr_objectives, t3_offline, t3b_offline_poi, t4_speed, t5_speed_taco, t6_cql_alpha,
-                    f1_average, f3_action_repr, f4_curves_dmc, f5_curves_metaworld, f6_tsne, f7a_batch_size,
-                    f7b_objectives, f8_horizon, f9_action_repeat, f10_action_dim, f11_seeds, f12_manipulator,
-                    f13_frames)
 
 
 def load_artifacts() -> dict[str, Artifact]:

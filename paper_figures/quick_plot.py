@@ -29,11 +29,6 @@ from paper_figures.common import (  # noqa: E402
 PLOT_REPS = 2_000  # bootstrap repetitions per plotted point (a quick look, not a paper table)
 
 
-def group_label(row: pd.Series, by: Sequence[str]) -> str:
-    """``taco / base`` from the ``by`` columns of one run."""
-    return " / ".join(str(row[c]) for c in by)
-
-
 def plot_curves(curves: pd.DataFrame, metric: str, out: Path, x: str = "frame", by: Sequence[str] = ("method",),
                 reps: int = PLOT_REPS, seed: int = 0,
                 published: Mapping[str, pd.DataFrame] | None = None) -> list[Path]:

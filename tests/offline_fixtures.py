@@ -1,4 +1,4 @@
-"""Tiny datasets in the dataset contract's format (PLAN.md): episodes/ep_XXXXXXX.npz + manifest.json (last).
+"""Tiny datasets in the dataset contract's format (docs/offline.md): episodes/ep_XXXXXXX.npz + manifest.json (last).
 
 Frames carry their episode and time index in pixel (0, 0) and (0, 1) of every channel, rewards and actions
 are known functions of (episode, t), so tests can check what the replay samples.

@@ -67,7 +67,9 @@ def test_published_curves_are_packaged_with_licence_and_loaded_apart_from_runs(t
     assert (PUBLISHED_DIR / "LICENSE").read_text().startswith("MIT License")
     assert "facebookresearch/drqv2" in (PUBLISHED_DIR / "README.md").read_text()
     pyproject = (Path(__file__).resolve().parents[1] / "pyproject.toml").read_text()
-    assert "reference_data/drqv2_curves/*" in pyproject
+    assert 'repro_data = ["README.md", "paper/*", "reference/drqv2_curves/*"]' in pyproject
+    provenance = (PUBLISHED_DIR.parents[1] / "README.md").read_text()
+    assert "arXiv:2306.13229" in provenance and "MIT" in provenance and "c0c650b" in provenance
     pub = load_published()
     assert not pub.problems and set(DMC9) <= set(pub.runs["task"])
     assert set(pub.runs["source"]) == set(pub.eval["source"]) == {SOURCE_PUBLISHED}

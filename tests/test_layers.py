@@ -19,9 +19,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("repro", "analysis", "paper_figures", "repro_app")
+PACKAGES = ("repro", "repro_data", "analysis", "paper_figures", "repro_app")
 SCRIPT_DIRS = ("benchmarks",)  # plain scripts, not a package: app layer
-# The layers of ../shared/docs/layout.md (docs/layers.md), lowest first: one folder per layer inside repro/.
+# The layers of docs/layers.md, lowest first: one folder per layer inside repro/.
 LAYERS = ("config/envs", "runs/agent", "data/learners", "train/bench", "launch", "analysis", "paper_figures", "app")
 CONFIG, RUNS, DATA, TRAIN, LAUNCH, ANALYSIS, FIGURES, APP = range(len(LAYERS))
 LAYER_OF = {
@@ -35,6 +35,7 @@ LAYER_OF = {
     "repro.train": TRAIN,
     "repro.bench": TRAIN,
     "repro.launch": LAUNCH,
+    "repro_data": CONFIG,  # files from outside the project and their paths (imports nothing of the project)
     "repro.__main__": APP,  # `python -m repro`: the entry shim of the app
     "analysis": ANALYSIS,
     "paper_figures": FIGURES,
@@ -222,12 +223,12 @@ def test_no_module_imports_from_a_higher_layer():
 
 
 def test_each_folder_has_its_layer():
-    """repro/ holds the layer folders and no loose module; each folder has the layer of layout.md (a folder
+    """repro/ holds the layer folders and no loose module; each folder has the layer of docs/layers.md (a folder
     mapped to the wrong layer in LAYER_OF would let upward imports pass)."""
     loose = sorted(p.name for p in (ROOT / "repro").iterdir()
                    if (p.suffix == ".py" and p.name not in ("__init__.py", "__main__.py"))
                    or (p.is_dir() and p.name not in REPRO_FOLDERS and p.name != "__pycache__"))
-    assert not loose, f"repro/ must hold only the layer folders of layout.md, found {loose}"
+    assert not loose, f"repro/ must hold only the layer folders of docs/layers.md, found {loose}"
     assert layer_of("repro.config.compose") == layer_of("repro.envs.dmc") == CONFIG
     assert layer_of("repro.runs.rundir") == layer_of("repro.agent.agent") == RUNS
     assert layer_of("repro.data.dataset") == layer_of("repro.learners.losses.cql") == DATA

@@ -1,4 +1,4 @@
-"""Load a dataset (contract: PLAN.md / docs/offline.md) into the online ReplayBuffer, once.
+"""Load a dataset (contract: docs/offline.md) into the online ReplayBuffer, once.
 
 Frames are stored once (uint8, single frames, like the online ring), so the buffer's memory is the raw
 frame bytes plus a few bytes per transition; stacks, n-step returns and K-step action sequences are then
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-# The one import of the dataset API (a private shim until repro.data.dataset lands: same names).
+# The one import of the dataset API (repro/data/dataset.py).
 from repro.data.dataset import DatasetError, Manifest, iter_episodes, load_manifest, resolve_dataset
 from repro.data.replay import ReplayBuffer
 

@@ -1,10 +1,10 @@
 """Meta-world v3 from pixels (``metaworld`` is imported lazily inside :class:`MetaWorldEnv`).
 
-Setup (see docs/machine.md): ``metaworld.MT1("<name>-v3", seed)`` provides 50 train tasks (object and
-goal positions); the environment class renders ``camera_name`` at ``image_size``. Each ``reset(seed)``
-picks one of the train tasks deterministically from ``seed``, calls ``set_task`` and ``env.seed(seed)``
-(``reset(seed=...)`` is ignored by Meta-world). Episodes end after 500 environment steps (truncation:
-``last=True``, discount 1.0); there is no terminal state.
+Setup (see "Meta-world setup" in docs/deviations.md): ``metaworld.MT1("<name>-v3", seed)`` provides 50 train
+tasks (object and goal positions); the environment class renders ``camera_name`` at ``image_size``. Each
+``reset(seed)`` picks one of the train tasks deterministically from ``seed``, calls ``set_task`` and
+``env.seed(seed)`` (``reset(seed=...)`` is ignored by Meta-world). Episodes end after 500 environment steps
+(truncation: ``last=True``, discount 1.0); there is no terminal state.
 
 The ``corner``/``corner2``/``corner3``/``corner4`` cameras are defined upside down (their up axis points
 down in the world), so their frames come out rotated by 180 degrees: such frames are rotated back, which

@@ -32,7 +32,6 @@ TB = "tb"  # runtime.tensorboard: TensorBoard event files mirroring eval.csv and
 WANDB = "wandb"  # runtime.wandb: the W&B run id and the offline W&B run folder mirroring the CSVs (repro/runs/wblog.py)
 VIDEOS = "videos"  # train.save_video: frame_XXXXXXXXX.mp4 (offline: update_...) per evaluation (repro/runs/video.py)
 WRITER_LOCK = ".writer.lock"  # flock()ed by the one process writing the run; names the last holder (repro/runs/rundir.py)
-FILES = (CONFIG, META, RESOLVED, EVAL, TRAIN, CHECKPOINT, DONE, FRAMES, REPLAY, TB, WANDB, VIDEOS)
 
 # ---------------------------------------------------------------- CSV columns
 EVAL_COLUMNS = ("frame", "step", "episode", "episode_reward", "episode_reward_std", "episode_length", "success",
@@ -76,7 +75,6 @@ def train_columns(metric_names: Sequence[str]) -> list[str]:
 
 # ---------------------------------------------------------------- run states
 STATE_DONE, STATE_PARTIAL, STATE_ABSENT = "done", "partial", "absent"
-RUN_STATES = (STATE_DONE, STATE_PARTIAL, STATE_ABSENT)
 
 
 def read_done(path: str | Path) -> dict | None:
@@ -128,7 +126,6 @@ def run_state(path: str | Path, budget: int | None = None) -> str:
 
 # ---------------------------------------------------------------- identity
 # The run directory is {runtime.results_root}/{experiment}/{agent.name}/{variant}/{task.name}/seed_{seed}.
-PATH_KEYS = ("experiment", "agent.name", "variant", "task.name", "seed")
 
 
 def run_path(results_root: str | Path, experiment: str, algo: str, variant: str, task: str, seed: int,
