@@ -55,7 +55,7 @@ class PhaseTimer:
 
 def _inner_env(env: Any) -> Any:
     """The suite environment under the wrappers (TimeLimit, DistractingActionDims hold theirs in ``env``)."""
-    while hasattr(env, "env"):
+    while not hasattr(env, "_render") and hasattr(env, "env"):
         env = env.env
     return env
 
