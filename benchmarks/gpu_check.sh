@@ -11,8 +11,8 @@
 # Runs from a checkout where `make setup` was run (.venv), or with PYTHON=/path/to/python of an environment holding
 # the project's requirements (the checkout is put on PYTHONPATH). It needs no network.
 #   OUT=/tmp/out benchmarks/gpu_check.sh
-# GPU_CHECK_DEVICE=cpu GPU_CHECK_QUICK=1: the same steps at tiny sizes on the CPU, no compile step
-# (tests/test_gpu_check.py). GPU_CHECK_BUDGET_S: the whole script's seconds (default 470); each step gets at most
+# GPU_CHECK_DEVICE=cpu GPU_CHECK_QUICK=1: the same steps at tiny sizes on the CPU (DrQ-v2 only, batch 8, the tiny
+# profile), no compile step (tests/test_gpu_check.py). GPU_CHECK_BUDGET_S: the whole script's seconds (default 470); each step gets at most
 # its own limit and what is left of that budget, and a step that runs out is recorded as "timeout".
 set -u -o pipefail
 cd "$(dirname "$0")/.."
@@ -35,13 +35,13 @@ STEPS="$WORK/steps.jsonl"
 START=$(date +%s)
 
 if [ "$QUICK" = 1 ]; then
-  BATCH=(--batch 8); UPD=(--warmup 0 --repeats 1)
+  BATCH=(--algo drqv2 --batch 8); UPD=(--warmup 0 --repeats 1)
   E2E=(--algo drqv2 --frames 40 --seed-frames 20); AMP_CHECK=(--batch 8 --updates 2 --hidden-dim 64)
-  PACK_FRAMES=100; PACK_SET=(profile=tiny); PACK_SEED_FRAMES=20
+  PACK_AGENT=drqv2; PACK_FRAMES=100; PACK_SET=(profile=tiny); PACK_SEED_FRAMES=80  # one 50-step episode each
 else
   BATCH=(--batch 256 --batch 1024); UPD=(--warmup 3 --repeats 10)
   E2E=(--algo taco --batch 1024 --frames 6000 --seed-frames 4000); AMP_CHECK=(--batch 256 --updates 5)
-  PACK_FRAMES=4000; PACK_SET=(agent.batch_size=256 replay.capacity=100000); PACK_SEED_FRAMES=1000
+  PACK_AGENT=taco; PACK_FRAMES=4000; PACK_SET=(agent.batch_size=256 replay.capacity=100000); PACK_SEED_FRAMES=1000
 fi
 
 REPRO=("$PYTHON" -m repro)
@@ -73,11 +73,12 @@ pack_sweep() {  # pack_sweep N: write a sweep of N runs (seeds), to be run all a
     echo "artifacts: []"
     echo "experiment: pack$n"
     echo "tasks: [cheetah_run]"
-    echo "agents: [taco]"
+    echo "agents: [$PACK_AGENT]"
     echo "seeds: $n"
     echo "frames: $PACK_FRAMES"
-    echo "eval: {every_frames: $PACK_FRAMES, episodes: 0}"
-    echo "common: [$(IFS=,; echo "${PACK_SET[*]}"), train.seed_frames=$PACK_SEED_FRAMES, runtime.progress=false]"
+    echo "eval: {every_frames: $PACK_FRAMES, episodes: null}"
+    echo "common: [$(IFS=,; echo "${PACK_SET[*]}"), train.seed_frames=$PACK_SEED_FRAMES, train.eval_episodes=0,"
+    echo "         train.save_frames=false, runtime.progress=false]"
     echo "variants: {base: []}"
   } >"$file"
 }

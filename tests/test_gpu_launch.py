@@ -50,7 +50,7 @@ def test_pick_fills_the_least_busy_gpu_and_never_more_than_n():
 
 def _sweep(tmp_path: Path, seeds: int) -> list[specs.PlannedRun]:
     path = write_sweep(tmp_path, "gpus", ["cheetah_run"], {"base": []}, seeds)
-    sel = specs.Selection(sets=(f"runtime.results_root={tmp_path / 'runs'}",))
+    sel = specs.Selection(sets=(f"runtime.results_root={specs.hydra_quote(str(tmp_path / 'runs'))}",))
     return specs.plan(specs.expand(specs.load(str(path)), sel))
 
 

@@ -6,6 +6,7 @@ against a figure measured on another machine or in another process says nothing.
 upstream code, time both side by side on one machine (docs/performance.md). Results are saved as JSON
 under ``{results_root}/bench/`` for the speed tables (T4, T5).
 
+``--e2e`` times a short real training loop phase by phase (repro/bench/e2e.py) into the same JSON's ``e2e``;
 ``--offline`` times each offline learner against the online DrQ-v2 update (repro/bench/offline.py);
 ``--offline-data`` a dataset's load time, memory and sampling speed against the online buffer
 (repro/bench/data.py).
@@ -247,7 +248,8 @@ def register(app: typer.Typer) -> None:
               task: str = typer.Option("cheetah_run", "--task", help="With --e2e: the task."),
               results_root: Path = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).")):
         """Time one update of TACO and DrQ-v2 at batch 256 and 1024; print same-run ratios and replay memory.
-        With --offline: each offline learner against DrQ-v2; with --offline-data: dataset load and sampling."""
+        With --offline: each offline learner against DrQ-v2; with --offline-data: dataset load and sampling;
+        with --e2e: a short training loop timed per phase (env step, render, replay sample, update, act) and FPS."""
         import torch
 
         from repro.bench.data import run_data_bench
