@@ -242,7 +242,7 @@ def register(app: typer.Typer) -> None:
               e2e: bool = typer.Option(False, "--e2e", help="Instead: a short real training loop (env step, "
                                        "render, replay sample, update, act; no evaluation) timed per phase; without "
                                        "--batch the main job's tiny profile."),
-              frames: int = typer.Option(200, "--frames", help="With --e2e: timed frames after the seed frames."),
+              frames: int = typer.Option(100, "--frames", help="With --e2e: timed frames after the seed frames."),
               seed_frames: Optional[int] = typer.Option(
                   None, "--seed-frames", help="With --e2e: untimed frames first (default: the config's)."),
               task: str = typer.Option("cheetah_run", "--task", help="With --e2e: the task."),

@@ -79,7 +79,7 @@ def _time_render(env: Any, timer: PhaseTimer) -> list[float]:
     return spent
 
 
-def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plain", frames: int = 200,
+def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plain", frames: int = 100,
             task: str = "cheetah_run", warmup: int = 1, seed_frames: int | None = None) -> dict[str, Any]:
     """Build a run of ``algo`` on ``task`` (the tiny profile when ``batch_size`` is None, else the agent's own
     settings at that batch), step its seed frames untimed, run ``warmup`` untimed updates, then time ``frames``
