@@ -8,9 +8,10 @@ The bench JSON read here (written by ``repro bench``, repro/bench/cli.py; see do
   one object per timed update with ``algo`` (the agent file, e.g. ``taco``), ``batch_size``, ``speedup``
   (``plain``, ``amp``, ``compile``), ``update_seconds``; optional per result ``peak_device_bytes`` (the device's
   peak allocation during the timed updates); optional top level ``device_memory_bytes`` (the device's memory).
-  Optional ``e2e``: one object per end-to-end training measurement with ``algo``, ``batch_size``, ``frames``
-  (environment frames trained), ``seconds`` (wall-clock of those frames, every phase) and optional ``phases``
-  (phase name -> seconds of the same run, e.g. ``env_step``, ``update``, ``eval``), ``peak_device_bytes``,
+  Optional ``e2e`` (``repro bench --e2e``, repro/bench/e2e.py): one object per end-to-end training measurement
+  with ``algo``, ``batch_size``, ``frames`` (environment frames trained), ``seconds`` (wall-clock of those frames,
+  every phase), optional ``speedup`` (the path, as in ``results``; default ``plain``) and optional ``phases``
+  (phase name -> seconds of the same run, e.g. ``env_step``, ``render``, ``update``), ``peak_device_bytes``,
   ``peak_host_bytes``. A run's FPS is ``frames / seconds`` of its e2e entry where there is one, else the
   update-bound ``frames per update / update_seconds`` (frames per update = the run's
   ``train.update_every_steps x env.action_repeat``).
@@ -71,7 +72,7 @@ class Bench:
     path: Path | None = None
     hardware: str = ""
     updates: dict[tuple[str, int, str], dict[str, Any]] = field(default_factory=dict)
-    e2e: dict[tuple[str, int], dict[str, Any]] = field(default_factory=dict)
+    e2e: dict[tuple[str, int, str], dict[str, Any]] = field(default_factory=dict)
     offline: dict[tuple[str, int], float] = field(default_factory=dict)
     offline_path: Path | None = None
     device_memory_bytes: int | None = None
@@ -99,7 +100,7 @@ def parse_bench(data: dict[str, Any], path: Path | None, device: str) -> Bench:
         for r in data.get("e2e", []) or []:
             if float(r["frames"]) <= 0 or float(r["seconds"]) <= 0:
                 raise ValueError("e2e frames and seconds must be positive")
-            bench.e2e[(str(r["algo"]), int(r["batch_size"]))] = r
+            bench.e2e[(str(r["algo"]), int(r["batch_size"]), str(r.get("speedup", "plain")))] = r
         mem = data.get("device_memory_bytes")
         bench.device_memory_bytes = int(mem) if mem else None
     except (KeyError, TypeError, ValueError) as exc:
@@ -236,7 +237,7 @@ def _rate(cost: RunCost, bench: Bench) -> None:
             cost.missing = (f"repro bench --offline --device {bench.device} --learner {cost.algo} "
                             f"--batch {cost.batch_size}")
         return
-    e2e = bench.e2e.get((cost.algo, cost.batch_size))
+    e2e = bench.e2e.get((cost.algo, cost.batch_size, cost.speedup))
     upd = bench.updates.get((cost.algo, cost.batch_size, cost.speedup))
     if e2e is not None:
         cost.fps, cost.fps_source = float(e2e["frames"]) / float(e2e["seconds"]), "e2e"

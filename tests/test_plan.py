@@ -139,6 +139,13 @@ def test_device_hours_on_a_synthetic_bench_equal_runs_times_frames_over_fps(tiny
     rate = costs[0].frames_per_update / 0.5
     assert totals("tiny", plan_sweeps(["tiny"], bench, results_root=root), 1, 1).hours == \
         pytest.approx(8 * frames / rate / 3600)
+    # an e2e entry of another path (`repro bench --e2e --amp`) does not rate a plain run: update-bound again
+    path = _bench(root / "amp")
+    data = json.loads(path.read_text())
+    data["e2e"] = [{**e, "speedup": "amp"} for e in data["e2e"]]
+    path.write_text(json.dumps(data))
+    amp_only = plan_sweeps(["tiny"], find_bench(root, "cuda", path), results_root=root)
+    assert {c.fps_source for c in amp_only} == {"update-bound"}
 
 
 def test_plan_without_a_bench_file_is_one_line_and_exit_2(tmp_path):

@@ -6,6 +6,7 @@ against a figure measured on another machine or in another process says nothing.
 upstream code, time both side by side on one machine (docs/performance.md). Results are saved as JSON
 under ``{results_root}/bench/`` for the speed tables (T4, T5).
 
+``--e2e`` times a short real training loop phase by phase (repro/bench/e2e.py) into the same JSON's ``e2e``;
 ``--offline`` times each offline learner against the online DrQ-v2 update (repro/bench/offline.py);
 ``--offline-data`` a dataset's load time, memory and sampling speed against the online buffer
 (repro/bench/data.py).
@@ -23,7 +24,7 @@ from typing import TYPE_CHECKING, Optional
 
 import typer
 
-from repro.bench import OFFLINE_AGENTS
+from repro.bench import OFFLINE_AGENTS, SPEEDUP_FLAGS
 from repro.runs.fsutil import atomic_write_text
 
 if TYPE_CHECKING:
@@ -52,7 +53,7 @@ def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: 
     from repro.config.compose import compose, typed
     from repro.envs import get_task
 
-    flags = {"plain": [], "amp": ["agent.amp=true"], "compile": ["agent.compile=true"]}[speedup]
+    flags = SPEEDUP_FLAGS[speedup]
     rc = typed(compose([f"agent={algo}", f"task={task}", f"agent.batch_size={batch_size}", *flags]))
     A = get_task(task).action_dim
     torch.manual_seed(0)
@@ -150,11 +151,55 @@ def run_bench(configs: list[tuple[str, int]], repeats: int, device: str, out_dir
     report = {"hardware": hardware(device), "device": device, "host": socket.gethostname(),
               "torch": torch.__version__, "python": platform.python_version(), "results": results,
               "ratios": ratios, "replay_memory": memory, "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / f"bench-{socket.gethostname()}-{device.split(':')[0]}.json"
-    atomic_write_text(path, json.dumps(report, indent=2) + "\n")
-    echo(f"wrote {path}")
+    path = bench_path(out_dir, device)
+    e2e = _read_existing(path).get("e2e")
+    if e2e:
+        report["e2e"] = e2e  # the --e2e entries of an earlier run stay (each has its own time)
+    _write_report(out_dir, path.name, report, echo)
     return report
+
+
+def bench_path(out_dir: Path, device: str) -> Path:
+    """The bench file of this host and device, read by the speed tables and `repro plan`."""
+    return out_dir / f"bench-{socket.gethostname()}-{device.split(':')[0]}.json"
+
+
+def _read_existing(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def e2e_key(entry: dict) -> tuple:
+    return entry["algo"], entry["batch_size"], entry.get("profile"), entry.get("speedup", "plain")
+
+
+def run_e2e_bench(configs: list[tuple[str, Optional[int]]], device: str, out_dir: Path, frames: int,
+                  speedups: tuple[str, ...] = (), warmup: int = 1, task: str = "cheetah_run",
+                  seed_frames: Optional[int] = None, echo=print, meta: Optional[dict] = None) -> list[dict]:
+    """Time each (algo, batch; None: the tiny profile) on every path with :func:`repro.bench.e2e.run_e2e` and
+    put the entries under ``e2e`` of the bench file (an entry of the same algo, batch, profile and path replaced,
+    the update results kept)."""
+    from repro.bench.e2e import PHASES, run_e2e
+
+    entries = []
+    for speedup in ("plain", *speedups):
+        for algo, bs in configs:
+            e = run_e2e(algo, bs, device, speedup, frames=frames, task=task, warmup=warmup, seed_frames=seed_frames)
+            entries.append(e)
+            what = f"profile {e['profile']} B{e['batch_size']}" if e["profile"] else f"B{e['batch_size']}"
+            shares = ", ".join(f"{k} {e['phases'][k]:.2f}s" for k in PHASES)
+            echo(f"{algo:>6} {what} {speedup}: {e['frames']} frames in {e['seconds']:.2f} s, {e['fps']:.1f} fps "
+                 f"({shares}; {e['updates']} updates, evaluation excluded)")
+    path = bench_path(out_dir, device)
+    report = _read_existing(path) or {"results": []}
+    report.update(meta or {})
+    new = {e2e_key(e) for e in entries}
+    report["e2e"] = [e for e in report.get("e2e", []) if e2e_key(e) not in new] + entries
+    _write_report(out_dir, path.name, report, echo)
+    return entries
 
 
 def _write_report(out_dir: Path, name: str, report: dict, echo=print) -> Path:
@@ -194,9 +239,17 @@ def register(app: typer.Typer) -> None:
                                                  help="With --offline-data: transitions per episode."),
               sample_batches: int = typer.Option(50, "--sample-batches",
                                                  help="With --offline-data: batches sampled from each buffer."),
+              e2e: bool = typer.Option(False, "--e2e", help="Instead: a short real training loop (env step, "
+                                       "render, replay sample, update, act; no evaluation) timed per phase; without "
+                                       "--batch the main job's tiny profile."),
+              frames: int = typer.Option(100, "--frames", help="With --e2e: timed frames after the seed frames."),
+              seed_frames: Optional[int] = typer.Option(
+                  None, "--seed-frames", help="With --e2e: untimed frames first (default: the config's)."),
+              task: str = typer.Option("cheetah_run", "--task", help="With --e2e: the task."),
               results_root: Path = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).")):
         """Time one update of TACO and DrQ-v2 at batch 256 and 1024; print same-run ratios and replay memory.
-        With --offline: each offline learner against DrQ-v2; with --offline-data: dataset load and sampling."""
+        With --offline: each offline learner against DrQ-v2; with --offline-data: dataset load and sampling;
+        with --e2e: a short training loop timed per phase (env step, render, replay sample, update, act) and FPS."""
         import torch
 
         from repro.bench.data import run_data_bench
@@ -216,6 +269,15 @@ def register(app: typer.Typer) -> None:
             raise _fail("--dt-batch must be >= 1")
         if transitions < 1 or sample_batches < 1 or episode_length < 3:
             raise _fail("--transitions and --sample-batches must be >= 1, --episode-length >= 3")
+        if frames < 1 or (seed_frames is not None and seed_frames < 0):
+            raise _fail("--frames must be >= 1 and --seed-frames >= 0")
+        if e2e and (offline or offline_data):
+            raise _fail("--e2e times the online loop: drop --offline / --offline-data")
+        if e2e:
+            from repro.envs import TASKS
+
+            if task not in TASKS:
+                raise _fail(f"unknown task '{task}'")
         out_dir, host, dev = results_root / "bench", socket.gethostname(), device.split(":")[0]
         meta = {"hardware": hardware(device), "device": device, "host": host, "torch": torch.__version__,
                 "python": platform.python_version(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
@@ -228,6 +290,11 @@ def register(app: typer.Typer) -> None:
             _write_report(out_dir, f"bench-offline-data-{host}.json", {**meta, **data}, typer.echo)
         if offline or offline_data:
             return
-        configs = [(a, b) for a in (algo or ["taco", "drqv2"]) for b in (batch or [256, 1024])]
         speedups = tuple(name for name, on in (("amp", amp), ("compile", compile_)) if on)
+        if e2e:
+            sizes: list[Optional[int]] = list(batch) if batch else [None]
+            run_e2e_bench([(a, b) for a in (algo or ["taco", "drqv2"]) for b in sizes], device, out_dir, frames,
+                          speedups, warmup, task, seed_frames, echo=typer.echo, meta=meta)
+            return
+        configs = [(a, b) for a in (algo or ["taco", "drqv2"]) for b in (batch or [256, 1024])]
         run_bench(configs, repeats, device, out_dir, echo=typer.echo, speedups=speedups, warmup=warmup)

@@ -20,7 +20,7 @@ from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 from repro.launch.spec.sharing import SweepFrames, shared_frames
 
 if TYPE_CHECKING:
-    from repro.launch.local import LaunchReport
+    from repro.launch.local import GpuPacking, LaunchReport
     from repro.launch.status import RunStatus
 
 # The same flags as `repro status`, `figures` and `report`.
@@ -174,10 +174,18 @@ def sweep_cmd(
         False, "--warm-start", help="Local: fork each run from a process that has imported torch and the trainer "
         "already (about 4 s of CPU less per run; the same files and logs) instead of a fresh interpreter."
     ),
+    gpus: Optional[str] = typer.Option(
+        None, "--gpus", help="Local: GPU ids, e.g. 0,1; each run gets one (CUDA_VISIBLE_DEVICES and "
+        "MUJOCO_EGL_DEVICE_ID), at most --runs-per-gpu at once on each."
+    ),
+    runs_per_gpu: Optional[int] = typer.Option(
+        None, "--runs-per-gpu", help="Local, with --gpus: runs sharing one GPU at once (default 1)."
+    ),
 ) -> None:
     """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
     if warm_start and launcher == Launcher.slurm:
         raise _fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
+    packing = _gpu_packing(gpus, runs_per_gpu, launcher, max_parallel, warm_start)
     try:
         spec = specs.load(name)
         task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
@@ -190,7 +198,7 @@ def sweep_cmd(
         if any(p.state == "mismatch" for p in planned) and not force:
             raise SweepError(_mismatch_error(planned, root))
         _check_wandb(planned)
-        report = _launch(spec, planned, root, launcher, max_parallel, force, cluster_config, warm_start)
+        report = _launch(spec, planned, root, launcher, max_parallel, force, cluster_config, warm_start, packing)
     except SweepError as exc:
         raise _fail(str(exc)) from None
     _print_report(report, launcher, spec.name)
@@ -198,6 +206,28 @@ def sweep_cmd(
         raise typer.Exit(130)
     if report.failed or report.mismatch:
         raise typer.Exit(1)
+
+
+def _gpu_packing(gpus: Optional[str], runs_per_gpu: Optional[int], launcher: Launcher, max_parallel: Optional[int],
+                 warm_start: bool) -> GpuPacking | None:
+    """``--gpus`` / ``--runs-per-gpu`` as a GpuPacking (None without --gpus); bad input: one line, exit 2."""
+    from repro.launch.local import parse_gpus
+
+    if gpus is None:
+        if runs_per_gpu is not None:
+            raise _fail("--runs-per-gpu needs --gpus (the GPUs the runs share)")
+        return None
+    if launcher == Launcher.slurm:
+        raise _fail("--gpus is for the local launcher (SLURM places runs on GPUs: gpus_per_node and the gres in "
+                    "the launcher config, sweeps/launchers/example.yaml)")
+    if max_parallel is not None:
+        raise _fail("--gpus sets the runs at once (GPUs x --runs-per-gpu): drop --max-parallel")
+    if warm_start:
+        raise _fail("--gpus with --warm-start: the warm server sets up one EGL display for every run; drop one")
+    try:
+        return parse_gpus(gpus, 1 if runs_per_gpu is None else runs_per_gpu)
+    except ValueError as exc:
+        raise _fail(str(exc)) from None
 
 
 def _check_wandb(planned: list[PlannedRun]) -> None:
@@ -212,7 +242,8 @@ def _check_wandb(planned: list[PlannedRun]) -> None:
 
 
 def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: Launcher, max_parallel: Optional[int],
-            force: bool, cluster_config: Optional[Path], warm_start: bool = False) -> LaunchReport:
+            force: bool, cluster_config: Optional[Path], warm_start: bool = False,
+            gpus: GpuPacking | None = None) -> LaunchReport:
     """Record the launch in the sweep's state folder and submit (SLURM) or run (local) the planned runs."""
     from repro.launch.local import default_parallel, run_local
     from repro.launch.state import record_launch, state_dir
@@ -230,9 +261,11 @@ def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: La
         record_launch(sdir, spec.name, spec.path, "slurm", grid, report.job_ids,
                       {"cluster_config": str(cpath) if cpath else None})
         return report
-    parallel = max_parallel or default_parallel()
-    record_launch(sdir, spec.name, spec.path, "local", grid, extra={"max_parallel": parallel, "warm_start": warm_start})
-    return run_local(planned, spec.name, sdir, parallel, force, say, warm_start)
+    parallel = gpus.max_parallel if gpus is not None else (max_parallel or default_parallel())
+    extra = {"max_parallel": parallel, "warm_start": warm_start,
+             **({"gpus": list(gpus.gpus), "runs_per_gpu": gpus.per_gpu} if gpus is not None else {})}
+    record_launch(sdir, spec.name, spec.path, "local", grid, extra=extra)
+    return run_local(planned, spec.name, sdir, parallel, force, say, warm_start, gpus)
 
 
 def status_cmd(

@@ -73,13 +73,52 @@ class Interrupted(Exception):
     """SIGINT or SIGTERM reached the launcher."""
 
 
-def child_env(max_parallel: int) -> dict[str, str]:
+def child_env(max_parallel: int, gpu: int | None = None) -> dict[str, str]:
+    """A child's environment: this process's, headless rendering, the CPU threads shared among ``max_parallel``
+    runs, and with ``gpu`` (a physical GPU id, `repro sweep --gpus`) that GPU alone for CUDA
+    (``CUDA_VISIBLE_DEVICES``, in nvidia-smi's order) and for MuJoCo's EGL rendering (``MUJOCO_EGL_DEVICE_ID``)."""
     env = dict(os.environ)
     env.setdefault("MUJOCO_GL", "egl")
     threads = str(max(1, (os.cpu_count() or 1) // max(1, max_parallel)))
     env.setdefault("OMP_NUM_THREADS", threads)
     env.setdefault("MKL_NUM_THREADS", threads)
+    if gpu is not None:
+        env["CUDA_DEVICE_ORDER"] = "PCI_BUS_ID"  # ids as nvidia-smi numbers them (CUDA's default is fastest first)
+        env["CUDA_VISIBLE_DEVICES"] = str(gpu)
+        env["MUJOCO_EGL_DEVICE_ID"] = str(gpu)
     return env
+
+
+@dataclass(frozen=True)
+class GpuPacking:
+    """`repro sweep --gpus 0,1 --runs-per-gpu N`: the physical GPU ids and how many runs share each at once."""
+
+    gpus: tuple[int, ...]
+    per_gpu: int = 1
+
+    @property
+    def max_parallel(self) -> int:
+        return len(self.gpus) * self.per_gpu
+
+    def pick(self, running: Sequence[int | None]) -> int | None:
+        """The GPU for the next run, given the GPUs of the running ones: the least busy (the first listed among
+        equals), None when every GPU has ``per_gpu`` runs."""
+        load = {g: sum(1 for r in running if r == g) for g in self.gpus}
+        free = [g for g in self.gpus if load[g] < self.per_gpu]
+        return min(free, key=lambda g: load[g]) if free else None
+
+
+def parse_gpus(text: str, per_gpu: int) -> GpuPacking:
+    """``--gpus 0,1`` and ``--runs-per-gpu N`` as a :class:`GpuPacking`; ValueError (one line) for bad input."""
+    ids = [part.strip() for part in text.split(",")]
+    if not ids or any(not part.isdigit() for part in ids):
+        raise ValueError(f"--gpus takes comma-separated GPU ids (integers >= 0, e.g. 0,1), got '{text}'")
+    gpus = tuple(int(part) for part in ids)
+    if len(set(gpus)) != len(gpus):
+        raise ValueError(f"--gpus lists a GPU twice ('{text}'); use --runs-per-gpu to share one")
+    if per_gpu < 1:
+        raise ValueError(f"--runs-per-gpu must be >= 1, got {per_gpu}")
+    return GpuPacking(gpus, per_gpu)
 
 
 @dataclass
@@ -89,9 +128,10 @@ class _Active:
     log: Path
     record: RunRecord
     started: float
+    gpu: int | None = None
 
 
-def _start(c: Claim, sdir: Path, env: dict[str, str], warm: WarmStarter | None) -> _Active:
+def _start(c: Claim, sdir: Path, env: dict[str, str], warm: WarmStarter | None, gpu: int | None = None) -> _Active:
     p = c.planned
     log = log_path(sdir, p.key)
     log.parent.mkdir(parents=True, exist_ok=True)
@@ -112,7 +152,7 @@ def _start(c: Claim, sdir: Path, env: dict[str, str], warm: WarmStarter | None) 
     record = RunRecord(key=p.key, run_dir=str(p.run_dir), overrides=list(p.overrides), launcher="local",
                        status="running", log=str(log), stderr=str(log), pid=proc.pid, budget=run_budget(p.cfg))
     write_record(sdir, record)
-    return _Active(c, proc, log, record, time.time())
+    return _Active(c, proc, log, record, time.time(), gpu)
 
 
 def _finish(a: _Active, sdir: Path, rc: int, report: LaunchReport, say: Callable[[str], None]) -> None:
@@ -155,15 +195,20 @@ def _stop_all(active: dict[str, _Active], sdir: Path) -> None:
 
 
 def run_local(planned: Sequence[PlannedRun], sweep: str, sdir: Path, max_parallel: int, force: bool,
-              say: Callable[[str], None], warm_start: bool = False) -> LaunchReport:
+              say: Callable[[str], None], warm_start: bool = False, gpus: GpuPacking | None = None) -> LaunchReport:
     """Run every not-yet-done run, at most ``max_parallel`` at a time; keep going past failures.
 
     Each run is claimed (locked, state re-read) just before it starts, so a concurrent launcher on
     the same grid never runs it twice. SIGINT/SIGTERM stop the children and release their locks; the
     runs resume from their checkpoints on the next launch. ``warm_start`` forks each run from a server that has
     imported torch and the trainer already (repro/launch/warm.py) instead of starting a fresh interpreter.
+    ``gpus`` places each run on a GPU (its environment: :func:`child_env`), at most ``gpus.per_gpu`` runs per GPU
+    at once (``max_parallel`` is then ``gpus.max_parallel``; a warm start is refused by the command line, since its
+    server would set up one EGL display for every run).
     """
     report = LaunchReport()
+    if gpus is not None:
+        max_parallel = gpus.max_parallel
     env = child_env(max_parallel)
     queue = report.to_launch(planned, say)
     warm = WarmStarter(env) if warm_start and queue else None
@@ -185,9 +230,11 @@ def run_local(planned: Sequence[PlannedRun], sweep: str, sdir: Path, max_paralle
                     continue
                 if c.moved_to is not None:
                     say(f"[yellow]moved[/] old run dir of {p.key} to {escape(str(c.moved_to))}")
-                active[p.key] = _start(c, sdir, env, warm)
+                gpu = gpus.pick([a.gpu for a in active.values()]) if gpus is not None else None
+                active[p.key] = _start(c, sdir, env if gpu is None else child_env(max_parallel, gpu), warm, gpu)
                 report.started.append(p.key)
-                say(f"[cyan]start[/] {p.key} ({len(active)} running, {len(queue)} queued)")
+                on = "" if gpu is None else f" on GPU {gpu}"
+                say(f"[cyan]start[/] {p.key}{on} ({len(active)} running, {len(queue)} queued)")
             for key, a in list(active.items()):
                 rc = a.proc.poll()
                 if rc is not None:
