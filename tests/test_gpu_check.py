@@ -17,6 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.slow
+@pytest.mark.device_script
 def test_gpu_check_quick_on_cpu_writes_every_json(tmp_path):
     out = tmp_path / "out"
     env = dict(os.environ, OUT=str(out), GPU_CHECK_DEVICE="cpu", GPU_CHECK_QUICK="1", PYTHON=sys.executable,
