@@ -192,3 +192,17 @@ def launch_app() -> typer.Typer:
         pass
 
     return app
+
+
+def bench_app() -> typer.Typer:
+    """A Typer app with ``repro bench`` only, as ``repro`` registers it."""
+    from repro.bench.cli import register
+
+    app = typer.Typer()
+    register(app)
+
+    @app.callback()
+    def main() -> None:  # keep `bench` a named sub-command
+        pass
+
+    return app

@@ -11,21 +11,15 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
+from helpers import bench_app
 from repro.bench import OFFLINE_AGENTS
-from repro.bench.cli import register, same_run_ratios
+from repro.bench.cli import same_run_ratios
 from repro.bench.data import episode_lengths, synthetic_episode
 from repro.bench.offline import available, run_offline_bench
 
 
 def _app() -> typer.Typer:
-    app = typer.Typer()
-    register(app)
-
-    @app.callback()
-    def main() -> None:  # keep `bench` a named sub-command
-        pass
-
-    return app
+    return bench_app()
 
 
 def test_same_run_ratios_pair_only_measured_settings():

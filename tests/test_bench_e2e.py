@@ -9,7 +9,7 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from repro.bench.cli import register
+from helpers import bench_app
 from repro.bench.e2e import PHASES
 from repro_app.plan import parse_bench
 
@@ -19,14 +19,7 @@ SUM_TOLERANCE = 0.10
 
 
 def _app() -> typer.Typer:
-    app = typer.Typer()
-    register(app)
-
-    @app.callback()
-    def main() -> None:  # keep `bench` a named sub-command
-        pass
-
-    return app
+    return bench_app()
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
