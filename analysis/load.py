@@ -23,7 +23,8 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from analysis.identity import algo_key, enabled_objectives, method_label, normalize_dataset
-from repro.runs.migrate import ABSENT, get_key, migrate_config
+from repro.config.compose import ABSENT, get_key
+from repro.runs.migrate import migrate_config
 from repro.runs.runformat import (
     CONFIG,
     EVAL,

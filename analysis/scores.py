@@ -98,21 +98,25 @@ def _offline_score(run: Any, rows: pd.DataFrame | None) -> dict[str, Any]:
     return out
 
 
+def _budget_end(rows: pd.DataFrame) -> pd.Series:
+    """Which of ``rows`` only a shorter budget's end produced (analysis.load.budget_end_rows; none without the
+    column)."""
+    if "budget_end" not in rows.columns:
+        return pd.Series(False, index=rows.index)
+    return rows["budget_end"].fillna(False).astype(bool)
+
+
 def on_grid(rows: pd.DataFrame) -> pd.DataFrame:
-    """``rows`` without those only a shorter budget's end produced (analysis.load.budget_end_rows): the rows of a
-    run trained to its budget in one go."""
-    if "budget_end" not in rows.columns or rows.empty:
-        return rows
-    return rows[~rows["budget_end"].fillna(False).astype(bool)]
+    """``rows`` without those only a shorter budget's end produced: the rows of a run trained to its budget in one
+    go."""
+    return rows[~_budget_end(rows)]
 
 
 def _at_budget(rows: pd.DataFrame, x: str, budget: float) -> pd.DataFrame:
     """The rows a run has up to ``budget`` (its prefix): the grid rows and a budget's-end row exactly at it, so a
     run extended past a budget scores there as the same run stopped at it."""
     within = rows[rows[x] <= budget]
-    if "budget_end" not in within.columns:
-        return within
-    return within[~within["budget_end"].fillna(False).astype(bool) | (within[x] == budget)]
+    return within[~_budget_end(within) | (within[x] == budget)]
 
 
 def common_grid(eval_df: pd.DataFrame, step: int | None = None, max_frame: float | None = None) -> np.ndarray:

@@ -180,7 +180,8 @@ def test_the_sweep_launcher_skips_a_run_that_a_hand_started_train_holds(tmp_path
     from repro.launch.runner import claim
 
     cfg = compose(["task=cheetah_run", f"runtime.results_root={tmp_path}"])
-    planned = SimpleNamespace(results_root=tmp_path, run_dir=rundir.run_dir(cfg), cfg=cfg)
+    planned = SimpleNamespace(results_root=tmp_path, run_dir=rundir.run_dir(cfg), cfg=cfg,
+                              budget=rundir.run_budget(cfg))
     planned.run_dir.mkdir(parents=True)
     with rundir.acquire_writer_lock(planned.run_dir):
         c = claim(planned, "local", "s", force=False)  # type: ignore[arg-type]

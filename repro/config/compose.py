@@ -7,7 +7,7 @@ import os
 import re
 from collections.abc import Iterable
 from pathlib import Path
-from typing import cast
+from typing import Any, cast
 
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -148,12 +148,6 @@ def validate(raw: DictConfig) -> DictConfig:
         value = str(OmegaConf.select(cfg, key))
         if not NAME_RE.match(value):
             raise ConfigError(f"{key}='{value}' may only contain letters, digits, '_', '.' and '-'.")
-    positive = ("agent.K", "agent.batch_size", "agent.nstep", "agent.stddev_schedule.step_scale",
-                "env.action_repeat", "env.frame_stack",
-                "train.frames", "train.eval_every_frames", "train.update_every_steps", "replay.capacity")
-    for key in positive:
-        if OmegaConf.select(cfg, key) < 1:
-            raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
     _check_ranges(cfg)
     if cfg.seed < 0:
         raise ConfigError(f"seed must be >= 0 (got {cfg.seed}).")
@@ -168,15 +162,17 @@ def validate(raw: DictConfig) -> DictConfig:
     return cfg
 
 
-# Ranges that torch's optimizers (or the networks) would otherwise reject with a traceback after the run directory
-# is written: key -> (lowest allowed, whether the lowest is allowed itself).
+# The lowest value of each numeric key (counts, sizes, rates): key -> (lowest allowed, whether the lowest is allowed
+# itself). Checked before anything is built or written: torch's optimizers and the networks would otherwise reject
+# such a value with a traceback after the run directory exists. agent.discount and agent.critic_target_tau: [0, 1].
 RANGES: dict[str, tuple[float, bool]] = {
+    **{key: (1, True) for key in ("agent.K", "agent.batch_size", "agent.nstep", "agent.stddev_schedule.step_scale",
+                                  "env.action_repeat", "env.frame_stack", "train.frames", "train.eval_every_frames",
+                                  "train.update_every_steps", "replay.capacity")},
     "agent.lr": (0.0, False),
     "agent.feature_dim": (1, True),
     "agent.hidden_dim": (1, True),
     "agent.action_hidden_dim": (1, True),
-    "agent.discount": (0.0, True),
-    "agent.critic_target_tau": (0.0, True),
     "agent.stddev_clip": (0.0, True),
     "agent.dt.lr": (0.0, False),
     "agent.dt.weight_decay": (0.0, True),
@@ -260,6 +256,33 @@ def typed(cfg: DictConfig) -> RunConfig:
 # Keys outside ``runtime`` that change no logged number (what is watched, not what is trained): a run resumed
 # with another value is the same run.
 NON_IDENTITY_KEYS = ("train.save_video", "train.video_every", "train.video_size")
+
+
+class _Absent:
+    def __repr__(self) -> str:
+        return "<absent>"
+
+
+ABSENT: Any = _Absent()  # what :func:`get_key` gives for a key the dict lacks (shown as <absent> in differences)
+
+
+def get_key(data: dict, dotted: str) -> Any:
+    """The value at the dotted key in the nested dict ``data``, or :data:`ABSENT`."""
+    node: Any = data
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return ABSENT
+        node = node[part]
+    return node
+
+
+def set_key(data: dict, dotted: str, value: Any) -> None:
+    """Set the dotted key in the nested dict ``data``, making the sections it lacks."""
+    *parents, leaf = dotted.split(".")
+    node = data
+    for part in parents:
+        node = node.setdefault(part, {})
+    node[leaf] = value
 
 
 def pop_key(data: dict, dotted: str) -> None:

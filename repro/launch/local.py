@@ -147,19 +147,17 @@ def _start(c: Claim, sdir: Path, env: dict[str, str], warm: WarmStarter | None, 
                                     preexec_fn=die_with_parent)
     assert c.info is not None
     lock.update(c.lock_path, c.info.token, child_pid=proc.pid, child_start=lock.process_start(proc.pid))
-    from repro.runs.rundir import run_budget
-
     record = RunRecord(key=p.key, run_dir=str(p.run_dir), overrides=list(p.overrides), launcher="local",
-                       status="running", log=str(log), stderr=str(log), pid=proc.pid, budget=run_budget(p.cfg))
+                       status="running", log=str(log), stderr=str(log), pid=proc.pid, budget=p.budget)
     write_record(sdir, record)
     return _Active(c, proc, log, record, time.time(), gpu)
 
 
 def _finish(a: _Active, sdir: Path, rc: int, report: LaunchReport, say: Callable[[str], None]) -> None:
-    from repro.runs.rundir import run_budget, run_state
+    from repro.runs.rundir import run_state
 
     key = a.claim.planned.key
-    done = run_state(a.claim.planned.run_dir, run_budget(a.claim.planned.cfg)) == "done"
+    done = run_state(a.claim.planned.run_dir, a.claim.planned.budget) == "done"
     a.record.returncode = rc
     a.record.status = "done" if (rc == 0 and done) else "failed"
     if rc == 0 and not done:

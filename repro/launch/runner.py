@@ -72,7 +72,7 @@ def _writer(holder: str) -> lock.LockInfo:
 
 def claim(planned: PlannedRun, launcher: str, sweep: str, force: bool) -> Claim:
     """Lock the run, then re-read its state under the lock (another launcher may have finished it)."""
-    from repro.runs.rundir import config_diff, run_budget, run_state, writer_lock_holder
+    from repro.runs.rundir import config_diff, run_state, writer_lock_holder
 
     info = lock.LockInfo.mine(launcher, sweep)
     path = lock.lock_path(planned.results_root, planned.run_dir)
@@ -83,7 +83,7 @@ def claim(planned: PlannedRun, launcher: str, sweep: str, force: bool) -> Claim:
     if holder is not None:
         lock.release(path, info.token)
         return Claim(planned, "locked", _writer(holder))
-    state = run_state(planned.run_dir, run_budget(planned.cfg))
+    state = run_state(planned.run_dir, planned.budget)
     diff = config_diff(planned.run_dir, planned.cfg) if state != "absent" else []
     if diff and not force:
         lock.release(path, info.token)

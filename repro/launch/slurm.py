@@ -20,7 +20,6 @@ from repro.launch.local import LaunchReport
 from repro.launch.runner import claim
 from repro.launch.spec import PlannedRun, SweepError, close_matches
 from repro.launch.state import RunRecord, read_record, write_record
-from repro.runs.rundir import run_budget
 
 ENV_CLUSTER_CONFIG = "REPRO_SLURM_CONFIG"
 USER_CLUSTER_CONFIG = Path("~/.config/taco-repro/slurm.yaml")
@@ -205,7 +204,7 @@ def submit(planned: Sequence[PlannedRun], sweep: str, sdir: Path, cluster: Clust
             chunk = claims[start:start + size]
             tasks = [JobRun(key=c.planned.key, run_dir=str(c.planned.run_dir), overrides=c.planned.overrides,
                             lock_path=str(c.lock_path), token=c.info.token, state_dir=str(sdir),  # type: ignore[union-attr]
-                            budget=run_budget(c.planned.cfg))
+                            budget=c.planned.budget)
                      for c in chunk]
             jobs = executor.map_array(TrainJob(), tasks)
             submitted += len(chunk)
@@ -233,4 +232,4 @@ def _queued(sdir: Path, c, job_id: str, paths) -> None:
         write_record(sdir, RunRecord(
             key=c.planned.key, run_dir=str(c.planned.run_dir), overrides=list(c.planned.overrides),
             launcher="slurm", status="queued", job_id=job_id, log=str(paths.stdout), stderr=str(paths.stderr),
-            budget=run_budget(c.planned.cfg)))
+            budget=c.planned.budget))

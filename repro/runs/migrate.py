@@ -27,7 +27,7 @@ from typing import Any
 
 import yaml
 
-from repro.config.compose import pop_key, prune_unread
+from repro.config.compose import ABSENT, get_key, pop_key, prune_unread, set_key
 from repro.config.schema import LearnerName
 
 CONFIG_FORMAT = 2  # the version config.yaml is written in
@@ -64,19 +64,7 @@ class Diff:
     new: Any
 
     def __str__(self) -> str:
-        return f"{self.path}: {_show(self.old)} -> {_show(self.new)}"
-
-
-class _Absent:
-    def __repr__(self) -> str:
-        return "<absent>"
-
-
-ABSENT: Any = _Absent()
-
-
-def _show(value: Any) -> str:
-    return repr(value)
+        return f"{self.path}: {self.old!r} -> {self.new!r}"
 
 
 def diff(old: Any, new: Any, prefix: str = "") -> list[Diff]:
@@ -90,24 +78,6 @@ def diff(old: Any, new: Any, prefix: str = "") -> list[Diff]:
 
 
 # ------------------------------------------------------------------------------------------------ config.yaml
-def get_key(data: dict, dotted: str) -> Any:
-    """The value at ``dotted`` in the nested dict ``data``, or :data:`ABSENT`."""
-    node: Any = data
-    for part in dotted.split("."):
-        if not isinstance(node, dict) or part not in node:
-            return ABSENT
-        node = node[part]
-    return node
-
-
-def set_key(data: dict, dotted: str, value: Any) -> None:
-    *parents, leaf = dotted.split(".")
-    node = data
-    for part in parents:
-        node = node.setdefault(part, {})
-    node[leaf] = value
-
-
 @cache
 def v2_defaults() -> dict:
     """The packaged defaults when config format 2 began (agent taco, task cheetah_run), as plain containers."""

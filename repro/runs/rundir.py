@@ -20,7 +20,7 @@ from typing import Any
 import yaml
 from omegaconf import DictConfig, OmegaConf
 
-from repro.config.compose import compose_base, drop_non_identity, identity, run_keys, validate
+from repro.config.compose import ABSENT, compose_base, drop_non_identity, get_key, identity, run_keys, set_key, validate
 from repro.config.schema import RunConfig, budget_key, is_offline, unread_keys
 from repro.runs import migrate
 from repro.runs.fsutil import atomic_write_text, named_os_error
@@ -114,9 +114,9 @@ def saved_config(path: str | Path) -> DictConfig:
     base = OmegaConf.to_container(compose_base(), resolve=True, enum_to_str=True)
     assert isinstance(base, dict)
     for key in unread_keys(str(saved["agent"]["learner"])):
-        value = migrate.get_key(base, key)
-        if value is not migrate.ABSENT:
-            migrate.set_key(saved, key, value)
+        value = get_key(base, key)
+        if value is not ABSENT:
+            set_key(saved, key, value)
     saved["runtime"] = {**base["runtime"], **(saved.get("runtime") or {})}  # runtime keys added since
     return validate(OmegaConf.create(saved))
 
@@ -187,15 +187,21 @@ def device_name(device: str) -> str:
     return "cpu"
 
 
-def read_meta(path: str | Path) -> dict | None:
-    """The run directory's meta.json in the current format (migrate.migrate_meta); None when it has none."""
+def _read_meta_file(path: str | Path) -> dict | None:
+    """The run directory's meta.json as written (any format); None when it has none."""
     file = Path(path) / META
     if not file.exists():
         return None
     meta = json.loads(file.read_text(encoding="utf-8"))
     if not isinstance(meta, dict):
         raise migrate.FormatError(f"{file} is not a JSON object")
-    return migrate.migrate_meta(meta, read_done(path))
+    return meta
+
+
+def read_meta(path: str | Path) -> dict | None:
+    """The run directory's meta.json in the current format (migrate.migrate_meta); None when it has none."""
+    meta = _read_meta_file(path)
+    return None if meta is None else migrate.migrate_meta(meta, read_done(path))
 
 
 def write_meta(path: Path, device: str, resumed: bool, extension: tuple[int, int] | None = None,
@@ -206,10 +212,10 @@ def write_meta(path: Path, device: str, resumed: bool, extension: tuple[int, int
     file = path / META
     now = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     entry = {"time": now, "host": socket.gethostname(), "command": sys.argv, "device": device_name(device)}
-    old = read_meta(path)
-    if old is not None:
-        meta = old
-        before = json.loads(file.read_text(encoding="utf-8")).get("format", 1)
+    written = _read_meta_file(path)
+    if written is not None:
+        meta = migrate.migrate_meta(written, read_done(path))
+        before = written.get("format", 1)
         if before != migrate.META_FORMAT:
             meta["migrations"].append({"file": META, "from": before, "to": migrate.META_FORMAT, "time": now})
         if resumed:

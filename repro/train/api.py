@@ -15,7 +15,7 @@ from typing import Any, Protocol, TypeVar, cast
 
 import torch
 import yaml
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from repro.config.compose import compose, run_keys, typed
 from repro.config.schema import Device, RunConfig, budget_key, is_offline
@@ -228,7 +228,7 @@ def _plan_start(path: Path, cfg: DictConfig, echo: Callable[[str], None]) -> Sta
                                     "use another experiment/variant name or move it away.")
     learner = str(cfg.agent.learner)
     key = budget_key(learner)
-    budget = int(OmegaConf.select(cfg, key))
+    budget = rundir.run_budget(cfg)
     unit = "updates" if is_offline(learner) else "frames"
     reached = tuple(rundir.reached_budgets(path))
     done = (path / rundir.DONE).exists()

@@ -40,6 +40,11 @@ class PlannedRun:
     def overrides(self) -> tuple[str, ...]:
         return self.run.overrides
 
+    @property
+    def budget(self) -> int:
+        """The run's budget in this sweep (frames online, updates offline): it is done when it has reached it."""
+        return run_budget(self.cfg)
+
 
 def run_key(run_dir: Path, results_root: Path) -> str:
     return "__".join(Path(os.path.relpath(run_dir, results_root)).parts)
