@@ -219,10 +219,16 @@ def test_the_v1_fixture_resumes_and_extends(tmp_path):
     assert yaml.safe_load((run / rundir.CONFIG).read_text())["format"] == migrate.CONFIG_FORMAT
     ev, tr = pd.read_csv(run / EVAL), pd.read_csv(run / TRAIN)
     assert list(ev["frame"]) == [0, 200, 400] and list(tr["frame"]) == [100, 200, 300, 400]
-    # the rows the old code wrote stay as written (the frame-200 evaluation is re-run, equal but for its time)
+    # the rows before the checkpoint stay as the old code wrote them, byte for byte; the frame-200 evaluation comes
+    # after it and is re-run from the fixture's weights, on this machine's CPU: equal within float tolerance (a CPU
+    # of other features gives other last bits), its wall-clock total_time aside
     assert (run / TRAIN).read_text().splitlines()[:3] == prefix[TRAIN]
-    assert [r.rsplit(",", 1)[0] for r in (run / EVAL).read_text().splitlines()[:3]] == \
-        [r.rsplit(",", 1)[0] for r in prefix[EVAL]]
+    assert (run / EVAL).read_text().splitlines()[:2] == prefix[EVAL][:2]
+    old_row = pd.read_csv(pd.io.common.StringIO("\n".join(prefix[EVAL]) + "\n")).iloc[1]
+    new_row = ev.iloc[1]
+    for col in ("frame", "step", "episode", "episode_length", "eval_episodes"):
+        assert new_row[col] == old_row[col], col
+    assert new_row["episode_reward"] == pytest.approx(old_row["episode_reward"], rel=1e-4, abs=1e-6)
     meta = json.loads((run / META).read_text())
     assert [m["file"] for m in meta["migrations"]] == [META, rundir.CONFIG]
     assert rundir.read_done(run)["frame"] == 400 and load_results(root).runs.iloc[0]["last_frame"] == 400
