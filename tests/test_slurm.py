@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import write_sweep  # the same tiny-run sweep files as the local launcher tests
+from helpers import assert_wandb_mirrors_csv, write_sweep  # the same tiny-run sweep files as the local launcher tests
 
 # one worker runs both tests: they share the session's cluster (brought up once, and not taken down by one
 # worker while the other still uses it)
@@ -145,8 +145,8 @@ def test_usr2_requeues_and_resumes_without_duplicate_rows(slurm, tmp_path):
     bad.run_dir.mkdir(parents=True)
     write_config(bad.run_dir, bad.cfg)
     (bad.run_dir / "checkpoint.pt").write_bytes(b"not a checkpoint")
-    code, out = cli("sweep", str(sweep), "--set", f"runtime.results_root={root}", "--launcher", "slurm",
-                    "--cluster-config", str(CLUSTER))
+    code, out = cli("sweep", str(sweep), "--set", f"runtime.results_root={root}", "--set", "runtime.wandb=true",
+                    "--launcher", "slurm", "--cluster-config", str(CLUSTER))
     assert code == 0, out
     sdir = state_dir(root, "req")
     job, bad_job = read_record(sdir, good.key).job_id, read_record(sdir, bad.key).job_id
@@ -166,6 +166,11 @@ def test_usr2_requeues_and_resumes_without_duplicate_rows(slurm, tmp_path):
     assert_complete(run, 400)
     meta = json.loads((run / "meta.json").read_text())
     assert len(meta["resumes"]) == 1, "the requeued job must resume, not restart"
+    # issue 28: the requeued job resumed its W&B run (one id, one offline folder, every CSV point once)
+    record, _ = assert_wandb_mirrors_csv(run)
+    assert record["id"] == (run / "wandb" / "run_id").read_text().strip()
+    assert len(list((run / "wandb").glob("offline-run-*"))) == 1
+
     def states() -> list[str]:
         return subprocess.run(["sacct", "-n", "-X", "-D", "-P", "-o", "State", "-j", job], capture_output=True,
                               text=True).stdout.split()

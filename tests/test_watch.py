@@ -152,6 +152,58 @@ def test_offline_wandb_mirror_steps_are_updates(tmp_path: Path):
     assert not any("eval/score_reference" in row or "eval/normalized_score" in row for row in history)
 
 
+def test_signals_deferred_holds_a_requeue_handler_until_the_block_ends():
+    """submitit's USR2 handler raises SystemExit wherever the main thread is; inside a W&B call it left the run
+    half-written (the SLURM requeue test). Deferred, the handler runs once, right after the block."""
+    import os
+    import signal
+
+    from repro.runs.wblog import signals_deferred
+
+    seen: list[int] = []
+
+    def handler(signum, frame):
+        seen.append(signum)
+
+    old = signal.signal(signal.SIGUSR2, handler)
+    try:
+        with signals_deferred():
+            os.kill(os.getpid(), signal.SIGUSR2)
+            for _ in range(3):
+                time.sleep(0.01)  # a Python handler would have run by now
+            assert seen == []
+        assert seen == [signal.SIGUSR2] and signal.getsignal(signal.SIGUSR2) is handler
+        os.kill(os.getpid(), signal.SIGUSR2)  # outside the block: at once, as before
+        time.sleep(0.01)
+        assert seen == [signal.SIGUSR2, signal.SIGUSR2]
+    finally:
+        signal.signal(signal.SIGUSR2, old)
+
+
+def test_a_failing_wandb_finish_does_not_replace_the_loops_exception(tmp_path: Path, capsys):
+    """SLURM's requeue stops wandb's service at once, so the finish of a requeued run fails: while the loop is
+    failing (``failing=True``) that is one line on stderr, not an exception in place of submitit's SystemExit;
+    a finish that fails after a loop that ended well still raises."""
+    log = RunLogger(tmp_path, METRICS, echo=lambda s: None, wandb=WB)
+    log.log_eval(_eval_row(0))
+    run = log.wb._run
+    finish = run.finish
+
+    def lost(*args, **kwargs):
+        raise ConnectionResetError("Connection lost")
+
+    run.finish = lost
+    try:
+        with pytest.raises(ConnectionResetError):
+            log.wb.close()
+        log.close(failing=True)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "not finished (ConnectionResetError: Connection lost)" in err[0], err
+    finally:
+        run.finish = finish
+        finish()
+
+
 def test_wandb_without_the_package_is_one_line_before_anything_is_written(tmp_path: Path, monkeypatch):
     monkeypatch.setitem(sys.modules, "wandb", None)  # `import wandb` fails as it does when it is not installed
     code, _, err = cli("train", "profile=tiny", "runtime.wandb=true", f"runtime.results_root={tmp_path}")

@@ -119,13 +119,15 @@ class CsvPairLogger:
         if self.wb is not None:
             self.wb.add_row(prefix, row)
 
-    def close(self) -> None:
+    def close(self, failing: bool = False) -> None:
+        """Close the CSVs and the mirrors; ``failing``: the loop is ending with an exception, which a mirror's
+        failure to close must not replace (the CSVs are closed first either way)."""
         self.eval.close()
         self.train.close()
         if self.tb is not None:
             self.tb.close()
         if self.wb is not None:
-            self.wb.close()
+            self.wb.close(failing)
 
 
 class RunLogger(CsvPairLogger):

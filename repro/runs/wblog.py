@@ -26,9 +26,12 @@ import os
 import re
 import secrets
 import shutil
+import signal
 import subprocess
 import sys
-from collections.abc import Callable, Mapping
+import threading
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -106,6 +109,38 @@ def _own_service() -> None:
         os.environ.pop(SERVICE_ENV, None)
 
 
+DEFERRED_SIGNALS = (signal.SIGUSR2, signal.SIGTERM, signal.SIGINT)  # submitit's requeue signals, and Ctrl-C
+
+
+@contextmanager
+def signals_deferred(signums: tuple[int, ...] = DEFERRED_SIGNALS) -> Iterator[None]:
+    """Run the block with the Python-level handlers of ``signums`` held back, then call them for what arrived.
+
+    A Python signal handler runs between two bytecodes of the main thread. submitit's USR2 handler requeues the
+    job and raises SystemExit there; inside wandb's call to its service that leaves the W&B run half-written and
+    its client in a state that the exit then trips over. Deferred, a W&B call completes (or fails) first and the
+    handler runs right after it. Signals without a Python handler (default or ignored) are not touched; outside
+    the main thread (where handlers cannot be set) the block runs as it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: dict[int, Callable[..., Any]] = {}
+    arrived: list[tuple[int, Any]] = []
+    for signum in signums:
+        handler = signal.getsignal(signum)
+        if callable(handler):
+            held[signum] = handler
+            signal.signal(signum, lambda n, frame: arrived.append((n, frame)))
+    try:
+        yield
+    finally:
+        for signum, handler in held.items():
+            signal.signal(signum, handler)
+        for signum, frame in arrived:
+            held[signum](signum, frame)
+
+
 class WandbMirror:
     """One W&B run mirroring a run directory's CSVs (see the module docstring for resume and extension)."""
 
@@ -126,10 +161,11 @@ class WandbMirror:
         settings = wandb.Settings(silent=True, console="off", x_disable_stats=True, x_disable_machine_info=True,
                                   save_code=False, allow_val_change=True)
         try:
-            self._run = wandb.init(mode="offline" if self.offline else "online", dir=str(run_dir), id=self.run_id,
-                                   resume=None if self.offline else "allow", project=run.project,
-                                   entity=run.entity, group=run.group, name=run.name, tags=list(run.tags),
-                                   config=dict(run.config), reinit="create_new", settings=settings)
+            with signals_deferred():
+                self._run = wandb.init(mode="offline" if self.offline else "online", dir=str(run_dir), id=self.run_id,
+                                       resume=None if self.offline else "allow", project=run.project,
+                                       entity=run.entity, group=run.group, name=run.name, tags=list(run.tags),
+                                       config=dict(run.config), reinit="create_new", settings=settings)
         except (wandb.errors.Error, OSError, TimeoutError) as exc:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise WandbError(f"the W&B run {self.run_id} could not start ({first}); train with "
@@ -152,7 +188,8 @@ class WandbMirror:
             x = cell_number(value) if key != self.step_column else None
             if x is not None:
                 data[f"{prefix}/{key}"] = x
-        self._run.log(data, step=int(step))
+        with signals_deferred():
+            self._run.log(data, step=int(step))
 
     def rebuild(self, csv_files: Mapping[str, str | os.PathLike]) -> int:
         """Log the rows of the given (truncated) CSV files (prefix -> path) that the W&B run lacks, in step order;
@@ -164,8 +201,19 @@ class WandbMirror:
             self.add_row(prefix, row)
         return len(due)
 
-    def close(self) -> None:
-        self._run.finish()
+    def close(self, failing: bool = False) -> None:
+        """Finish the W&B run. ``failing``: the run's loop is ending with an exception (a kill, a requeue's
+        SystemExit, an error): a W&B error then is one line on stderr instead of replacing the loop's exception
+        (SLURM's requeue stops wandb's service process at once, so its finish fails). Nothing is lost: every
+        start rebuilds the W&B run from the CSVs."""
+        try:
+            with signals_deferred():
+                self._run.finish(exit_code=1 if failing else None)
+        except Exception as exc:  # wandb raises its own, asyncio and socket errors here; all mean the same
+            if not failing:
+                raise
+            print(f"W&B run {self.run_id} not finished ({type(exc).__name__}: {exc}); the next start of the run "
+                  "rebuilds it from the CSVs", file=sys.stderr)
 
 
 def offline_folders(run_dir: str | os.PathLike) -> list[Path]:

@@ -346,7 +346,7 @@ class _Loop(Protocol[T_co]):
 
 
 class _Closing(Protocol):
-    def close(self) -> None: ...
+    def close(self, failing: bool = False) -> None: ...
 
 
 def _restore_run_finish(path: Path, trainer: _Loop[T], state: dict | None, resumed: Callable[[dict], None],
@@ -360,10 +360,14 @@ def _restore_run_finish(path: Path, trainer: _Loop[T], state: dict | None, resum
         resumed(state)
     try:
         result = trainer.run()
-    finally:
+    except BaseException:  # a kill, a requeue's SystemExit, an error: closed, then raised as it was
         if bar:
             bar.close()
-        logger.close()
+        logger.close(failing=True)
+        raise
+    if bar:
+        bar.close()
+    logger.close()
     rundir.write_done(path, {**done(result), "total_time": round(trainer.total_time(), 3),
                              "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, budget)
 
