@@ -167,3 +167,47 @@ def test_offline_data_bench_times_the_offline_sampler_it_names(tmp_path, monkeyp
                                        work_dir=tmp_path, echo=lambda s: None)
     assert report["offline_batches_per_s"] <= 25.0 < report["online_batches_per_s"]
     assert report["ratios"]["offline_over_online_batches_per_s"] < 1.0
+
+
+def _encoder_forward_flops(batch: int) -> int:
+    """FLOPs of one DrQ-v2 encoder forward on (batch, 9, 84, 84): conv 9->32 stride 2 (41x41), three 32->32
+    (39, 37, 35), counted from the shapes here and not by the code under test."""
+    from repro.bench.roofline import conv_flops
+
+    return (conv_flops(batch, 9, 32, 3, 41, 41)
+            + sum(conv_flops(batch, 32, 32, 3, side, side) for side in (39, 37, 35)))
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_roofline_counts_the_updates_flops_and_names_the_kernels(tmp_path):
+    """`repro bench --roofline`: the DrQ-v2 update's forward convolutions are its two encoder passes (obs and
+    next_obs) at the batch asked for, the peak convolution's FLOPs are its shape's, and each path's rate is its
+    FLOPs over its measured seconds against the peak of its dtype, with the kernels that take its time."""
+    from repro.bench.roofline import conv_flops, flop_op
+
+    args = ["bench", "--roofline", "--algo", "drqv2", "--batch", "4", "--amp", "--repeats", "1", "--warmup", "0",
+            "--results", str(tmp_path)]
+    result = CliRunner().invoke(_app(), args)
+    assert result.exit_code == 0, result.output
+    assert "of this process's float32 convolution peak" in result.output, result.output
+    report = json.loads(next((tmp_path / "bench").glob("bench-roofline-*.json")).read_text())
+    (entry,) = report["roofline"]
+    assert entry["flops_by_op"]["aten.convolution"] == 2 * _encoder_forward_flops(4)
+    assert entry["flops"] == sum(entry["flops_by_op"].values()) and entry["flops_per_sample"] == entry["flops"] // 4
+    n, c, h, w = entry["peaks"]["float32"]["shape"]
+    assert entry["peaks"]["float32"]["flops"] == conv_flops(n, c, c, 3, h - 2, w - 2)
+    assert set(entry["paths"]) == {"plain", "amp"}
+    assert (entry["paths"]["plain"]["conv_dtype"], entry["paths"]["amp"]["conv_dtype"]) == ("float32", "bfloat16")
+    for path in entry["paths"].values():
+        rate = entry["flops"] / path["seconds"] / 1e9
+        assert path["gflops_per_s"] == pytest.approx(rate, rel=0.01, abs=0.01)
+        peak = entry["peaks"][path["conv_dtype"]]["gflops_per_s"]
+        assert path["of_peak"] == pytest.approx(rate / peak, rel=0.01, abs=1e-4)
+        ops = {k["op"] for k in path["kernels"]}
+        assert any(flop_op(op) == "aten.convolution" for op in ops), ops
+    assert flop_op("aten::mkldnn_convolution") == "aten.convolution" and flop_op("aten::copy_") is None
+
+
+def test_roofline_with_another_mode_is_one_line(tmp_path):
+    result = CliRunner().invoke(_app(), ["bench", "--roofline", "--e2e", "--results", str(tmp_path)])
+    assert result.exit_code == 2 and "--roofline times the online update" in result.output

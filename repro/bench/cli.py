@@ -20,7 +20,7 @@ import socket
 import statistics
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING, Any, Optional
 
 import typer
 
@@ -43,22 +43,28 @@ def _batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tensor]:
             "reward_ksum": torch.rand(B, 1, generator=g).to(device)}
 
 
-def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
-                device: str = "cpu", speedup: str = "plain", warmup: int = 1) -> dict:
-    """Median wall-clock seconds of one full agent update, over ``repeats`` timed updates after ``warmup``
-    untimed ones (same batch every time)."""
+def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[str]) -> tuple[Any, Any]:
+    """The online agent of agent file ``algo`` at ``batch_size`` for ``task`` with the overrides ``flags``, seeded
+    0, and its typed run config."""
     import torch
 
     from repro.agent.agent import Agent
     from repro.config.compose import compose, typed
     from repro.envs import get_task
 
-    flags = SPEEDUP_FLAGS[speedup]
     rc = typed(compose([f"agent={algo}", f"task={task}", f"agent.batch_size={batch_size}", *flags]))
-    A = get_task(task).action_dim
     torch.manual_seed(0)
-    agent = Agent(rc.agent, (9, 84, 84), A, device=device)
-    batch = _batch(batch_size, rc.agent.K, A, device)
+    return Agent(rc.agent, (9, 84, 84), get_task(task).action_dim, device=device), rc
+
+
+def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
+                device: str = "cpu", speedup: str = "plain", warmup: int = 1) -> dict:
+    """Median wall-clock seconds of one full agent update, over ``repeats`` timed updates after ``warmup``
+    untimed ones (same batch every time)."""
+    import torch
+
+    agent, rc = build_agent(algo, batch_size, task, device, SPEEDUP_FLAGS[speedup])
+    batch = _batch(batch_size, rc.agent.K, agent.action_dim, device)
     for _ in range(warmup):
         agent.update(batch, step=10**6)
     times = []
@@ -246,6 +252,10 @@ def register(app: typer.Typer) -> None:
               seed_frames: Optional[int] = typer.Option(
                   None, "--seed-frames", help="With --e2e: untimed frames first (default: the config's)."),
               task: str = typer.Option("cheetah_run", "--task", help="With --e2e: the task."),
+              roofline: bool = typer.Option(False, "--roofline", help="Instead: the update's FLOPs (torch's FLOP "
+                                            "counter) over its time against this process's measured fp32 and bf16 "
+                                            "convolution peak, and the kernels that keep it from the peak (default "
+                                            "TACO B256; --amp/--compile add paths)."),
               results_root: Path = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).")):
         """Time one update of TACO and DrQ-v2 at batch 256 and 1024; print same-run ratios and replay memory.
         With --offline: each offline learner against DrQ-v2; with --offline-data: dataset load and sampling;
@@ -273,6 +283,8 @@ def register(app: typer.Typer) -> None:
             raise _fail("--frames must be >= 1 and --seed-frames >= 0")
         if e2e and (offline or offline_data):
             raise _fail("--e2e times the online loop: drop --offline / --offline-data")
+        if roofline and (offline or offline_data or e2e):
+            raise _fail("--roofline times the online update: drop --offline / --offline-data / --e2e")
         if e2e:
             from repro.envs import TASKS
 
@@ -291,6 +303,13 @@ def register(app: typer.Typer) -> None:
         if offline or offline_data:
             return
         speedups = tuple(name for name, on in (("amp", amp), ("compile", compile_)) if on)
+        if roofline:
+            from repro.bench.roofline import run_roofline
+
+            entries = [run_roofline(a, b, speedups, device, repeats, warmup, echo=typer.echo)
+                       for a in (algo or ["taco"]) for b in (batch or [256])]
+            _write_report(out_dir, f"bench-roofline-{host}-{dev}.json", {**meta, "roofline": entries}, typer.echo)
+            return
         if e2e:
             sizes: list[Optional[int]] = list(batch) if batch else [None]
             run_e2e_bench([(a, b) for a in (algo or ["taco", "drqv2"]) for b in sizes], device, out_dir, frames,
