@@ -41,7 +41,7 @@ def count_flops(fn: Any) -> tuple[int, dict[str, int]]:
 
 
 def peak_conv(dtype: str, device: str = "cpu", repeats: int = 3, shape: tuple[int, int, int, int] = PEAK_SHAPE
-              ) -> dict[str, float]:
+              ) -> dict[str, Any]:
     """FLOP rate of a large 3x3 convolution in ``dtype`` (float32 | bfloat16): the median of ``repeats`` timed
     runs after one untimed one; the FLOPs are counted, not assumed."""
     import torch
