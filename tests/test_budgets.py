@@ -7,6 +7,7 @@ copied, loaded, resumed and extended.
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import shutil
@@ -240,17 +241,18 @@ def test_every_key_of_todays_config_is_in_the_current_format_or_has_a_migration(
     base = OmegaConf.to_container(compose_base(), resolve=True, enum_to_str=True)
     base.pop("runtime")
     assert migrate.CONFIG_FORMAT == max(migrate.CONFIG_STEPS) + 1
-    assert sorted(migrate._leaves(base)) == sorted(migrate._leaves(migrate.v2_defaults()))
+    assert sorted(migrate._leaves(base)) == sorted(migrate._leaves(migrate.current_defaults()))
 
 
 def test_a_v1_file_behaves_as_its_old_behaviour_for_the_learners_that_had_it():
     raw = OmegaConf.to_container(compose(["agent=cql", "offline.dataset=medium"]), resolve=True, enum_to_str=True)
     del raw["agent"]["cql"]["clip_policy_samples"], raw["agent"]["dt"]["init"], raw["train"]["eval_episodes"]
     out = migrate.migrate_config(raw)
-    assert out["format"] == 2 and out["agent"]["cql"]["clip_policy_samples"] is False  # CQL's old behaviour
+    assert out["format"] == migrate.CONFIG_FORMAT and out["agent"]["cql"]["clip_policy_samples"] is False  # CQL's old
+    assert out["agent"]["fast"] is False  # the 2 -> 3 step: runs before agent.fast ran the plain path
     assert "dt" not in out["agent"] and "eval_episodes" not in out["train"]  # not read by CQL: dropped
-    with pytest.raises(migrate.FormatError, match="format 3"):
-        migrate.migrate_config({"format": 3})
+    with pytest.raises(migrate.FormatError, match=f"format {migrate.CONFIG_FORMAT + 1}"):
+        migrate.migrate_config({"format": migrate.CONFIG_FORMAT + 1})
     assert [str(d) for d in migrate.diff({"a": {"b": 1}}, {"a": {"b": 2, "c": 3}})] == \
         ["a.b: 1 -> 2", "a.c: <absent> -> 3"]
 
@@ -331,3 +333,15 @@ def test_a_dataset_made_from_a_v1_run_is_still_found_by_the_same_request():
     old = {**fields, "source": {**fields["source"], "config_hash": legacy}}
     assert _same_request(fields, fields) and _same_request(old, fields, legacy)
     assert not _same_request(old, fields) and not _same_request({**old, "source": {"config_hash": "x"}}, fields, legacy)
+
+
+def test_a_format_2_file_migrates_to_todays_config_with_the_plain_path():
+    """config format 3 added agent.fast: a format-2 run (written before it) ran the plain path, so it migrates to
+    exactly today's config of the same overrides, and a resume or extension finds no difference in identity."""
+    today = yaml.safe_load(rundir.config_text(compose(["profile=tiny", "runtime.results_root=/tmp/fx"])))
+    old = copy.deepcopy(today)
+    del old["agent"]["fast"]
+    old["format"] = 2
+    assert migrate.migrate_config(old) == today
+    old["agent"]["fast"] = True  # a value already there is kept
+    assert migrate.migrate_config(old)["agent"]["fast"] is True

@@ -296,6 +296,7 @@ class AgentConfig:
     objective_params: dict[str, Any]  # ObjectiveName -> its parameters
     compile: bool
     amp: bool
+    fast: bool  # agent.fast: repro/agent/fast.py resolves what it turns on
     cql: CQLConfig
     td3bc: TD3BCConfig
     iql: IQLConfig

@@ -11,6 +11,8 @@ Versions:
   listed there, and as the value in ``data/config_v2_defaults.yaml`` (the packaged defaults when version 2 began)
   otherwise.
 - config 2: ``format: 2``; only the keys the run's learner reads (``repro.config.compose.prune_unread``).
+- config 3: ``format: 3``; ``agent.fast`` (issue 26; runs written before it ran the plain path: ``false``). The
+  packaged defaults when version 3 began are ``data/config_v3_defaults.yaml``.
 - meta 1: no ``format`` key, no ``budgets``.
 - meta 2: ``format: 2``; ``budgets`` (each budget the run reached: ``budget``, ``finished``) and ``extensions``
   (``from``, ``to``, ``time``); ``migrations`` lists the files migrated on disk (``file``, ``from``, ``to``, ``time``).
@@ -30,9 +32,10 @@ import yaml
 from repro.config.compose import ABSENT, get_key, pop_key, prune_unread, set_key
 from repro.config.schema import LearnerName
 
-CONFIG_FORMAT = 2  # the version config.yaml is written in
+CONFIG_FORMAT = 3  # the version config.yaml is written in
 META_FORMAT = 2  # the version meta.json is written in
 V2_DEFAULTS = Path(__file__).resolve().parent / "data" / "config_v2_defaults.yaml"
+CURRENT_DEFAULTS = Path(__file__).resolve().parent / "data" / f"config_v{CONFIG_FORMAT}_defaults.yaml"
 FREE_MAPPINGS = ("agent.objectives", "agent.objective_params")  # names chosen per agent file, not fields
 
 _L = LearnerName
@@ -78,12 +81,23 @@ def diff(old: Any, new: Any, prefix: str = "") -> list[Diff]:
 
 
 # ------------------------------------------------------------------------------------------------ config.yaml
+def _frozen(path: Path) -> dict:
+    data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    assert isinstance(data, dict)
+    return data
+
+
 @cache
 def v2_defaults() -> dict:
     """The packaged defaults when config format 2 began (agent taco, task cheetah_run), as plain containers."""
-    data = yaml.safe_load(V2_DEFAULTS.read_text(encoding="utf-8"))
-    assert isinstance(data, dict)
-    return data
+    return _frozen(V2_DEFAULTS)
+
+
+@cache
+def current_defaults() -> dict:
+    """The packaged defaults when the current config format began (agent taco, task cheetah_run): today's keys
+    must be exactly these (tests/test_budgets.py), or a new format version and its step are due."""
+    return _frozen(CURRENT_DEFAULTS)
 
 
 def _leaves(data: dict, prefix: str = "") -> list[str]:
@@ -141,7 +155,14 @@ def _config_1_to_2(data: dict) -> dict:
     return {"format": 2, **data}
 
 
-CONFIG_STEPS: dict[int, Callable[[dict], dict]] = {1: _config_1_to_2}
+def _config_2_to_3(data: dict) -> dict:
+    """``agent.fast`` (issue 26): a run written before it existed ran the plain path."""
+    if get_key(data, "agent.fast") is ABSENT:
+        set_key(data, "agent.fast", False)
+    return {**data, "format": 3}
+
+
+CONFIG_STEPS: dict[int, Callable[[dict], dict]] = {1: _config_1_to_2, 2: _config_2_to_3}
 
 
 def config_version(data: dict) -> int:
