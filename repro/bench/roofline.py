@@ -123,14 +123,14 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     the kernel table per path."""
     import torch
 
-    from repro.bench.cli import _batch, build_agent
+    from repro.bench.update_setup import build_agent, synthetic_batch
 
     agents = {}
     for path in ("plain", *speedups):
         agent, rc = build_agent(algo, batch_size, task, device, SPEEDUP_FLAGS[path])
         agents[path] = agent
     A, K = agents["plain"].action_dim, rc.agent.K
-    batch = _batch(batch_size, K, A, device)
+    batch = synthetic_batch(batch_size, K, A, device)
 
     def update(path: str) -> Any:
         return lambda: agents[path].update(batch, step=10**6)
