@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Optional
 import typer
 
 from repro.bench import OFFLINE_AGENTS, SPEEDUP_FLAGS
+from repro.runs.console import fail
 from repro.runs.fsutil import atomic_write_text
 
 if TYPE_CHECKING:
@@ -216,11 +217,6 @@ def _write_report(out_dir: Path, name: str, report: dict, echo=print) -> Path:
     return path
 
 
-def _fail(message: str) -> typer.Exit:
-    typer.echo(f"error: {message}", err=True)
-    return typer.Exit(2)
-
-
 def register(app: typer.Typer) -> None:
     @app.command()
     def bench(batch: Optional[list[int]] = typer.Option(
@@ -266,30 +262,30 @@ def register(app: typer.Typer) -> None:
         from repro.bench.offline import run_offline_bench
 
         if device.startswith("cuda") and not torch.cuda.is_available():
-            raise _fail("--device cuda but no CUDA device is available")
+            fail("--device cuda but no CUDA device is available")
         for a in algo or []:
             if a not in ("taco", "drqv2"):
-                raise _fail(f"unknown algo '{a}' (taco, drqv2)")
+                fail(f"unknown algo '{a}' (taco, drqv2)")
         if any(b < 1 for b in batch or []):
-            raise _fail("--batch must be >= 1")
+            fail("--batch must be >= 1")
         for name in learner or []:
             if name not in OFFLINE_AGENTS:
-                raise _fail(f"unknown offline learner '{name}' ({', '.join(OFFLINE_AGENTS)})")
+                fail(f"unknown offline learner '{name}' ({', '.join(OFFLINE_AGENTS)})")
         if dt_batch is not None and dt_batch < 1:
-            raise _fail("--dt-batch must be >= 1")
+            fail("--dt-batch must be >= 1")
         if transitions < 1 or sample_batches < 1 or episode_length < 3:
-            raise _fail("--transitions and --sample-batches must be >= 1, --episode-length >= 3")
+            fail("--transitions and --sample-batches must be >= 1, --episode-length >= 3")
         if frames < 1 or (seed_frames is not None and seed_frames < 0):
-            raise _fail("--frames must be >= 1 and --seed-frames >= 0")
+            fail("--frames must be >= 1 and --seed-frames >= 0")
         if e2e and (offline or offline_data):
-            raise _fail("--e2e times the online loop: drop --offline / --offline-data")
+            fail("--e2e times the online loop: drop --offline / --offline-data")
         if roofline and (offline or offline_data or e2e):
-            raise _fail("--roofline times the online update: drop --offline / --offline-data / --e2e")
+            fail("--roofline times the online update: drop --offline / --offline-data / --e2e")
         if e2e:
             from repro.envs import TASKS
 
             if task not in TASKS:
-                raise _fail(f"unknown task '{task}'")
+                fail(f"unknown task '{task}'")
         out_dir, host, dev = results_root / "bench", socket.gethostname(), device.split(":")[0]
         meta = {"hardware": hardware(device), "device": device, "host": host, "torch": torch.__version__,
                 "python": platform.python_version(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}

@@ -9,6 +9,7 @@ from typing import Optional
 import typer
 
 from repro.data.dataset import KINDS, DatasetError
+from repro.runs.console import fail
 from repro.runs.fsutil import write_error_message
 
 
@@ -36,8 +37,6 @@ def register(dataset_app: typer.Typer) -> None:
         try:
             make(source, kind, transitions, medium_fraction, seed, out, results, task, device, echo=typer.echo)
         except DatasetError as exc:  # MakeError included
-            typer.echo(f"error: {exc}", err=True)
-            raise typer.Exit(2) from None
+            fail(str(exc))
         except OSError as exc:  # a full disk: the staging folder is kept and a re-run resumes from it
-            typer.echo(f"error: {write_error_message(exc)}", err=True)
-            raise typer.Exit(1) from None
+            fail(write_error_message(exc), 1)
