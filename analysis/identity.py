@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Mapping
 from typing import Any
@@ -74,16 +73,6 @@ def task_display(task: str) -> str:
     if task in _TASK_NAMES:
         return _TASK_NAMES[task]
     return " ".join(part.capitalize() for part in re.split(r"[_\-]+", str(task)) if part)
-
-
-def normalize_dataset(name: Any) -> str | None:
-    """``medium_replay`` / ``Medium-replay`` -> ``medium-replay``; ``replay`` (Table 6's name) -> ``full-replay``."""
-    if name is None or (isinstance(name, float) and math.isnan(name)):
-        return None
-    text = str(name).strip().lower().replace("_", "-")
-    if text in ("replay", "full"):
-        return "full-replay"
-    return text or None
 
 
 def action_dim(task: str) -> int | None:

@@ -36,8 +36,8 @@ import yaml
 
 from repro.agent.networks import Actor, Encoder
 from repro.config.compose import CONF_DIR, ConfigError, typed
-from repro.config.schema import RunConfig
-from repro.data.dataset import KINDS, MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
+from repro.config.schema import DatasetKind, RunConfig
+from repro.data.dataset import MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
 from repro.data.record import EPISODES, SNAPSHOTS, load_snapshot, record_dir, snapshot_path, snapshot_steps
 from repro.envs import TASKS
 from repro.runs import rundir
@@ -281,8 +281,8 @@ def plan(source: Source, kind: str, transitions: int | None = None, medium_fract
          seed: int = 0, out: str | Path | None = None, results_root: str | Path | None = None,
          device: str = "auto") -> Plan:
     """Check the request and decide what to write (no file is written)."""
-    if kind not in KINDS:
-        raise MakeError(f"unknown kind {kind!r}; one of {', '.join(KINDS)}")
+    if kind not in DatasetKind.values():
+        raise MakeError(f"unknown kind {kind!r}; one of {', '.join(DatasetKind.values())}")
     dev = _check_seed_and_device(seed, device)
     n = default_transitions(source.task) if transitions is None else int(transitions)
     if n < 1:
