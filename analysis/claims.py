@@ -24,7 +24,7 @@ from analysis import select
 from analysis.calibration import SOURCE_TEXT, published_values
 from analysis.claim_budget import ClaimBudget, claim_runs, frames_text, load_budgets, reach, seed_counts
 from analysis.context import Context
-from analysis.offline import offline_runs
+from analysis.offline_tables import offline_runs
 from analysis.paper import DMC9, METAWORLD6, OFFLINE_TASKS
 from analysis.robustness import seed_spread, solved_counts
 from analysis.speed import speed_measurements
@@ -482,7 +482,7 @@ def _action_repeat(ctx: Context) -> tuple[str, str]:
 @check("action_dim", "on quadruped_run the means at dims 6 and 24 are below every intermediate dim's, and the "
        "intermediate dims' range is <= 15% of their mean")
 def _action_dim(ctx: Context) -> tuple[str, str]:
-    df = select.action_dim(ctx.scores, ctx.experiment_map)
+    df = select.action_dim_runs(ctx.scores, ctx.experiment_map)
     table = means(df, ["dim"]) if not df.empty else {}
     have = sorted(k[0] for k in table if get(ctx, table, *k) is not None)
     mid = [d for d in have if 6 < d < 24]

@@ -26,8 +26,8 @@ ALGO_LABELS: dict[str, str] = {
     "bc": "BC",
     "dt": "DT",
 }
-# the offline learners' names (agent.name of their plain agent files), from the config schema
-OFFLINE_ALGOS = frozenset(str(n) for n in LearnerName if is_offline(n))
+# the offline learners' names (agent.learner; also agent.name of their plain agent files), from the config schema
+OFFLINE_LEARNERS = frozenset(str(n) for n in LearnerName if is_offline(n))
 
 # Names the paper prints that a plain title-casing would get wrong.
 _TASK_NAMES: dict[str, str] = {
@@ -59,11 +59,14 @@ def enabled_objectives(objectives: Mapping[str, Any] | None) -> tuple[str, ...]:
     return tuple(sorted(out))
 
 
-def method_label(algo: Any, objectives: tuple[str, ...] = ()) -> str:
-    """The paper's label of a method: ``TACO``, ``DrQ-v2``, ``CQL+TACO`` (offline algorithm with TACO)."""
-    key = algo_key(algo)
-    label = ALGO_LABELS.get(key, str(algo))
-    if key in OFFLINE_ALGOS and "taco" in objectives:
+def method_label(name: Any, objectives: tuple[str, ...] = ()) -> str:
+    """The paper's label of a method: ``TACO``, ``DrQ-v2``, ``CQL+TACO`` (an offline learner with TACO).
+
+    ``name``: an online run's algorithm (``agent.name``) or an offline run's learner (``agent.learner``: ``cql``
+    for the ``cql_taco`` agent)."""
+    key = algo_key(name)
+    label = ALGO_LABELS.get(key, str(name))
+    if key in OFFLINE_LEARNERS and "taco" in objectives:
         label += "+TACO"
     return label
 

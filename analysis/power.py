@@ -52,7 +52,7 @@ from analysis.calibration import published_values
 from analysis.claim_budget import ClaimBudget, frames_text, load_budgets
 from analysis.context import Context
 from analysis.load import Results
-from analysis.offline import offline_runs
+from analysis.offline_tables import offline_runs
 from analysis.paper import DMC9, OFFLINE_TASKS, PaperData
 from analysis.robustness import cell_spread
 from analysis.tables import TableOutput, fmt_num, write_table

@@ -7,7 +7,7 @@ upstream code, time both side by side on one machine (docs/performance.md). Resu
 under ``{results_root}/bench/`` for the speed tables (T4, T5).
 
 ``--e2e`` times a short real training loop phase by phase (repro/bench/e2e.py) into the same JSON's ``e2e``;
-``--offline`` times each offline learner against the online DrQ-v2 update (repro/bench/offline.py);
+``--offline`` times each offline learner against the online DrQ-v2 update (repro/bench/offline_update.py);
 ``--offline-data`` a dataset's load time, memory and sampling speed against the online buffer
 (repro/bench/data.py).
 """
@@ -259,7 +259,7 @@ def register(app: typer.Typer) -> None:
         import torch
 
         from repro.bench.data import run_data_bench
-        from repro.bench.offline import run_offline_bench
+        from repro.bench.offline_update import run_offline_bench
 
         if device.startswith("cuda") and not torch.cuda.is_available():
             fail("--device cuda but no CUDA device is available")
