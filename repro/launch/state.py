@@ -8,7 +8,7 @@ Layout under ``{results_root}/.sweeps/{sweep}/``::
     logs/KEY.log      stdout+stderr of local runs
     slurm/            submitit folders (job scripts, pickles, %j_0_log.out/.err)
 
-Every file is written atomically (temporary file + ``os.replace``). ``state.json`` is shared by
+Every file is written atomically (repro/runs/fsutil.py). ``state.json`` is shared by
 concurrent launches, so its read-modify-write happens under a short lock.
 """
 
