@@ -20,11 +20,11 @@ import numpy as np
 import pandas as pd
 
 from analysis.calibration import SOURCE_TEXT, packaged_published, published_values
-from analysis.identity import normalize_dataset
 from analysis.load import Results
 from analysis.paper import DMC9, PaperData
 from analysis.stats import DEFAULT_SEED, mean_cis, ratio_to_task_means
 from analysis.tables import write_table
+from repro.config.schema import normalize_dataset
 
 T1_COLUMNS = ["TACO", "DrQ-v2", "A-LIX", "DrQ", "CURL", "DreamerV3", "TD-MPC"]
 T2_COLUMNS = ["TACO", "SPR", "ATC", "DRIML", "DrQ-v2"]

@@ -24,13 +24,14 @@ from analysis import select
 from analysis.calibration import SOURCE_TEXT, published_values
 from analysis.claim_budget import ClaimBudget, claim_runs, frames_text, load_budgets, reach, seed_counts
 from analysis.context import Context
-from analysis.offline import offline_runs
+from analysis.offline_tables import offline_runs
 from analysis.paper import DMC9, METAWORLD6, OFFLINE_TASKS
 from analysis.robustness import seed_spread, solved_counts
 from analysis.speed import speed_measurements
 from analysis.stats import grand_mean_ci, ratio_of_means, ratio_to_task_means, score_matrix
 from analysis.tables import write_table
 from analysis.tsne import CLUSTER_THRESHOLD, tsne_for_context
+from repro.config.schema import DatasetKind
 
 SUPPORTED, REFUTED, NO_DATA = "supported", "refuted", "not enough data"
 
@@ -142,7 +143,6 @@ def online_rows(ctx: Context) -> pd.DataFrame:
 # runs, so that the power simulation (analysis.power) applies them, unchanged, to simulated cells.
 GAIN_BAR = 1.3  # online_avg_gain: about 1.4x, tolerance 0.1
 REPR_TASKS = ("quadruped_run", "walker_run", "hopper_hop", "reacher_hard", "acrobot_swingup")
-OFFLINE_DATASETS = ("medium", "medium-replay", "full-replay")
 OFFLINE_PRINTED = {"TD3+BC+TACO": 71.0, "TD3+BC": 68.2, "CQL+TACO": 72.1, "CQL": 66.7}
 MODEL_BASED = ("DreamerV3", "TD-MPC")
 
@@ -424,7 +424,7 @@ def _offline_gain(ctx: Context) -> tuple[str, str]:
 def offline_gain_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
     """offline_gain on a (task, dataset, method) ``means`` table of returns."""
     pairs = [((t, d, f"{x}+TACO"), (t, d, x), f"{t}/{d} {x}") for t in OFFLINE_TASKS
-             for d in OFFLINE_DATASETS for x in ("TD3+BC", "CQL")]
+             for d in DatasetKind.values() for x in ("TD3+BC", "CQL")]
     return universal(ctx, table, pairs)
 
 
@@ -432,7 +432,7 @@ def offline_gain_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tu
        "95% CI of the reproduced average normalised score over the 12 pairs")
 def _offline_average(ctx: Context) -> tuple[str, str]:
     table, df = _offline_table(ctx, "normalized")
-    pairs = [(t, d) for t in OFFLINE_TASKS for d in OFFLINE_DATASETS]
+    pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
     require(ctx, table, [(t, d, m) for t, d in pairs for m in OFFLINE_PRINTED])
     matrices = {}
     for m in OFFLINE_PRINTED:
@@ -482,7 +482,7 @@ def _action_repeat(ctx: Context) -> tuple[str, str]:
 @check("action_dim", "on quadruped_run the means at dims 6 and 24 are below every intermediate dim's, and the "
        "intermediate dims' range is <= 15% of their mean")
 def _action_dim(ctx: Context) -> tuple[str, str]:
-    df = select.action_dim(ctx.scores, ctx.experiment_map)
+    df = select.action_dim_runs(ctx.scores, ctx.experiment_map)
     table = means(df, ["dim"]) if not df.empty else {}
     have = sorted(k[0] for k in table if get(ctx, table, *k) is not None)
     mid = [d for d in have if 6 < d < 24]

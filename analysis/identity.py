@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Mapping
 from typing import Any
@@ -27,8 +26,8 @@ ALGO_LABELS: dict[str, str] = {
     "bc": "BC",
     "dt": "DT",
 }
-# the offline learners' names (agent.name of their plain agent files), from the config schema
-OFFLINE_ALGOS = frozenset(str(n) for n in LearnerName if is_offline(n))
+# the offline learners' names (agent.learner; also agent.name of their plain agent files), from the config schema
+OFFLINE_LEARNERS = frozenset(str(n) for n in LearnerName if is_offline(n))
 
 # Names the paper prints that a plain title-casing would get wrong.
 _TASK_NAMES: dict[str, str] = {
@@ -60,11 +59,14 @@ def enabled_objectives(objectives: Mapping[str, Any] | None) -> tuple[str, ...]:
     return tuple(sorted(out))
 
 
-def method_label(algo: Any, objectives: tuple[str, ...] = ()) -> str:
-    """The paper's label of a method: ``TACO``, ``DrQ-v2``, ``CQL+TACO`` (offline algorithm with TACO)."""
-    key = algo_key(algo)
-    label = ALGO_LABELS.get(key, str(algo))
-    if key in OFFLINE_ALGOS and "taco" in objectives:
+def method_label(name: Any, objectives: tuple[str, ...] = ()) -> str:
+    """The paper's label of a method: ``TACO``, ``DrQ-v2``, ``CQL+TACO`` (an offline learner with TACO).
+
+    ``name``: an online run's algorithm (``agent.name``) or an offline run's learner (``agent.learner``: ``cql``
+    for the ``cql_taco`` agent)."""
+    key = algo_key(name)
+    label = ALGO_LABELS.get(key, str(name))
+    if key in OFFLINE_LEARNERS and "taco" in objectives:
         label += "+TACO"
     return label
 
@@ -74,16 +76,6 @@ def task_display(task: str) -> str:
     if task in _TASK_NAMES:
         return _TASK_NAMES[task]
     return " ".join(part.capitalize() for part in re.split(r"[_\-]+", str(task)) if part)
-
-
-def normalize_dataset(name: Any) -> str | None:
-    """``medium_replay`` / ``Medium-replay`` -> ``medium-replay``; ``replay`` (Table 6's name) -> ``full-replay``."""
-    if name is None or (isinstance(name, float) and math.isnan(name)):
-        return None
-    text = str(name).strip().lower().replace("_", "-")
-    if text in ("replay", "full"):
-        return "full-replay"
-    return text or None
 
 
 def action_dim(task: str) -> int | None:

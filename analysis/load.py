@@ -22,8 +22,9 @@ import yaml
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from analysis.identity import algo_key, enabled_objectives, method_label, normalize_dataset
+from analysis.identity import algo_key, enabled_objectives, method_label
 from repro.config.compose import ABSENT, get_key
+from repro.config.schema import normalize_dataset
 from repro.runs.migrate import migrate_config
 from repro.runs.runformat import (
     CONFIG,

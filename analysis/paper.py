@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.identity import normalize_dataset
 from repro.config.paper_defaults import ALPHA_TABLE, ONLINE_TABLE
+from repro.config.schema import normalize_dataset
 from repro_data import PAPER_DIR
 
 # The nine DMC tasks of Table 1 in the paper's row order.

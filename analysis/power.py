@@ -52,10 +52,11 @@ from analysis.calibration import published_values
 from analysis.claim_budget import ClaimBudget, frames_text, load_budgets
 from analysis.context import Context
 from analysis.load import Results
-from analysis.offline import offline_runs
+from analysis.offline_tables import offline_runs
 from analysis.paper import DMC9, OFFLINE_TASKS, PaperData
 from analysis.robustness import cell_spread
 from analysis.tables import TableOutput, fmt_num, write_table
+from repro.config.schema import DatasetKind
 
 TARGET = 0.8  # the power "seeds for 80%" asks for
 DEFAULT_SIMS = 2000
@@ -206,7 +207,7 @@ def _judge_published_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
 
 
 def _judge_offline_average(ctx: Context, cells: Cells) -> tuple[str, str]:
-    pairs = [(t, d) for t in OFFLINE_TASKS for d in cl.OFFLINE_DATASETS]
+    pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
     cl.require(ctx, means_table(cells), [(t, d, m) for t, d in pairs for m in cl.OFFLINE_PRINTED])
     return cl.offline_average_rule(ctx, {m: stacked(cells, [(t, d, m) for t, d in pairs])
                                          for m in cl.OFFLINE_PRINTED})
@@ -268,7 +269,7 @@ def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = N
     offline_cells = [paper_normal((r.task, r.dataset, r.method), float(r.normalized_mean), float(r.normalized_std),
                                   "Table 3 (normalised)", *NORMALIZED_RANGE)
                      for r in off.itertuples(index=False)
-                     if r.task in OFFLINE_TASKS and r.dataset in cl.OFFLINE_DATASETS and pd.notna(r.normalized_mean)]
+                     if r.task in OFFLINE_TASKS and r.dataset in DatasetKind.values() and pd.notna(r.normalized_mean)]
     gain_cells = [c for c in offline_cells if c.key[2] in ("TD3+BC+TACO", "TD3+BC", "CQL+TACO", "CQL")]
     manip = [CellSource(("TACO",), "bernoulli", 3 / 6, math.nan, source="appendix G: 3 of 6 seeds solve"),
              CellSource(("DrQ-v2",), "bernoulli", 0.0, math.nan, source="appendix G: 0 of 6 seeds solve")]

@@ -8,9 +8,12 @@ the tasks rendered before a failure are kept.
 from __future__ import annotations
 
 import sys
+from functools import partial
 from pathlib import Path
 
 import numpy as np
+
+from repro.runs.fsutil import atomic_write
 
 
 def rollout(task: str, steps: int = 60) -> np.ndarray:
@@ -36,9 +39,7 @@ def main(argv: list[str]) -> int:
     out_dir, steps, tasks = Path(argv[0]), int(argv[1]), argv[2:]
     for task in tasks:
         frames = rollout(task, steps)
-        tmp = out_dir / f".{task}.npz"
-        np.savez_compressed(tmp, frames=frames)
-        tmp.replace(out_dir / f"{task}.npz")
+        atomic_write(out_dir / f"{task}.npz", partial(np.savez_compressed, frames=frames))
         print(f"rendered {task}", flush=True)
     return 0
 

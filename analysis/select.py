@@ -76,16 +76,16 @@ def pick(
     return df[rank == best].copy()
 
 
-def method_label(row: pd.Series) -> str:
-    """The paper's method name (runs of several variants of one method share the cell; the tables
-    list the variants that contributed, see analysis.compare.build_cells)."""
+def by_method(row: pd.Series) -> str:
+    """A row's label: its ``method`` column, the paper's method name (runs of several variants of one method
+    share the cell; the tables list the variants that contributed, see analysis.compare.build_cells)."""
     return str(row["method"])
 
 
 def online_main(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -> pd.DataFrame:
     """Table 1 / F1 / F4 / F11: online runs of the main comparison on the paper's nine DMC tasks (reach_duplo's
     suite is ``manipulation``), labelled by method."""
-    return pick(scores, ["main"], method_label, experiment_map=experiment_map, task=set(DMC9),
+    return pick(scores, ["main"], by_method, experiment_map=experiment_map, task=set(DMC9),
                 dataset=lambda d: pd.isna(d))
 
 
@@ -94,7 +94,7 @@ def repr_objectives(scores: pd.DataFrame, experiment_map: ExperimentMap | None =
     return pick(
         scores,
         ["repr_objectives", "main"],
-        method_label,
+        by_method,
         experiment_map=experiment_map,
         algo={"taco", "spr", "atc", "driml", "drqv2"},
         dataset=lambda d: pd.isna(d),
@@ -201,7 +201,7 @@ def dim_value(row: pd.Series) -> int | None:
     return None if pd.isna(row["latent_action_dim"]) else int(row["latent_action_dim"])
 
 
-def action_dim(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -> pd.DataFrame:
+def action_dim_runs(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -> pd.DataFrame:
     """F10: TACO on quadruped_run for each latent action dimension; label ``d=..``."""
 
     def label(row: pd.Series) -> str | None:
@@ -223,7 +223,7 @@ def action_dim(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None
 
 def metaworld(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -> pd.DataFrame:
     """F5: Meta-world runs labelled by method."""
-    return pick(scores, ["metaworld", "main"], method_label, experiment_map=experiment_map, suite="metaworld")
+    return pick(scores, ["metaworld", "main"], by_method, experiment_map=experiment_map, suite="metaworld")
 
 
 def manipulator(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -> pd.DataFrame:
@@ -231,7 +231,7 @@ def manipulator(scores: pd.DataFrame, experiment_map: ExperimentMap | None = Non
     return pick(
         scores,
         ["manipulator", "main"],
-        method_label,
+        by_method,
         experiment_map=experiment_map,
         task=lambda t: str(t).startswith("manipulator"),
     )
@@ -242,7 +242,7 @@ def offline(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -
     return pick(
         scores,
         ["offline"],
-        method_label,
+        by_method,
         keys=("task", "dataset", "label"),
         experiment_map=experiment_map,
         dataset=lambda d: not pd.isna(d),

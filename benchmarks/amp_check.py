@@ -1,8 +1,9 @@
 """Plain against `agent.amp` on one device: the losses of the same updates from the same weights and batches.
 
-Two agents are built from one seed; each gets the same ``--updates`` synthetic batches (repro/bench/cli.py:_batch,
-one seed per update) in the same order. The JSON (``--out``) holds every update's losses on both paths and, per
-loss, the largest difference against the tolerance of tests/test_speedups.py (rel 0.05, abs 0.02 for one update);
+Two agents are built from one seed; each gets the same ``--updates`` synthetic batches
+(repro/bench/online_update.py:synthetic_batch, one seed per update) in the same order. The JSON (``--out``) holds
+every update's losses on both paths and, per loss, the largest difference against the tolerance of
+tests/test_speedups.py (rel 0.05, abs 0.02 for one update);
 the differences grow update by update as the bfloat16 weights drift, so a later update may pass it less closely.
 Used by benchmarks/gpu_check.sh on CUDA; on CPU tests/test_speedups.py checks one update.
 
@@ -25,7 +26,7 @@ def losses(flags: list[str], device: str, batch: int, updates: int, hidden: int 
     import torch
 
     from repro.agent.agent import Agent
-    from repro.bench.cli import _batch
+    from repro.bench.online_update import synthetic_batch
     from repro.config.compose import compose, typed
     from repro.envs import get_task
 
@@ -37,7 +38,7 @@ def losses(flags: list[str], device: str, batch: int, updates: int, hidden: int 
     out = []
     for i in range(updates):
         torch.manual_seed(1 + i)  # the same augmentation and noise draws on both paths
-        metrics = agent.update(_batch(batch, rc.agent.K, A, device), step=10**6 + 2 * i)
+        metrics = agent.update(synthetic_batch(batch, rc.agent.K, A, device), step=10**6 + 2 * i)
         out.append({k: float(metrics[k]) for k in LOSSES if k in metrics})
     return out
 

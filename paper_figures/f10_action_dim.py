@@ -13,7 +13,7 @@ DIMS = [6, PAPER_DEFAULT, 24]  # the text's extremes and the paper's default
 
 @register("F10", "Latent action dimension (quadruped_run)", "figure", "fig:action_representation_dim")
 def render(ctx: Context) -> ArtifactResult:
-    df = select.action_dim(ctx.scores, ctx.experiment_map)
+    df = select.action_dim_runs(ctx.scores, ctx.experiment_map)
     df = df.assign(arm="TACO") if not df.empty else df.assign(arm=[], dim=[])
     dims = sorted(set(DIMS) | set(df["dim"]))
     caption = (

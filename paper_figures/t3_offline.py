@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from analysis.context import Context
-from analysis.offline import offline_runs, t3_cells
+from analysis.offline_tables import offline_runs, t3_cells
 from paper_figures.common import comparison_table, has_data
 from paper_figures.registry import ArtifactResult, register
 

@@ -7,7 +7,7 @@ import pandas as pd
 
 from analysis.context import Context
 from analysis.identity import task_display
-from analysis.offline import POI_MAX_REPS, offline_runs, taco_poi
+from analysis.offline_tables import POI_MAX_REPS, offline_runs, taco_poi
 from analysis.tables import EMPTY, fmt_ci, fmt_num, write_table
 from paper_figures.registry import ArtifactResult, register
 

@@ -6,7 +6,7 @@ import pandas as pd
 
 from analysis.context import Context
 from analysis.identity import task_display
-from analysis.offline import offline_runs
+from analysis.offline_tables import offline_runs
 from analysis.tables import EMPTY, write_table
 from paper_figures.registry import ArtifactResult, register
 

@@ -9,11 +9,12 @@ import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn, Optional
+from typing import TYPE_CHECKING, Any, Optional
 
 import typer
 
 from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
+from repro.runs.console import fail
 
 if TYPE_CHECKING:
     from analysis.context import Context
@@ -42,16 +43,11 @@ PUBLISHED_OPT = typer.Option(True, "--published/--no-published",
                              help="F4: draw the DrQ-v2 authors' published curve (mean, 95% CI band) beside the runs.")
 
 
-def _fail(message: str) -> NoReturn:
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(code=2)
-
-
 def _experiment_map(items: Optional[list[str]]) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
     for item in items or []:
         if "=" not in item:
-            _fail(f"--experiment-map expects CANONICAL=ACTUAL[,ACTUAL...], got {item!r}")
+            fail(f"--experiment-map expects CANONICAL=ACTUAL[,ACTUAL...], got {item!r}")
         key, value = item.split("=", 1)
         out.setdefault(key.strip(), []).extend(v.strip() for v in value.split(",") if v.strip())
     return out
@@ -64,7 +60,7 @@ def _load_results(results: Path):
     try:
         return load_results(results)
     except ResultsRootError as exc:
-        _fail(f"{exc} (pass --results ROOT)")
+        fail(f"{exc} (pass --results ROOT)")
 
 
 def make_context(results: Path, out: Path, frames: int, reps: int, seed: int, min_seeds: int = 2,
@@ -74,7 +70,7 @@ def make_context(results: Path, out: Path, frames: int, reps: int, seed: int, mi
     from analysis.context import Context
 
     if frames <= 0 or reps <= 0 or tsne_n <= 1 or min_seeds < 1:
-        _fail("--frames and --reps must be positive, --tsne-n > 1 and --min-seeds >= 1")
+        fail("--frames and --reps must be positive, --tsne-n > 1 and --min-seeds >= 1")
     if results == DEFAULT_RESULTS and not results.exists():
         # A fresh checkout before any training: show the paper-only view rather than an error.
         results.mkdir(parents=True, exist_ok=True)
@@ -205,11 +201,11 @@ def _artifacts(ids: Optional[list[str]], all_: bool) -> list:
     from paper_figures.registry import UnknownArtifactError
 
     if not all_ and not ids:
-        _fail("name artifact ids (e.g. 'repro figures F8 T1'), or pass --all or --list")
+        fail("name artifact ids (e.g. 'repro figures F8 T1'), or pass --all or --list")
     try:
         return resolve(ordered_ids() if all_ else (ids or []))  # ids is set unless --all
     except UnknownArtifactError as exc:
-        _fail(str(exc))
+        fail(str(exc))
 
 
 @_context_options("results", "out", "frames", "reps", "seed", "min_seeds", "experiment_map", "tsne_n", "indicative")
@@ -262,7 +258,7 @@ def calibrate_cmd(
     from analysis.calibration import ABOUT_TEXT, INTERP_TEXT, calibrate, write_calibration
 
     if reps <= 0 or (at is not None and at < 0):
-        _fail("--reps must be positive and --frames >= 0")
+        fail("--reps must be positive and --frames >= 0")
     loaded = _load_results(results)
     for problem in loaded.problems:
         typer.echo(f"  {problem}", err=True)

@@ -12,6 +12,7 @@ from omegaconf import OmegaConf
 from repro.bench import cli as bench
 from repro.data.cli import dataset_app
 from repro.launch import cli as launch_cli
+from repro.runs.console import console, fail
 from repro.train import make_dataset_cli as make_cli
 from repro_app import analysis_cli, plan_cli, reproduce, watch_cli
 
@@ -19,12 +20,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Reproduce, extend and report TACO (Zheng et al., NeurIPS 2023).")
-
-
-def fail(message: str, code: int = 2) -> None:
-    """One clear line on stderr and a non-zero exit."""
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(code)
 
 
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
@@ -63,8 +58,8 @@ def _dry_run(cfg) -> None:
     from repro.train.api import build_agent, run_action_dim
 
     rc = typed(cfg)
-    console = _console()
-    console.print(OmegaConf.to_yaml(cfg, resolve=True), markup=False, highlight=False)
+    con = console(min_width=120)
+    con.print(OmegaConf.to_yaml(cfg, resolve=True), markup=False, highlight=False)
     action_dim = run_action_dim(rc)
     obs_shape = (3 * rc.env.frame_stack, rc.env.image_size, rc.env.image_size)
     agent = build_agent(rc, obs_shape, action_dim, "cpu")
@@ -75,9 +70,9 @@ def _dry_run(cfg) -> None:
     for name, count in rows:
         table.add_row(name, f"{count:,}")
     table.add_row("[bold]total", f"[bold]{sum(c for _, c in rows):,}")
-    console.print(table)
+    con.print(table)
     from repro.runs.rundir import run_dir
-    console.print(f"run directory: {run_dir(cfg)}")
+    con.print(f"run directory: {run_dir(cfg)}")
 
 
 @app.command()
@@ -95,16 +90,7 @@ def tasks():
         cfg = compose([f"task={name}"])
         table.add_row(name, info.suite, str(info.action_dim), cfg.task.preset, str(cfg.agent.K),
                       str(cfg.agent.nstep), f"{cfg.train.frames:,}", str(info.camera))
-    _console().print(table)
-
-
-def _console():
-    """A rich console at least 120 columns wide, so tables are not truncated in narrow or piped output."""
-    import shutil
-
-    from rich.console import Console
-
-    return Console(width=max(120, shutil.get_terminal_size((120, 24)).columns))
+    console(min_width=120).print(table)
 
 
 for _commands in (launch_cli, analysis_cli, plan_cli, bench, reproduce, watch_cli):

@@ -4,29 +4,22 @@ paper's numbers are the truth (analysis/power.py). Bad input: one line, exit 2. 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import NoReturn, Optional
+from typing import Optional
 
 import typer
 
 from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
+from repro.runs.console import console, fail
 
 DEFAULT_RESULTS = Path("runs")
 
 
-def _fail(message: str) -> NoReturn:
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(code=2)
-
-
 def _print(display, title: str, notes: list[str]) -> None:
     """A display frame as a rich table, with its notes under it."""
-    import shutil
-
-    from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
-    con = Console(width=max(160, shutil.get_terminal_size((160, 24)).columns))
+    con = console(min_width=160)
     table = Table(title=escape(title), title_justify="left")
     for col in display.columns:
         table.add_column(escape(str(col)), overflow="fold")
@@ -66,13 +59,13 @@ def plan_cmd(
     from repro_app.plan import PlanError
 
     if not sweeps and not all_ and not claims:
-        _fail("name sweeps (e.g. 'repro plan main'), or pass --all or --claims")
+        fail("name sweeps (e.g. 'repro plan main'), or pass --all or --claims")
     if devices < 1 or sims < 10 or max_seeds < 2 or reps < 1 or min_seeds < 1 or (
             device_memory_gb is not None and device_memory_gb <= 0):
-        _fail("--devices must be >= 1, --sims >= 10, --max-seeds >= 2, --reps and --min-seeds >= 1, "
+        fail("--devices must be >= 1, --sims >= 10, --max-seeds >= 2, --reps and --min-seeds >= 1, "
               "--device-memory-gb > 0")
     if device not in ("cuda", "cpu"):
-        _fail(f"--device must be cuda or cpu (got {device!r})")
+        fail(f"--device must be cuda or cpu (got {device!r})")
     try:
         if sweeps or all_:
             _plan_sweeps(sweeps or [], all_, results, out, bench_file, device, devices, cluster_config,
@@ -80,7 +73,7 @@ def plan_cmd(
         if claims:
             _plan_claims(results, out, bench_file, device, sims, max_seeds, seed, reps, min_seeds)
     except (PlanError, SweepError) as exc:
-        _fail(str(exc))
+        fail(str(exc))
 
 
 def _cluster(cluster_config: Optional[Path]):

@@ -20,6 +20,8 @@ from typing import Optional
 
 import typer
 
+from repro.runs.console import fail
+
 OFFLINE_SWEEP = "tiny_offline"
 # The recorded online run the datasets come from: {experiment}/{agent}/{variant}/{task}/seed_{seed}.
 SOURCE_RUN = Path("taco/base/cheetah_run/seed_1")
@@ -32,8 +34,7 @@ def _call(cmd: list[str], what: str) -> None:
     typer.echo(f"  $ repro {' '.join(cmd[3:])}")
     rc = subprocess.call(cmd)
     if rc != 0:
-        typer.echo(f"error: {what} failed (exit {rc})", err=True)
-        raise typer.Exit(1)
+        fail(f"{what} failed (exit {rc})", 1)
 
 
 def _offline_leg(results_root: Path, sweep: str, max_parallel: int, warm: list[str]) -> bool:
@@ -85,8 +86,7 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"[1/3] online training: {' '.join(cmd[2:])}")
         rc = subprocess.call(cmd)
         if rc != 0:
-            typer.echo(f"error: the sweep failed (exit {rc}); see `repro status {sweep}`", err=True)
-            raise typer.Exit(1)
+            fail(f"the sweep failed (exit {rc}); see `repro status {sweep}`", 1)
         for csv in sorted(results_root.glob(f"{sweep}/*/*/*/*/eval.csv")):
             typer.echo(f"\n{csv}:\n{csv.read_text().rstrip()}")
 

@@ -14,17 +14,13 @@ from typing import TYPE_CHECKING, Optional
 
 import typer
 
+from repro.runs.console import fail
 from repro.runs.runformat import DONE
 from repro.runs.tblog import TB_DIR
 from repro.runs.wblog import RUN_ID, WANDB_DIR, offline_folders
 
 if TYPE_CHECKING:
     import pandas as pd
-
-
-def _fail(message: str) -> None:
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(code=2)
 
 
 def _tool(name: str) -> str:
@@ -58,7 +54,7 @@ def tensorboard_cmd(
 ) -> None:
     """Print (or --run) the command that opens every run under ROOT in TensorBoard (runtime.tensorboard=true)."""
     if not root.is_dir():
-        _fail(f"{root} does not exist or is not a directory")
+        fail(f"{root} does not exist or is not a directory")
     n = sum(1 for _ in root.rglob(f"{TB_DIR}/events.out.tfevents.*"))
     cmd = tensorboard_command(root, port)
     if not run:
@@ -67,7 +63,7 @@ def tensorboard_cmd(
                    + ("" if n else " (train with runtime.tensorboard=true)"), err=True)
         return
     if n == 0:
-        _fail(f"no event files under {root} (train with runtime.tensorboard=true)")
+        fail(f"no event files under {root} (train with runtime.tensorboard=true)")
     raise typer.Exit(subprocess.call(cmd))
 
 def wandb_runs(paths: list[Path]) -> list[Path]:
@@ -89,7 +85,7 @@ def wandb_sync_cmd(
     """Print (or --run) the `wandb sync` command that sends the offline W&B runs under PATHS (runtime.wandb=true)."""
     for path in paths:
         if not path.is_dir():
-            _fail(f"{path} does not exist or is not a directory")
+            fail(f"{path} does not exist or is not a directory")
     runs = wandb_runs(paths)
     done = [r for r in runs if unfinished or (r / DONE).exists()]
     folders = [f for r in done for f in offline_folders(r)]
@@ -97,7 +93,7 @@ def wandb_sync_cmd(
         why = (" (train with runtime.wandb=true)" if not runs else
                f"; {len(runs) - len(done)} not done (--unfinished)" if len(done) < len(runs) else
                " (runtime.wandb_mode=online runs were sent as they trained)")
-        _fail(f"no offline W&B run to sync under {', '.join(map(str, paths))}{why}")
+        fail(f"no offline W&B run to sync under {', '.join(map(str, paths))}{why}")
     cmd = [_tool("wandb"), "sync", *map(str, folders)]
     if not run:
         left = len(runs) - len(done)
@@ -106,7 +102,7 @@ def wandb_sync_cmd(
                                                             else ""), err=True)
         return
     if shutil.which(cmd[0]) is None and not Path(cmd[0]).exists():
-        _fail("wandb not found: pip install '.[wandb]' (or run the printed command where it is installed)")
+        fail("wandb not found: pip install '.[wandb]' (or run the printed command where it is installed)")
     raise typer.Exit(subprocess.call(cmd))
 
 
@@ -132,7 +128,7 @@ def plot_cmd(
         runs, evals, problems = load_runs(paths)
         curves = tidy_curves(runs, evals, metric, cols)
     except PlotInputError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     for problem in problems:
         typer.echo(f"  {problem}", err=True)
     for cell in repeated_seeds(curves):

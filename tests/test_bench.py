@@ -15,7 +15,7 @@ from helpers import bench_app
 from repro.bench import OFFLINE_AGENTS
 from repro.bench.cli import same_run_ratios
 from repro.bench.data import episode_lengths, synthetic_episode
-from repro.bench.offline import available, run_offline_bench
+from repro.bench.offline_update import available, run_offline_bench
 
 
 def _app() -> typer.Typer:
@@ -93,7 +93,7 @@ def test_offline_bench_prints_each_learners_ratio_to_drqv2_from_this_run(tmp_pat
 
 
 def test_an_unregistered_learner_is_skipped_with_its_reason(monkeypatch):
-    from repro.bench.offline import LEARNERS
+    from repro.bench.offline_update import LEARNERS
 
     monkeypatch.delitem(LEARNERS, "iql")
     assert "learner 'iql' is not registered" in available("iql") and "\n" not in available("iql")

@@ -125,3 +125,30 @@ def test_sweep_short_results_flag_launches_under_root(tmp_path):
     status = runner.invoke(app, ["status", "-r", str(root)], terminal_width=240)
     assert status.exit_code == 0 and f"no sweep launched under {root}" in status.output, status.output
     assert not (tmp_path / "runs").exists()
+
+
+def test_every_command_fails_and_prints_through_the_one_console_helper():
+    """repro/runs/console.py is the only place that defines a command's error exit (``fail``) or builds a rich
+    Console: a copy defined elsewhere (a module's own ``_fail``, its own Console width) fails here by file:line."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    found = []
+    for pkg in ("repro", "repro_app", "analysis", "paper_figures"):
+        for path in sorted((root / pkg).rglob("*.py")):
+            if path == root / "repro" / "runs" / "console.py":
+                continue
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                called = getattr(node.func, "id", getattr(node.func, "attr", "")) if isinstance(node, ast.Call) else ""
+                named = node.name.lstrip("_") if isinstance(node, ast.FunctionDef) else ""
+                if called == "Console" or named in ("fail", "die", "console"):
+                    found.append(f"{path.relative_to(root)}:{node.lineno}")
+    assert not found, found
+    from repro.runs.console import fail
+
+    result = CliRunner().invoke(app, ["train", "agent=no_such_agent"])
+    assert result.exit_code == 2 and result.output.count("error:") == 1 and "\x1b" not in result.output
+    with pytest.raises(Exception) as exc:  # typer.Exit carries the code
+        fail("x", 7)
+    assert getattr(exc.value, "exit_code", None) == 7

@@ -11,7 +11,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from repro.config import schema
-from repro.config.schema import LearnerName, ObjectiveName, check_registry, is_offline
+from repro.config.schema import DatasetKind, LearnerName, ObjectiveName, check_registry, is_offline, normalize_dataset
 
 
 def test_check_registry_names_what_is_missing_and_what_is_extra():
@@ -56,9 +56,39 @@ def test_every_choice_member_is_named_by_its_value():
     YAML a run writes and the overrides it accepts."""
     fields = schema.choice_fields()
     assert fields["agent.learner"] is LearnerName
-    for enum in {*fields.values(), ObjectiveName}:
+    for enum in {*fields.values(), ObjectiveName, DatasetKind}:
         assert all(m.name == m.value for m in enum), enum
         assert all(str(m) == f"{m}" == m.value for m in enum), enum
+
+
+def test_dataset_kinds_are_one_choice_with_one_normaliser():
+    """The kinds in Table 3's order, one spelling for every way the paper, a config or a table writes one, read by
+    the config's Table 6 lookup, `repro dataset make` and the analysis alike; an OmegaConf field of the Choice
+    reads ``medium-replay`` (a member named by a value that is not a Python name)."""
+    from analysis import claims, load, paper
+    from repro.config import paper_defaults
+    from repro.train import make_dataset
+
+    assert DatasetKind.values() == ("medium", "medium-replay", "full-replay")
+    spellings = [("Medium", "medium"), ("medium_replay", "medium-replay"), (" Medium-Replay", "medium-replay"),
+                 ("full_replay", "full-replay"), ("Replay", "full-replay")]
+    for spelling, kind in spellings:
+        assert DatasetKind(normalize_dataset(spelling)) == kind, spelling
+    assert normalize_dataset(None) is normalize_dataset(float("nan")) is normalize_dataset("") is None
+    assert normalize_dataset("imported-vd4rl") == "imported-vd4rl"  # a dataset's own name keeps its spelling
+    assert paper_defaults.cql_alpha("cheetah_run", "medium_replay") == paper_defaults.cql_alpha("cheetah_run",
+                                                                                                "medium-replay")
+    assert load.normalize_dataset is paper.normalize_dataset is normalize_dataset and claims.DatasetKind is DatasetKind
+    with pytest.raises(make_dataset.MakeError, match="one of medium, medium-replay, full-replay"):
+        make_dataset.plan(None, "medium_replay", None, None, 0, None, None, "cpu")  # type: ignore[arg-type]
+
+    @dataclasses.dataclass
+    class Section:
+        kind: DatasetKind = DatasetKind("medium")  # type: ignore[valid-type]
+
+    cfg = OmegaConf.structured(Section)
+    cfg.kind = "medium-replay"
+    assert OmegaConf.to_yaml(cfg) == "kind: medium-replay\n" and cfg.kind is DatasetKind("medium-replay")
 
 
 AGENT_OF_SECTION = {"iql": "iql", "dt": "dt", "td3bc": "td3bc", "learner": "bc"}

@@ -97,7 +97,7 @@ def test_f10_places_a_default_dim_run_at_the_dim_its_agent_used(tmp_path):
     write_run(tmp_path, experiment="action_dim", algo="taco", task="quadruped_run", seed=0, final=300.0,
               variant="dim6", latent_action_dim=6)
     ctx = Context(results=load_results(tmp_path), out_dir=tmp_path / "out", budget=FRAMES, reps=50)
-    dims = select.action_dim(ctx.scores).set_index("variant")["dim"]
+    dims = select.action_dim_runs(ctx.scores).set_index("variant")["dim"]
     assert dims.to_dict() == {"dimdefault": 16, "dim6": 6}
     f10_action_dim.render(ctx)
     table = pd.read_csv(ctx.out_dir / "F10.csv")
@@ -119,7 +119,7 @@ def test_run_without_resolved_values_falls_back_to_its_config_marked(tmp_path):
     assert pd.isna(runs.loc[0, "latent_action_dim"])  # null in its config: unknown, not recomputed
     assert runs.loc[1, "latent_action_dim"] == 12
     ctx = Context(results=res, out_dir=tmp_path / "out", budget=FRAMES, reps=10)
-    assert select.action_dim(ctx.scores)["seed"].tolist() == [1]  # the unknown dim is placed nowhere
+    assert select.action_dim_runs(ctx.scores)["seed"].tolist() == [1]  # the unknown dim is placed nowhere
 
 
 def test_malformed_resolved_values_are_a_warning_and_fall_back(tmp_path):

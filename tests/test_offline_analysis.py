@@ -15,7 +15,7 @@ import paper_figures  # noqa: E402
 from analysis.claims import NO_DATA, REFUTED, SUPPORTED, evaluate_claims  # noqa: E402
 from analysis.context import Context  # noqa: E402
 from analysis.load import load_results  # noqa: E402
-from analysis.offline import offline_runs, taco_poi  # noqa: E402
+from analysis.offline_tables import offline_runs, taco_poi  # noqa: E402
 from analysis.paper import OFFLINE_TASKS, PaperData  # noqa: E402
 from analysis.scores import final_scores  # noqa: E402
 from analysis.stats import pairwise_poi, poi_interval, probability_of_improvement  # noqa: E402

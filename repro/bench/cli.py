@@ -7,7 +7,7 @@ upstream code, time both side by side on one machine (docs/performance.md). Resu
 under ``{results_root}/bench/`` for the speed tables (T4, T5).
 
 ``--e2e`` times a short real training loop phase by phase (repro/bench/e2e.py) into the same JSON's ``e2e``;
-``--offline`` times each offline learner against the online DrQ-v2 update (repro/bench/offline.py);
+``--offline`` times each offline learner against the online DrQ-v2 update (repro/bench/offline_update.py);
 ``--offline-data`` a dataset's load time, memory and sampling speed against the online buffer
 (repro/bench/data.py).
 """
@@ -17,42 +17,19 @@ from __future__ import annotations
 import json
 import platform
 import socket
-import statistics
 import time
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
 
-from repro.bench import OFFLINE_AGENTS, SPEEDUP_FLAGS
-from repro.bench.update_setup import build_agent, synthetic_batch
+from repro.bench import OFFLINE_AGENTS
+from repro.bench.online_update import time_update
+from repro.runs.console import fail
 from repro.runs.fsutil import atomic_write_text
 
-
-def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
-                device: str = "cpu", speedup: str = "plain", warmup: int = 1) -> dict:
-    """Median wall-clock seconds of one full agent update, over ``repeats`` timed updates after ``warmup``
-    untimed ones (same batch every time)."""
-    import torch
-
-    agent, rc = build_agent(algo, batch_size, task, device, SPEEDUP_FLAGS[speedup])
-    batch = synthetic_batch(batch_size, rc.agent.K, agent.action_dim, device)
-    for _ in range(warmup):
-        agent.update(batch, step=10**6)
-    times = []
-    for _ in range(repeats):
-        if device.startswith("cuda"):
-            torch.cuda.synchronize()
-        t0 = time.perf_counter()
-        agent.update(batch, step=10**6)
-        if device.startswith("cuda"):
-            torch.cuda.synchronize()
-        times.append(time.perf_counter() - t0)
-    seconds = statistics.median(times)
-    # one update every 2 agent steps at action repeat 2 = 4 frames per update (update-bound estimate)
-    fps = rc.train.update_every_steps * rc.env.action_repeat / seconds
-    return {"algo": algo, "batch_size": batch_size, "speedup": speedup, "update_seconds": round(seconds, 4),
-            "fps_estimate": round(fps, 3), "repeats": repeats, "warmup": warmup}
+if TYPE_CHECKING:
+    pass
 
 
 def replay_memory_ratio(capacity: int = 100_000, action_dim: int = 12) -> dict:
@@ -188,11 +165,6 @@ def _write_report(out_dir: Path, name: str, report: dict, echo=print) -> Path:
     return path
 
 
-def _fail(message: str) -> typer.Exit:
-    typer.echo(f"error: {message}", err=True)
-    return typer.Exit(2)
-
-
 def register(app: typer.Typer) -> None:
     @app.command()
     def bench(batch: Optional[list[int]] = typer.Option(
@@ -235,33 +207,33 @@ def register(app: typer.Typer) -> None:
         import torch
 
         from repro.bench.data import run_data_bench
-        from repro.bench.offline import run_offline_bench
+        from repro.bench.offline_update import run_offline_bench
 
         if device.startswith("cuda") and not torch.cuda.is_available():
-            raise _fail("--device cuda but no CUDA device is available")
+            fail("--device cuda but no CUDA device is available")
         for a in algo or []:
             if a not in ("taco", "drqv2"):
-                raise _fail(f"unknown algo '{a}' (taco, drqv2)")
+                fail(f"unknown algo '{a}' (taco, drqv2)")
         if any(b < 1 for b in batch or []):
-            raise _fail("--batch must be >= 1")
+            fail("--batch must be >= 1")
         for name in learner or []:
             if name not in OFFLINE_AGENTS:
-                raise _fail(f"unknown offline learner '{name}' ({', '.join(OFFLINE_AGENTS)})")
+                fail(f"unknown offline learner '{name}' ({', '.join(OFFLINE_AGENTS)})")
         if dt_batch is not None and dt_batch < 1:
-            raise _fail("--dt-batch must be >= 1")
+            fail("--dt-batch must be >= 1")
         if transitions < 1 or sample_batches < 1 or episode_length < 3:
-            raise _fail("--transitions and --sample-batches must be >= 1, --episode-length >= 3")
+            fail("--transitions and --sample-batches must be >= 1, --episode-length >= 3")
         if frames < 1 or (seed_frames is not None and seed_frames < 0):
-            raise _fail("--frames must be >= 1 and --seed-frames >= 0")
+            fail("--frames must be >= 1 and --seed-frames >= 0")
         if e2e and (offline or offline_data):
-            raise _fail("--e2e times the online loop: drop --offline / --offline-data")
+            fail("--e2e times the online loop: drop --offline / --offline-data")
         if roofline and (offline or offline_data or e2e):
-            raise _fail("--roofline times the online update: drop --offline / --offline-data / --e2e")
+            fail("--roofline times the online update: drop --offline / --offline-data / --e2e")
         if e2e:
             from repro.envs import TASKS
 
             if task not in TASKS:
-                raise _fail(f"unknown task '{task}'")
+                fail(f"unknown task '{task}'")
         out_dir, host, dev = results_root / "bench", socket.gethostname(), device.split(":")[0]
         meta = {"hardware": hardware(device), "device": device, "host": host, "torch": torch.__version__,
                 "python": platform.python_version(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}

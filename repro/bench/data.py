@@ -16,13 +16,13 @@ from __future__ import annotations
 import resource
 import shutil
 import tempfile
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from repro.bench.clock import timed
 from repro.data.dataset import iter_episodes, write_dataset
 from repro.data.offline_replay import load_offline_data
 from repro.data.replay import ReplayBuffer
@@ -64,10 +64,12 @@ def peak_rss_bytes() -> int:
 
 def batches_per_second(buffer: ReplayBuffer, batch_size: int, iters: int) -> float:
     buffer.sample(batch_size)  # warm-up
-    t0 = time.perf_counter()
-    for _ in range(iters):
-        buffer.sample(batch_size)
-    return iters / (time.perf_counter() - t0)
+
+    def sample() -> None:
+        for _ in range(iters):
+            buffer.sample(batch_size)
+
+    return iters / timed(sample)[1]
 
 
 def fill_online(directory: Path, capacity: int, seed: int) -> ReplayBuffer:
@@ -92,19 +94,17 @@ def run_data_bench(transitions: int = 100_000, batch_size: int = 256, iters: int
             for i, n in enumerate(lengths):
                 yield synthetic_episode(i, n, seed)
 
-        t0 = time.perf_counter()
-        manifest = write_dataset(directory, episodes(), task=TASK, kind="synthetic",
-                                 source={"benchmark": "repro.bench.data"}, rule={"transitions": transitions})
-        write_s = time.perf_counter() - t0
+        manifest, write_s = timed(lambda: write_dataset(directory, episodes(), task=TASK, kind="synthetic",
+                                                        source={"benchmark": "repro.bench.data"},
+                                                        rule={"transitions": transitions}))
         disk = sum(p.stat().st_size for p in directory.rglob("*") if p.is_file())
         echo(f"wrote {manifest.transitions:,} transitions in {len(lengths)} episodes ({disk / 2**20:.1f} MiB on disk) "
              f"in {write_s:.1f} s")
 
         rss_before = peak_rss_bytes()
-        t0 = time.perf_counter()
-        data = load_offline_data(directory, task=TASK, action_dim=ACTION_DIM, frame_shape=FRAME_SHAPE,
-                                 frame_stack=FRAME_STACK, nstep=NSTEP, K=K, discount=DISCOUNT, seed=seed)
-        load_s = time.perf_counter() - t0
+        data, load_s = timed(lambda: load_offline_data(directory, task=TASK, action_dim=ACTION_DIM,
+                                                       frame_shape=FRAME_SHAPE, frame_stack=FRAME_STACK, nstep=NSTEP,
+                                                       K=K, discount=DISCOUNT, seed=seed))
         rss_growth = max(0, peak_rss_bytes() - rss_before)
         raw = data.raw_frame_bytes
         assert data.buffer is not None  # load_offline_data always builds the replay (only DT's loader does not)
@@ -112,9 +112,8 @@ def run_data_bench(transitions: int = 100_000, batch_size: int = 256, iters: int
         echo(f"load_offline_data: {load_s:.2f} s; replay bytes / raw frame bytes: {offline_bytes / raw:.4f} "
              f"(target <= 1.10); peak memory growth during the load / raw frame bytes: {rss_growth / raw:.3f}")
 
-        t0 = time.perf_counter()
-        online = fill_online(directory, data.buffer.capacity, seed)
-        fill_s = time.perf_counter() - t0
+        capacity = data.buffer.capacity
+        online, fill_s = timed(lambda: fill_online(directory, capacity, seed))
         echo(f"online ReplayBuffer filled with the same episodes: {fill_s:.2f} s (read + add step by step); "
              f"load / online fill time: {load_s / fill_s:.2f}x (measured in this run)")
 

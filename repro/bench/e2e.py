@@ -18,28 +18,28 @@ short of the wall clock only by the loop's own overhead (tests/test_bench.py bou
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
 from repro.bench import SPEEDUP_FLAGS
+from repro.bench.clock import now
 
 PHASES = ("env_step", "render", "replay_sample", "update", "act", "other")
 TINY = "tiny"  # the main job's profile (repro/conf/profile/tiny.yaml): what --e2e times without --batch
 
 
 class PhaseTimer:
-    """Seconds per phase; ``sync`` (CUDA's synchronize) runs before every clock reading."""
+    """Seconds per phase on the benchmarks' clock (repro/bench/clock.py: ``device`` synchronized before every
+    reading)."""
 
-    def __init__(self, sync: Callable[[], None] | None = None):
+    def __init__(self, device: str = "cpu"):
         self.seconds = dict.fromkeys(PHASES, 0.0)
-        self._sync = sync or (lambda: None)
+        self.device = device
         self.on = False  # off during the seed frames and warm-up updates
 
     def clock(self) -> float:
-        self._sync()
-        return time.perf_counter()
+        return now(self.device)
 
     @contextmanager
     def phase(self, name: str) -> Iterator[None]:
@@ -98,7 +98,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
     overrides += [f"profile={TINY}"] if batch_size is None else [f"agent.batch_size={batch_size}"]
     rc = typed(compose(overrides))
     cuda = device.startswith("cuda")
-    timer = PhaseTimer(torch.cuda.synchronize if cuda else None)
+    timer = PhaseTimer(device)
     env = build_env(rc, rc.seed)
     try:
         spec = env.spec

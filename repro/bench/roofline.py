@@ -15,10 +15,10 @@ Everything is measured in this one process (docs/performance.md, "Roofline"):
 from __future__ import annotations
 
 import statistics
-import time
 from typing import Any
 
 from repro.bench import SPEEDUP_FLAGS
+from repro.bench.clock import timed
 
 PEAK_SHAPE = (256, 32, 41, 41)  # (N, C, H, W) of the peak convolution: the encoder's second layer at batch 256
 TOP_KERNELS = 12  # kernels listed per path
@@ -56,24 +56,10 @@ def peak_conv(dtype: str, device: str = "cpu", repeats: int = 3, shape: tuple[in
         return torch.nn.functional.conv2d(x, weight)
 
     flops, _ = count_flops(run)
-    times = []
-    for i in range(repeats + 1):
-        _sync(device)
-        t0 = time.perf_counter()
-        run()
-        _sync(device)
-        if i:
-            times.append(time.perf_counter() - t0)
+    times = [timed(run, device)[1] for _ in range(repeats + 1)][1:]  # the first call warms up
     seconds = statistics.median(times)
     return {"dtype": dtype, "shape": list(shape), "flops": flops, "seconds": round(seconds, 5),
             "gflops_per_s": round(flops / seconds / 1e9, 2)}
-
-
-def _sync(device: str) -> None:
-    import torch
-
-    if device.startswith("cuda"):
-        torch.cuda.synchronize()
 
 
 def flop_op(kernel: str) -> str | None:
@@ -123,7 +109,7 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     the kernel table per path."""
     import torch
 
-    from repro.bench.update_setup import build_agent, synthetic_batch
+    from repro.bench.online_update import build_agent, synthetic_batch
 
     agents = {}
     for path in ("plain", *speedups):
@@ -141,11 +127,7 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     times: dict[str, list[float]] = {p: [] for p in agents}
     for _ in range(repeats):
         for path in agents:  # alternated: background load hits every path alike
-            _sync(device)
-            t0 = time.perf_counter()
-            update(path)()
-            _sync(device)
-            times[path].append(time.perf_counter() - t0)
+            times[path].append(timed(update(path), device)[1])
     peaks = {d: peak_conv(d, device, shape=peak_shape) for d in ("float32", "bfloat16")}
     flops, per_op = count_flops(update("plain"))  # the same ops on every path (FLOPs do not depend on dtype)
     paths = {}

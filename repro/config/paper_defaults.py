@@ -11,19 +11,17 @@ import csv
 from functools import lru_cache
 from pathlib import Path
 
+from repro.config.schema import normalize_dataset
+
 DATA_DIR = Path(__file__).resolve().parent / "data"
 ALPHA_TABLE = DATA_DIR / "cql_alpha.csv"  # Table 6: CQL's alpha per task and dataset kind
 ONLINE_TABLE = DATA_DIR / "online_rl_table.csv"  # Table 1: mean and std return at 1M frames per task and method
 
 
-def _dataset_key(dataset: str) -> str:
-    return dataset.strip().lower().replace("-", "_")
-
-
 @lru_cache(maxsize=1)
-def _alpha_table() -> dict[tuple[str, str], float]:
+def _alpha_table() -> dict[tuple[str, str | None], float]:
     with ALPHA_TABLE.open(newline="") as f:
-        return {(row["task"], _dataset_key(row["dataset"])): float(row["alpha_cql"]) for row in csv.DictReader(f)}
+        return {(row["task"], normalize_dataset(row["dataset"])): float(row["alpha_cql"]) for row in csv.DictReader(f)}
 
 
 def cql_alpha(task: str, dataset: str) -> float:
@@ -32,10 +30,10 @@ def cql_alpha(task: str, dataset: str) -> float:
     Unknown pairs raise a one-line ValueError naming the known tasks and kinds.
     """
     table = _alpha_table()
-    key = (task, _dataset_key(dataset))
+    key = (task, normalize_dataset(dataset))
     if key not in table:
         tasks = sorted({t for t, _ in table})
-        kinds = sorted({d.replace("_", "-") for _, d in table})
+        kinds = sorted({str(d) for _, d in table})
         raise ValueError(f"no Table 6 CQL alpha for task={task!r} dataset={dataset!r} (known tasks: "
                          f"{', '.join(tasks)}; datasets: {', '.join(kinds)}); set agent.cql.alpha")
     return table[key]

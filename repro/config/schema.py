@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import math
 import typing
 from dataclasses import dataclass
 from typing import Any, Optional
@@ -182,6 +183,27 @@ class Preset(Choice):
     easy = "easy"
     medium = "medium"
     hard = "hard"
+
+
+# ``offline.dataset``'s kinds: how `repro dataset make` makes an offline dataset (docs/offline.md), in the paper's
+# Table 3 order. ``offline.dataset`` itself stays a string (any dataset name under the results root, or a folder).
+# Built with Enum's functional API: a Choice member's name is its value, and ``medium-replay`` is not a Python name
+# (``DatasetKind("medium-replay")`` or ``DatasetKind["medium-replay"]`` reads it).
+# (mypy takes the call for str's constructor.)
+DatasetKind: type[Choice] = Choice(  # type: ignore[call-overload]
+    "DatasetKind", [(k, k) for k in ("medium", "medium-replay", "full-replay")])
+DATASET_ALIASES = {"replay": "full-replay", "full": "full-replay"}  # the paper's Table 6 prints 'Replay'
+
+
+def normalize_dataset(name: Any) -> str | None:
+    """The one spelling of a dataset name: lower case with '-' (``Medium_replay`` -> ``medium-replay``; Table 6's
+    ``Replay`` -> ``full-replay``); None for None, NaN (a missing table cell) or an empty name. A name that is not
+    a :data:`DatasetKind` (an imported dataset's) is spelled the same way. Read by the config (Table 6's CQL alpha)
+    and by the analysis (a run's, the paper tables' and the audit's dataset)."""
+    if name is None or (isinstance(name, float) and math.isnan(name)):
+        return None
+    text = str(name).strip().lower().replace("_", "-")
+    return DATASET_ALIASES.get(text, text) or None
 
 
 def check_registry(what: str, keys: Any, names: type[Choice]) -> None:

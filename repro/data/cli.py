@@ -7,7 +7,7 @@ Bad input (a missing, partial or damaged dataset, a wrong layout, another task's
 from __future__ import annotations
 
 from pathlib import Path
-from typing import NoReturn, Optional
+from typing import Optional
 
 import typer
 
@@ -16,6 +16,7 @@ from repro.data.convert import default_import_name, export_dataset, import_datas
 from repro.data.dataset import MANIFEST, DatasetError, check_dataset, dataset_path, load_manifest
 from repro.data.formats import FORMATS
 from repro.data.summary import plot_returns, summarize
+from repro.runs.console import fail
 from repro.runs.fsutil import FULL, write_error_message
 
 dataset_app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -24,11 +25,6 @@ dataset_app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exc
 FORMAT_HELP = " | ".join(FORMATS)
 RESULTS_OPT = typer.Option(None, "--results", "-r",
                            help="Results root (default: the config's runtime.results_root).")
-
-
-def _fail(message: str) -> NoReturn:
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(2)
 
 
 def _os_message(exc: OSError) -> str:
@@ -41,7 +37,7 @@ def _results_root(value: Optional[Path]) -> Path:
     try:
         return Path(str(compose_base().runtime.results_root))
     except ConfigError as exc:
-        _fail(str(exc))
+        fail(str(exc))
 
 
 @dataset_app.command("info")
@@ -54,9 +50,9 @@ def info_cmd(directory: Path = typer.Argument(..., help="Dataset folder."),
         m = load_manifest(directory)
         s = summarize(m, directory)
     except DatasetError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     except OSError as exc:
-        _fail(_os_message(exc))
+        fail(_os_message(exc))
     png = out or directory / "returns.png"
     try:
         plot_returns(m.returns, png, f"{m.task} / {m.kind}: {s['episodes']} episodes", bins=max(1, bins))
@@ -113,7 +109,7 @@ def import_cmd(path: Path = typer.Argument(..., help="An input file or a folder 
                results_root: Optional[Path] = RESULTS_OPT) -> None:
     """Import V-D4RL (hdf5 84px, npz 64px) or DrQ-v2/TACO replay episodes as a dataset (resumable)."""
     if fmt not in FORMATS:
-        _fail(f"unknown format '{fmt}' (known: {', '.join(FORMATS)})")
+        fail(f"unknown format '{fmt}' (known: {', '.join(FORMATS)})")
     name = out or default_import_name(fmt)
     root = Path(".") if is_folder_value(name) else _results_root(results_root)
     try:
@@ -121,10 +117,9 @@ def import_cmd(path: Path = typer.Argument(..., help="An input file or a folder 
         existed = (target / MANIFEST).exists()
         m = import_dataset(path, fmt, task, target, resize=resize)
     except DatasetError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     except OSError as exc:  # a full disk: the partial import is kept and a re-run resumes it
-        typer.echo(f"error: {write_error_message(exc)}", err=True)
-        raise typer.Exit(1 if exc.errno in FULL else 2) from None
+        fail(write_error_message(exc), 1 if exc.errno in FULL else 2)
     if existed:
         typer.echo(f"already imported: {target} holds this import ({len(m.episodes)} episodes); nothing written")
         return
@@ -138,11 +133,11 @@ def export_cmd(directory: Path = typer.Argument(..., help="Dataset folder."),
                out: Path = typer.Option(..., "--out", "-o", help="New folder to write (must not exist).")) -> None:
     """Export a dataset as V-D4RL hdf5 (84px), V-D4RL npz (64px) or DrQ-v2 replay episodes."""
     if fmt not in FORMATS:
-        _fail(f"unknown format '{fmt}' (known: {', '.join(FORMATS)})")
+        fail(f"unknown format '{fmt}' (known: {', '.join(FORMATS)})")
     try:
         files = export_dataset(directory, fmt, out)
     except DatasetError as exc:
-        _fail(str(exc))
+        fail(str(exc))
     except OSError as exc:
-        _fail(_os_message(exc))
+        fail(_os_message(exc))
     typer.echo(f"exported {directory} as {fmt}: {len(files)} file(s) in {out}")

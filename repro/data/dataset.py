@@ -36,7 +36,6 @@ FORMAT = 1
 MANIFEST = "manifest.json"
 PENDING = ".incomplete.json"
 EPISODES = "episodes"
-KINDS = ("medium", "medium-replay", "full-replay")  # the kinds `repro dataset make` makes (docs/offline.md)
 KEYS = ("frames", "actions", "rewards", "discounts", "ep_id")
 _EP_NAME = re.compile(r"^ep_(\d{7})\.npz$")
 

@@ -17,7 +17,6 @@ import io
 import os
 import re
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -26,7 +25,7 @@ import numpy as np
 import torch
 
 from repro.data.episodes import EpisodeStore
-from repro.runs.fsutil import atomic_write
+from repro.runs.fsutil import atomic_output, atomic_write
 
 RECORD, EPISODES, SNAPSHOTS = "record", "episodes", "snapshots"
 SNAPSHOT_FORMAT = 1
@@ -119,19 +118,12 @@ class Recorder:
         if written is None or not Path(written).is_file():
             self.episodes.save(data)
             return
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-        os.close(fd)
-        try:
-            os.unlink(tmp)
+        with atomic_output(target) as tmp:
+            tmp.unlink()
             try:
                 os.link(written, tmp)
             except OSError:  # no hard links on this filesystem
                 shutil.copyfile(written, tmp)
-            os.replace(tmp, target)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
 
     def snapshot(self, agent: Any, step: int, frame: int, eval_return: float) -> None:
         """Keep the acting part of ``agent`` (``.encoder``, ``.actor``, ``.stddev(step)``) after the evaluation

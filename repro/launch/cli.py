@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import sys
 import time
 from collections.abc import Sequence
 from enum import Enum
@@ -11,13 +10,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Optional
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
 from repro.launch import spec as specs
 from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 from repro.launch.spec.sharing import SweepFrames, shared_frames
+from repro.runs.console import console, fail
 
 if TYPE_CHECKING:
     from repro.launch.local import GpuPacking, LaunchReport
@@ -38,18 +37,6 @@ class Launcher(str, Enum):
     slurm = "slurm"
 
 
-def _console(stderr: bool = False) -> Console:
-    out = sys.stderr if stderr else sys.stdout
-    if out.isatty():
-        return Console(stderr=stderr)
-    return Console(stderr=stderr, width=240, soft_wrap=True)
-
-
-def _fail(message: str, code: int = 2) -> typer.Exit:
-    _console(stderr=True).print(f"[red]error:[/] {escape(message)}", highlight=False)
-    return typer.Exit(code)
-
-
 def _shown_overrides(p: PlannedRun) -> str:
     return " ".join(o for o in p.overrides if not o.startswith(("runtime.results_root=", "runtime.sweep=")))
 
@@ -60,7 +47,7 @@ def _rel(path: Path, root: Path) -> str:
 
 def print_plan(planned: list[PlannedRun], spec: SweepSpec, root: Path, force: bool,
                excluded: Sequence[tuple[str, str, str, str]] = ()) -> None:
-    con = _console()
+    con = console()
     for agent, variant, task, reason in excluded:
         con.print(f"[dim]{'n/a':<9}[/] {escape(f'{spec.experiment}/{agent}/{variant}/{task}')}  "
                   f"not run: {escape(reason)}", highlight=False)
@@ -100,7 +87,7 @@ def register(app: typer.Typer) -> None:
 
 def sweeps_cmd() -> None:
     """List the paper's experiment sweeps with their run counts."""
-    con = _console()
+    con = console()
     table = Table(title="Sweeps (sweeps/*.yaml)")
     for col in ("name", "artifacts", "runs", "tasks", "agents", "variants", "seeds", "frames", "to train",
                 "status"):
@@ -109,7 +96,7 @@ def sweeps_cmd() -> None:
         all_specs = specs.load_all()
         shared = shared_frames(all_specs)
     except SweepError as exc:
-        raise _fail(str(exc)) from None
+        fail(str(exc))
     for s in all_specs:
         table.add_row(*_sweep_row(s, shared.get(s.name)))
     con.print(table)
@@ -184,7 +171,7 @@ def sweep_cmd(
 ) -> None:
     """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
     if warm_start and launcher == Launcher.slurm:
-        raise _fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
+        fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
     packing = _gpu_packing(gpus, runs_per_gpu, launcher, max_parallel, warm_start)
     try:
         spec = specs.load(name)
@@ -200,7 +187,7 @@ def sweep_cmd(
         _check_wandb(planned)
         report = _launch(spec, planned, root, launcher, max_parallel, force, cluster_config, warm_start, packing)
     except SweepError as exc:
-        raise _fail(str(exc)) from None
+        fail(str(exc))
     _print_report(report, launcher, spec.name)
     if report.interrupted:
         raise typer.Exit(130)
@@ -215,19 +202,19 @@ def _gpu_packing(gpus: Optional[str], runs_per_gpu: Optional[int], launcher: Lau
 
     if gpus is None:
         if runs_per_gpu is not None:
-            raise _fail("--runs-per-gpu needs --gpus (the GPUs the runs share)")
+            fail("--runs-per-gpu needs --gpus (the GPUs the runs share)")
         return None
     if launcher == Launcher.slurm:
-        raise _fail("--gpus is for the local launcher (SLURM places runs on GPUs: gpus_per_node and the gres in "
+        fail("--gpus is for the local launcher (SLURM places runs on GPUs: gpus_per_node and the gres in "
                     "the launcher config, sweeps/launchers/example.yaml)")
     if max_parallel is not None:
-        raise _fail("--gpus sets the runs at once (GPUs x --runs-per-gpu): drop --max-parallel")
+        fail("--gpus sets the runs at once (GPUs x --runs-per-gpu): drop --max-parallel")
     if warm_start:
-        raise _fail("--gpus with --warm-start: the warm server sets up one EGL display for every run; drop one")
+        fail("--gpus with --warm-start: the warm server sets up one EGL display for every run; drop one")
     try:
         return parse_gpus(gpus, 1 if runs_per_gpu is None else runs_per_gpu)
     except ValueError as exc:
-        raise _fail(str(exc)) from None
+        fail(str(exc))
 
 
 def _check_wandb(planned: list[PlannedRun]) -> None:
@@ -251,7 +238,7 @@ def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: La
     sdir = state_dir(root, spec.name)
     grid = {p.key: {"run_dir": str(p.run_dir), "overrides": list(p.overrides),
                     **({"dataset": p.need.to_json()} if p.need else {})} for p in planned}
-    say = _console().print
+    say = console().print
     if launcher == Launcher.slurm:
         from repro.launch.slurm import cluster_config_path, load_cluster_config, submit
 
@@ -281,7 +268,7 @@ def status_cmd(
     from repro.launch.state import state_dir
 
     if every <= 0:
-        raise _fail(f"--every takes a positive number of seconds (got {every:g})")
+        fail(f"--every takes a positive number of seconds (got {every:g})")
     watch = every if watch_ else None
 
     try:
@@ -291,14 +278,14 @@ def status_cmd(
         names = _launched_names(name, root)
         while names:
             if watch is not None:
-                _console().print(f"[dim]{time.strftime('%H:%M:%S')}  refreshing every {watch:g}s "
+                console().print(f"[dim]{time.strftime('%H:%M:%S')}  refreshing every {watch:g}s "
                                  "(Ctrl-C to stop)[/]", highlight=False)
             statuses = [s for n in names for s in _print_status(n, root, state_dir(root, n))]
             if watch is None or all(s.status in FINISHED for s in statuses):
                 return
             time.sleep(watch)
     except SweepError as exc:
-        raise _fail(str(exc)) from None
+        fail(str(exc))
     except KeyboardInterrupt:
         raise typer.Exit(130) from None
 
@@ -310,14 +297,14 @@ def _launched_names(name: Optional[str], root: Path) -> list[str]:
     launched = sorted(d.name for d in base.iterdir() if (d / "state.json").exists()) if base.is_dir() else []
     if name is None:
         if not launched:
-            _console().print(f"no sweep launched under {root}", highlight=False)
+            console().print(f"no sweep launched under {root}", highlight=False)
         return launched
     if name in launched:
         return [name]
     known = set(specs.sweep_names()) | set(launched)
     if name not in known:
         raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, sorted(known)))
-    _console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
+    console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
     return []
 
 
@@ -341,7 +328,7 @@ def _default_results_root() -> Path:
 
 
 def _print_report(report, launcher: Launcher, sweep: str) -> None:
-    con = _console()
+    con = console()
     parts = [f"{len(report.started)} {'submitted' if launcher == Launcher.slurm else 'started'}"]
     if launcher == Launcher.local:
         parts.append(f"{len(report.finished)} finished")
@@ -373,7 +360,7 @@ def _print_status(name: str, root: Path, sdir: Path) -> list[RunStatus]:
         table.add_row(escape(_rel(s.run_dir, root)), f"[{style}]{s.status}[/]",
                       "" if s.frame is None else f"{s.frame:,}",
                       "" if s.eval_return is None else f"{s.eval_return:.1f}", s.job_id or "", escape(s.detail))
-    con = _console()
+    con = console()
     con.print(table)
     for s in statuses:
         if s.status == "failed" and s.log:

@@ -20,6 +20,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from repro.runs.fsutil import atomic_write_text
+
 GUARD_STALE_S = 30.0  # a break guard older than this is left over from a crashed breaker
 UNREADABLE_STALE_S = 60.0  # an unparseable lock older than this is treated as stale
 
@@ -135,8 +137,7 @@ def update(path: Path, token: str, **changes: object) -> bool:
         return False
     for key, value in changes.items():
         setattr(info, key, value)
-    tmp = _write_tmp(path, info)
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(asdict(info)))
     return True
 
 

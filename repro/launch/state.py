@@ -8,7 +8,7 @@ Layout under ``{results_root}/.sweeps/{sweep}/``::
     logs/KEY.log      stdout+stderr of local runs
     slurm/            submitit folders (job scripts, pickles, %j_0_log.out/.err)
 
-Every file is written atomically (temporary file + ``os.replace``). ``state.json`` is shared by
+Every file is written atomically (repro/runs/fsutil.py). ``state.json`` is shared by
 concurrent launches, so its read-modify-write happens under a short lock.
 """
 
@@ -19,13 +19,13 @@ import os
 import socket
 import sys
 import time
-import uuid
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from repro.launch import lock
+from repro.runs.fsutil import atomic_write_text
 
 STATE_FILE = "state.json"
 
@@ -35,10 +35,8 @@ def state_dir(results_root: Path, sweep: str) -> Path:
 
 
 def atomic_write_json(path: Path, data: Any) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n")
-    os.replace(tmp, path)
+    """``data`` as indented JSON, written atomically (repro/runs/fsutil.py)."""
+    atomic_write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
 
 
 def read_json(path: Path) -> Any | None:

@@ -1,4 +1,5 @@
-"""Atomic file writes: write a temporary file in the same folder, fsync, then rename over the target.
+"""The one atomic writer (:func:`atomic_output`: a temporary file in the same folder, fsync, then rename over
+the target) and the one flock-with-holder lock (:func:`try_flock`).
 
 Files get the ordinary mode a plain ``open()`` would give them (0666 less the process umask), not
 mkstemp's private 0600, so a dataset or run made by one user can be read by another. A write that fails
@@ -9,9 +10,13 @@ was; the temporary file is removed.
 from __future__ import annotations
 
 import errno
+import fcntl
+import json
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
@@ -41,23 +46,32 @@ def named_os_error(exc: OSError, path: str | os.PathLike) -> OSError:
     return type(exc)(exc.errno, exc.strerror or str(exc), str(path))
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], object]) -> None:
-    """Call ``write(f)`` on a temporary binary file, then atomically replace ``path`` with it."""
+@contextmanager
+def atomic_output(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]:
+    """The one atomic writer: yield the path of a new temporary file beside ``path`` (``.NAME.XXXXXXXX`` +
+    ``suffix``, with :func:`file_mode`) for the block to fill (by name: an encoder, a hard link); when the
+    block ends, fsync it, atomically replace ``path`` with it and fsync the folder. When the block raises,
+    the temporary file is removed and ``path`` is left as it was; an ``OSError`` names ``path``."""
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+        try:
+            os.fchmod(fd, file_mode())
+        finally:
+            os.close(fd)
     except OSError as exc:
         raise named_os_error(exc, path) from None
     try:
-        with os.fdopen(fd, "wb") as f:
-            os.fchmod(f.fileno(), file_mode())
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
+        yield Path(tmp)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
         os.replace(tmp, path)
     except BaseException as exc:
-        if os.path.exists(tmp):
+        if os.path.lexists(tmp):
             os.unlink(tmp)
         if isinstance(exc, OSError):
             raise named_os_error(exc, path) from None
@@ -67,6 +81,13 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], object]) 
         os.fsync(dir_fd)
     finally:
         os.close(dir_fd)
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], object]) -> None:
+    """Call ``write(f)`` on a temporary binary file, then atomically replace ``path`` with it
+    (:func:`atomic_output`)."""
+    with atomic_output(path) as tmp, open(tmp, "wb") as f:
+        write(f)
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
@@ -99,3 +120,76 @@ def write_error_message(exc: OSError) -> str:
         return f"{where}{exc.strerror or exc}"
     return (f"cannot write {where}{exc.strerror or exc}; nothing written before is lost: free space (or raise "
             "the limit) and re-run the same command to resume")
+
+
+# ---------------------------------------------------------------------------------------------- flock with holder
+@dataclass
+class HolderLock:
+    """An exclusive ``flock`` on a small file that names its holder (JSON: pid, host, ...), taken by
+    :func:`try_flock`. The kernel releases it when the holder exits in any way (SIGKILL included), so a dead
+    holder never blocks the next one; the file stays and names the last holder."""
+
+    path: Path
+    fd: int
+
+    def release(self) -> None:
+        if self.fd >= 0:
+            fcntl.flock(self.fd, fcntl.LOCK_UN)
+            os.close(self.fd)
+            self.fd = -1
+
+    def __enter__(self) -> HolderLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def try_flock(file: str | os.PathLike, holder: dict[str, object]) -> HolderLock | None:
+    """Take the exclusive ``flock`` on ``file`` now (created if missing) and write ``holder`` into it as JSON;
+    None when another process holds it (never waits). A filesystem without locks raises an ``OSError`` naming
+    ``file``: an error, never a silent second holder."""
+    file = Path(file)
+    fd = os.open(file, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    except OSError as exc:
+        os.close(fd)
+        raise named_os_error(exc, file) from None
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps(holder).encode(), 0)
+    except OSError as exc:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+        raise named_os_error(exc, file) from None
+    return HolderLock(file, fd)
+
+
+def holder_words(file: str | os.PathLike) -> str:
+    """Who last held (or holds) the lock ``file``, in words: ``pid P on HOST`` (``(since T)`` when it says),
+    or ``another process`` when the file does not say."""
+    try:
+        info = json.loads(Path(file).read_text())
+        since = f" (since {info['since']})" if "since" in info else ""
+        return f"pid {info['pid']} on {info['host']}{since}"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "another process"
+
+
+def flock_holder(file: str | os.PathLike) -> str | None:
+    """Who holds the lock ``file`` now, in words (:func:`holder_words`); None when nobody does (writes nothing)."""
+    try:
+        fd = os.open(file, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return holder_words(file)
+    finally:
+        os.close(fd)  # closing drops a shared lock taken just now
+    return None

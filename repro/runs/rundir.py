@@ -3,7 +3,6 @@ resolved values, DONE marker."""
 
 from __future__ import annotations
 
-import fcntl
 import getpass
 import json
 import os
@@ -12,7 +11,6 @@ import socket
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -23,7 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 from repro.config.compose import ABSENT, compose_base, drop_non_identity, get_key, identity, run_keys, set_key, validate
 from repro.config.schema import RunConfig, budget_key, is_offline, unread_keys
 from repro.runs import migrate
-from repro.runs.fsutil import atomic_write_text, named_os_error
+from repro.runs.fsutil import HolderLock, atomic_write_text, flock_holder, holder_words, try_flock
 from repro.runs.runformat import (
     CHECKPOINT,
     CONFIG,
@@ -32,15 +30,16 @@ from repro.runs.runformat import (
     REPLAY,
     RESOLVED,
     WRITER_LOCK,
-    resolved_json,
-    read_done,
     reached_budgets,
+    read_done,
+    resolved_json,
     run_path,
     run_state,
 )
 
 __all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "REPLAY", "RESOLVED", "WRITER_LOCK", "RunDirMismatch",
-           "config_text", "read_done", "run_budget", "read_meta", "read_saved_config", "reached_budgets", "saved_config",
+           "config_text", "read_done", "run_budget", "read_meta", "read_saved_config", "reached_budgets",
+           "saved_config",
            "RunLocked", "WriterLock", "acquire_writer_lock", "config_diff", "config_matches", "lock_holder",
            "locked_message", "resolved_values", "run_dir", "run_state", "write_config", "write_done", "write_meta",
            "write_resolved", "writer_lock_holder"]
@@ -254,41 +253,15 @@ class RunLocked(RuntimeError):
     """Another process is writing this run directory (one line naming it)."""
 
 
-@dataclass
-class WriterLock:
-    """An exclusive ``flock`` on ``{run}/.writer.lock``, held while a process writes the run directory.
-
-    The kernel releases it when the holder exits in any way (SIGKILL included), so a dead holder never
-    blocks a resume; the file stays (removing it would let a third process lock a fresh file while a second
-    still waits on the old one) and names the last holder (pid, host, start time) for the refusal message.
-    On NFS (v4, or v3 with lockd) Linux maps ``flock`` to a server-side lock: a lost node's lock goes when
-    the server's lease for it expires (NFSv4: about 90 s) or its lockd is told the node rebooted (v3); a
-    SLURM requeue after a node failure may be refused for that long and then succeeds on the next try.
-    """
-
-    path: Path
-    fd: int
-
-    def release(self) -> None:
-        if self.fd >= 0:
-            fcntl.flock(self.fd, fcntl.LOCK_UN)
-            os.close(self.fd)
-            self.fd = -1
-
-    def __enter__(self) -> WriterLock:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
+WriterLock = HolderLock  # the run directory's writer lock: an flock on {run}/.writer.lock (acquire_writer_lock)
+# On NFS (v4, or v3 with lockd) Linux maps ``flock`` to a server-side lock: a lost node's lock goes when the server's
+# lease for it expires (NFSv4: about 90 s) or its lockd is told the node rebooted (v3); a SLURM requeue after a node
+# failure may be refused for that long and then succeeds on the next try.
 
 
 def lock_holder(path: str | Path) -> str:
     """Who last held (or holds) the writer lock of the run directory ``path``, in words."""
-    try:
-        info = json.loads((Path(path) / WRITER_LOCK).read_text())
-        return f"pid {info['pid']} on {info['host']} (since {info['since']})"
-    except (OSError, ValueError, KeyError, TypeError):
-        return "another process"
+    return holder_words(Path(path) / WRITER_LOCK)
 
 
 def locked_message(path: Path, holder: str) -> str:
@@ -298,41 +271,17 @@ def locked_message(path: Path, holder: str) -> str:
 
 def writer_lock_holder(path: str | Path) -> str | None:
     """Who holds the run directory's writer lock now, in words; None when nobody does (writes nothing)."""
-    file = Path(path) / WRITER_LOCK
-    try:
-        fd = os.open(file, os.O_RDONLY)
-    except OSError:
-        return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-    except OSError:
-        return lock_holder(path)
-    finally:
-        os.close(fd)  # closing drops a shared lock taken just now
-    return None
+    return flock_holder(Path(path) / WRITER_LOCK)
 
 
 def acquire_writer_lock(path: str | Path) -> WriterLock:
     """Take the run directory's writer lock now, or raise :class:`RunLocked` (never waits: a second start
-    of a running run is a mistake to report, not a queue; the sweep launcher skips runs it sees locked)."""
+    of a running run is a mistake to report, not a queue; the sweep launcher skips runs it sees locked).
+    The file stays after release (removing it would let a third process lock a fresh file while a second
+    still waits on the old one) and names the last holder for the refusal message."""
     path = Path(path)
-    file = path / WRITER_LOCK
-    fd = os.open(file, os.O_RDWR | os.O_CREAT, 0o666)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise RunLocked(locked_message(path, lock_holder(path))) from None
-    except OSError as exc:  # a filesystem without locks: an error, never a silent second writer
-        os.close(fd)
-        raise named_os_error(exc, file) from None
-    try:
-        text = json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
-                           "since": time.strftime("%Y-%m-%dT%H:%M:%S%z")}).encode()
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, text, 0)
-    except OSError as exc:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
-        raise named_os_error(exc, file) from None
-    return WriterLock(file, fd)
+    lock = try_flock(path / WRITER_LOCK, {"pid": os.getpid(), "host": socket.gethostname(),
+                                         "since": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+    if lock is None:
+        raise RunLocked(locked_message(path, lock_holder(path)))
+    return lock

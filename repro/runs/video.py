@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from repro.config.schema import VideoEvery
+from repro.runs.fsutil import atomic_output
 from repro.runs.runformat import VIDEOS as VIDEO_DIR
 
 __all__ = ["VIDEO_DIR", "VIDEO_EVERY", "EvalVideos", "count_frames", "video_name", "write_mp4"]
@@ -60,25 +61,17 @@ def write_mp4(path: str | os.PathLike, frames: np.ndarray | list[np.ndarray], fp
     if frames.shape[1] % 2 or frames.shape[2] % 2:
         raise ValueError(f"H.264 (yuv420p) needs an even height and width, got {frames.shape[1:3]}")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
     height, width = frames.shape[1:3]
-    writer = imageio_ffmpeg.write_frames(str(tmp), (width, height), fps=fps, codec="libx264",
-                                         pix_fmt_out="yuv420p", macro_block_size=1,
-                                         output_params=["-loglevel", "error"])
-    try:
+    with atomic_output(path, suffix=f".tmp{path.suffix}") as tmp:  # the encoder reads the container from the suffix
+        writer = imageio_ffmpeg.write_frames(str(tmp), (width, height), fps=fps, codec="libx264",
+                                             pix_fmt_out="yuv420p", macro_block_size=1,
+                                             output_params=["-loglevel", "error"])
         writer.send(None)  # start the encoder
         try:
             for frame in frames:
                 writer.send(np.ascontiguousarray(frame))
         finally:
             writer.close()
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return path
 
 

@@ -19,7 +19,6 @@ One ``make`` writes a destination at a time (an flock beside it).
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import json
 import os
@@ -37,11 +36,12 @@ import yaml
 
 from repro.agent.networks import Actor, Encoder
 from repro.config.compose import CONF_DIR, ConfigError, typed
-from repro.config.schema import RunConfig
-from repro.data.dataset import KINDS, MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
+from repro.config.schema import DatasetKind, RunConfig
+from repro.data.dataset import MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
 from repro.data.record import EPISODES, SNAPSHOTS, load_snapshot, record_dir, snapshot_path, snapshot_steps
 from repro.envs import TASKS
 from repro.runs import rundir
+from repro.runs.fsutil import holder_words, try_flock
 from repro.train.api import DeviceError, build_env, resolve_device, run_action_dim
 from repro.train.online import episode_seed
 
@@ -281,8 +281,8 @@ def plan(source: Source, kind: str, transitions: int | None = None, medium_fract
          seed: int = 0, out: str | Path | None = None, results_root: str | Path | None = None,
          device: str = "auto") -> Plan:
     """Check the request and decide what to write (no file is written)."""
-    if kind not in KINDS:
-        raise MakeError(f"unknown kind {kind!r}; one of {', '.join(KINDS)}")
+    if kind not in DatasetKind.values():
+        raise MakeError(f"unknown kind {kind!r}; one of {', '.join(DatasetKind.values())}")
     dev = _check_seed_and_device(seed, device)
     n = default_transitions(source.task) if transitions is None else int(transitions)
     if n < 1:
@@ -362,24 +362,13 @@ def _make_lock(out: Path) -> Iterator[None]:
     refuses in one line naming the first); the kernel releases it when its holder dies; removed on success."""
     out.parent.mkdir(parents=True, exist_ok=True)
     file = out.parent / f".{out.name}.make.lock"
-    fd = os.open(file, os.O_RDWR | os.O_CREAT, 0o666)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            try:
-                holder = json.loads(file.read_text())
-                who = f"pid {holder['pid']} on {holder['host']}"
-            except (OSError, ValueError, KeyError, TypeError):
-                who = "another process"
-            raise MakeError(f"{out} is being made by {who}; wait for it to finish (re-running then finds it "
-                            "made)") from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname()}).encode(), 0)
+    lock = try_flock(file, {"pid": os.getpid(), "host": socket.gethostname()})
+    if lock is None:
+        raise MakeError(f"{out} is being made by {holder_words(file)}; wait for it to finish (re-running then finds "
+                        "it made)")
+    with lock:
         yield
         file.unlink(missing_ok=True)  # still held: a process that opened it before now sees out made
-    finally:
-        os.close(fd)
 
 
 def make(source_dir: str | Path, kind: str, transitions: int | None = None, medium_fraction: float | None = None,

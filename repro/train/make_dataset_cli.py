@@ -8,7 +8,9 @@ from typing import Optional
 
 import typer
 
-from repro.data.dataset import KINDS, DatasetError
+from repro.config.schema import DatasetKind
+from repro.data.dataset import DatasetError
+from repro.runs.console import fail
 from repro.runs.fsutil import write_error_message
 
 
@@ -17,7 +19,7 @@ def register(dataset_app: typer.Typer) -> None:
     def make_cmd(
         source: Path = typer.Option(
             ..., "--source", help="Run directory of an online run trained with runtime.record=true."),
-        kind: str = typer.Option(..., "--kind", help=f"Dataset kind: {' | '.join(KINDS)}."),
+        kind: str = typer.Option(..., "--kind", help=f"Dataset kind: {' | '.join(DatasetKind.values())}."),
         transitions: Optional[int] = typer.Option(
             None, "--transitions", help="Transitions, whole episodes (default: 100000, quadruped_run 500000)."),
         medium_fraction: Optional[float] = typer.Option(
@@ -36,8 +38,6 @@ def register(dataset_app: typer.Typer) -> None:
         try:
             make(source, kind, transitions, medium_fraction, seed, out, results, task, device, echo=typer.echo)
         except DatasetError as exc:  # MakeError included
-            typer.echo(f"error: {exc}", err=True)
-            raise typer.Exit(2) from None
+            fail(str(exc))
         except OSError as exc:  # a full disk: the staging folder is kept and a re-run resumes from it
-            typer.echo(f"error: {write_error_message(exc)}", err=True)
-            raise typer.Exit(1) from None
+            fail(write_error_message(exc), 1)

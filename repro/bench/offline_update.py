@@ -11,7 +11,6 @@ updates (median reported). Only ratios to the DrQ-v2 update measured in this run
 from __future__ import annotations
 
 import statistics
-import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -19,6 +18,7 @@ import numpy as np
 import torch
 
 from repro.bench import OFFLINE_AGENTS
+from repro.bench.clock import timed
 from repro.config.compose import ConfigError, compose, config_groups, typed
 from repro.config.schema import AgentConfig
 from repro.data.replay import ReplayBuffer
@@ -73,11 +73,6 @@ def available(agent: str) -> str | None:
     return None
 
 
-def _sync(device: str) -> None:
-    if device.startswith("cuda"):
-        torch.cuda.synchronize()
-
-
 def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapping[str, np.ndarray]],
                  repeats: int, warmup: int, device: str, own_batch: int | None = None) -> dict[str, Any]:
     """Median seconds of one update of ``agent`` (built from its agent file through the registry) at
@@ -105,13 +100,7 @@ def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapp
     learner.train(True)
     for _ in range(warmup):
         learner.update(batch, STEP)
-    times = []
-    for _ in range(repeats):
-        _sync(device)
-        t0 = time.perf_counter()
-        learner.update(batch, STEP)
-        _sync(device)
-        times.append(time.perf_counter() - t0)
+    times = [timed(lambda: learner.update(batch, STEP), device)[1] for _ in range(repeats)]
     return {"agent": agent, "learner": rc.agent.learner, "batch_size": size, "own_batch": own is not None,
             "update_seconds": statistics.median(times), "repeats": repeats, "warmup": warmup}
 
