@@ -86,7 +86,7 @@ class OfflineTrainer:
         self.budget_ends = frozenset(budget_ends)
         self.has_success = eval_env.spec.has_success
         self.dataset_best_return = dataset_best_return  # a ReturnConditioned learner's second target
-        self.batch_size = int(getattr(learner, "batch_size", learner.cfg.batch_size))  # DT: agent.dt.batch_size
+        self.batch_size = learner.batch_size  # DT: agent.dt.batch_size
         self.update = 0
         self.clock = WallClock()
         self.last_eval: float | None = None
