@@ -1,8 +1,8 @@
 """CQL (Kumar et al. 2020) as V-D4RL's pixel CQL (``drqbc/cql.py``) on the DrQ-v2 backbone: learner ``cql``
 (agent files ``cql`` and ``cql_taco``).
 
-Networks: the backbone's (``repro/agent/backbone.py``: encoder, actor, twin critic, target critic; with TACO the action encoder and the
-auxiliary heads); nothing of its own.
+Networks: the backbone's (``repro/agent/backbone.py``: encoder, actor, twin critic, target critic; with TACO the
+action encoder and the auxiliary heads); nothing of its own.
 
 Update, in V-D4RL's order:
 1. critic with the encoder: DrQ-v2's critic loss plus, for each head, CQL's regulariser alpha x (logsumexp

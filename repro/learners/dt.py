@@ -18,9 +18,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from repro.config.schema import AgentConfig
 from repro.agent.losses import Metrics
 from repro.agent.modules import LearnerBase
+from repro.config.schema import AgentConfig
 from repro.learners.base import count_parameters
 from repro.learners.dt_model import DecisionTransformer, EvalContext, SequenceSampler, batch_to_tensors, make_optimizer
 from repro.learners.losses.dt import action_loss

@@ -1,8 +1,8 @@
 """IQL (Kostrikov et al. 2022) on the DrQ-v2 pixel backbone: learner ``iql`` (agent file ``iql``).
 
-Networks: the backbone's (``repro/agent/backbone.py``: encoder, actor, twin critic, target critic), plus a state value V(h) (``ValueNet``,
-its own optimizer) and, with ``iql.learned_log_std``, the JAX actor's learned log-std (``LogStd``, trained by
-the actor's optimizer).
+Networks: the backbone's (``repro/agent/backbone.py``: encoder, actor, twin critic, target critic), plus a state
+value V(h) (``ValueNet``, its own optimizer) and, with ``iql.learned_log_std``, the JAX actor's learned log-std
+(``LogStd``, trained by the actor's optimizer).
 
 Update, in the JAX reference code's order (ikostrikov/implicit_q_learning ``learner.py``):
 1. value: expectile regression of V(sg(h)) onto min_i Qtarget_i(h, u(a)) (``losses/iql.py``);

@@ -42,7 +42,8 @@ def critic_target(reward: torch.Tensor, discount: torch.Tensor, next_v: torch.Te
     return (reward + discount * next_v).detach()
 
 
-def critic_loss(q1: torch.Tensor, q2: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+def critic_loss(q1: torch.Tensor, q2: torch.Tensor, target: torch.Tensor
+                ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Sum over the twin heads of the mean squared error to the (detached) target."""
     same_shape(q1=q1, q2=q2, target=target)
     target = target.detach()
