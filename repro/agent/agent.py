@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import torch
 
-from repro.agent.backbone import BackboneLearner, DrQV2Backbone
+from repro.agent.backbone import BackboneLearner
 from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics
-from repro.config.schema import AgentConfig
 
 __all__ = ["ACTOR_METRICS", "CRITIC_METRICS", "Agent"]
 
@@ -21,13 +20,7 @@ class Agent(BackboneLearner):
     ``actor_critic``)."""
 
     update_metrics = CRITIC_METRICS + ACTOR_METRICS
-
-    def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
-                 device: torch.device | str = "cpu", explore_steps: int = 0):
-        self.cfg = cfg
-        self.explore_steps = explore_steps
-        self._own(DrQV2Backbone(cfg, obs_shape, action_dim, device))
-        self.train(True)
+    explores = True  # uniform actions for the first explore_steps, then noisy policy samples
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         """One DrQ-v2 update, as upstream DrQ-v2 (``drqv2.py``): critic with the encoder, actor on sg(h), target

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from collections.abc import Callable, Mapping
-from typing import cast
+from typing import ClassVar, cast
 
 import numpy as np
 import torch
@@ -253,17 +253,20 @@ class DrQV2Backbone:
 class BackboneLearner(LearnerBase, ModuleSet):
     """What a learner that owns a ``DrQV2Backbone`` (as ``backbone``) forwards to it: its modules and optimizers
     (a learner with networks of its own extends them), acting, the noise schedule, the objectives' weights, the
-    action encoder and the auxiliary step's metric names after the learner's own ``update_metrics``."""
+    action encoder and the auxiliary step's metric names after the learner's own ``update_metrics``. Its
+    constructor builds the backbone (the learner registry's signature); a learner with networks of its own builds
+    them after it. Not a learner itself: a learner adds ``update()``."""
 
     untrained = ("critic_target",)  # the target critic follows by soft updates: not counted
-    backbone: DrQV2Backbone
-    update_metrics: tuple[str, ...]  # the train.csv columns of update(), before the auxiliary step's
-    explore_steps: int = 0  # agent steps of uniform random actions (online)
+    update_metrics: ClassVar[tuple[str, ...]]  # the train.csv columns of update(), before the auxiliary step's
+    explores: ClassVar[bool] = False  # whether acting explores (online): offline learners ignore explore_steps
 
-    def _own(self, backbone: DrQV2Backbone) -> None:
-        """Take ``backbone`` as this learner's: its replay options become the learner's."""
-        self.backbone = backbone
-        self.sample_options = backbone.sample_options
+    def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
+                 device: torch.device | str = "cpu", explore_steps: int = 0):
+        self.cfg = cfg
+        self.explore_steps = explore_steps if self.explores else 0  # agent steps of uniform random actions
+        self.backbone = DrQV2Backbone(cfg, obs_shape, action_dim, device)
+        self.sample_options = self.backbone.sample_options  # what the replay returns for the objectives
 
     def modules(self) -> dict[str, nn.Module]:
         return self.backbone.modules()
@@ -273,6 +276,14 @@ class BackboneLearner(LearnerBase, ModuleSet):
 
     def metric_names(self) -> list[str]:
         return list(self.update_metrics) + self.backbone.aux_metric_names()
+
+    @property
+    def action_dim(self) -> int:
+        return self.backbone.action_dim
+
+    @property
+    def device(self) -> torch.device:
+        return self.backbone.device
 
     @property
     def weights(self) -> Mapping[str, float]:

@@ -18,10 +18,9 @@ from __future__ import annotations
 
 import torch
 
-from repro.agent.backbone import BackboneLearner, DrQV2Backbone, optimize
+from repro.agent.backbone import BackboneLearner, optimize
 from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics
 from repro.agent.networks import TruncatedNormal
-from repro.config.schema import AgentConfig
 from repro.learners.losses import cql as cql_loss
 
 REGULARISER_METRICS = tuple(f"cql_{part}_q{i}" for i in (1, 2)
@@ -32,12 +31,6 @@ class CQL(BackboneLearner):
     """Offline learner ``cql``."""
 
     update_metrics = CRITIC_METRICS + REGULARISER_METRICS + ACTOR_METRICS
-
-    def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
-                 device: torch.device | str = "cpu", explore_steps: int = 0):
-        self.cfg = cfg
-        self._own(DrQV2Backbone(cfg, obs_shape, action_dim, device))  # offline: no exploration
-        self.train(True)
 
     @property
     def resolved(self) -> dict[str, object]:

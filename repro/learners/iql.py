@@ -22,7 +22,7 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from repro.agent.backbone import BackboneLearner, DrQV2Backbone, optimize
+from repro.agent.backbone import BackboneLearner, optimize
 from repro.agent.losses import CRITIC_METRICS, Metrics
 from repro.agent.networks import mlp, orthogonal_init, trunk
 from repro.config.schema import AgentConfig, RewardScaling, ValueForTargets
@@ -66,12 +66,11 @@ class IQL(BackboneLearner):
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
-        self.cfg = cfg
         # the Enums raise ValueError for a value outside them (compose refuses one first, in one line)
         self.targets_from_v_before = ValueForTargets(cfg.iql.value_for_targets) == ValueForTargets.before  # CORL's
         self.scales_rewards = RewardScaling(cfg.iql.reward_scaling) == RewardScaling.return_range
         self.reward_scale = 1.0  # set by set_dataset_returns when scales_rewards
-        self._own(DrQV2Backbone(cfg, obs_shape, action_dim, device))  # offline: no exploration
+        super().__init__(cfg, obs_shape, action_dim, device)  # the backbone
         bb = self.backbone
         self.value = ValueNet(bb.repr_dim, cfg.feature_dim, cfg.hidden_dim).to(bb.device)
         self.value_opt = torch.optim.Adam(self.value.parameters(), lr=cfg.lr)
@@ -79,7 +78,6 @@ class IQL(BackboneLearner):
         if cfg.iql.learned_log_std:  # trained by the actor's optimizer, as the JAX actor's log_stds
             self.log_std = LogStd(action_dim).to(bb.device)
             bb.actor_opt.add_param_group({"params": list(self.log_std.parameters())})
-        self.train(True)
 
     def set_dataset_returns(self, returns: Sequence[float]) -> None:
         """The dataset's episode returns, for ``iql.reward_scaling: return_range`` (the JAX code's normalize():

@@ -17,9 +17,8 @@ from __future__ import annotations
 
 import torch
 
-from repro.agent.backbone import BackboneLearner, DrQV2Backbone, optimize
+from repro.agent.backbone import BackboneLearner, optimize
 from repro.agent.losses import CRITIC_METRICS, Metrics
-from repro.config.schema import AgentConfig
 from repro.learners.losses import td3bc as td3bc_loss
 
 ACTOR_METRICS = ("actor_loss", "actor_lambda", "actor_bc", "actor_q")
@@ -29,12 +28,6 @@ class TD3BC(BackboneLearner):
     """Offline learner ``td3bc``."""
 
     update_metrics = CRITIC_METRICS + ACTOR_METRICS
-
-    def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
-                 device: torch.device | str = "cpu", explore_steps: int = 0):
-        self.cfg = cfg
-        self._own(DrQV2Backbone(cfg, obs_shape, action_dim, device))  # offline: no exploration
-        self.train(True)
 
     @property
     def resolved(self) -> dict[str, object]:
