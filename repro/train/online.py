@@ -56,7 +56,7 @@ class Trainer:
         # stopped there (an evaluation draws no training random number, so the trajectory is unchanged).
         self.budget_end_steps = frozenset(self._steps(f) for f in budget_ends)
         self.counters = Counters()
-        self.batch_size = agent.cfg.batch_size
+        self.batch_size = agent.batch_size
         self.has_success = env.spec.has_success
         self.clock = WallClock()
         self.last_eval: float | None = None
