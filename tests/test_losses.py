@@ -136,70 +136,70 @@ def test_latent_action_dim_rounding():
 def test_critic_sees_latent_actions_and_action_encoder_gets_critic_gradient():
     agent = agent_for(["agent=taco"])
     latent = agent.action_encoder.latent_dim
-    assert agent.critic.q1[0].in_features == agent.cfg.feature_dim + latent
+    assert agent.backbone.critic.q1[0].in_features == agent.cfg.feature_dim + latent
     batch = make_batch()
-    h = agent.encoder(agent.aug(batch["obs"].float()))
+    h = agent.backbone.encoder(agent.backbone.aug(batch["obs"].float()))
     with torch.no_grad():
-        nh = agent.encoder(agent.aug(batch["next_obs"].float()))
-    agent._update_critic(h, batch["action"], batch["reward"], batch["discount"], nh, 0)
+        nh = agent.backbone.encoder(agent.backbone.aug(batch["next_obs"].float()))
+    agent.backbone.critic_step(h, batch["action"], batch["reward"], batch["discount"], nh, 0)
     assert agent.action_encoder.step[0].weight.grad is not None
     assert agent.action_encoder.step[0].weight.grad.abs().sum() > 0
-    assert agent.encoder.convnet[0].weight.grad.abs().sum() > 0
+    assert agent.backbone.encoder.convnet[0].weight.grad.abs().sum() > 0
 
 
 def test_no_gradient_into_targets_and_actor_update_leaves_encoder():
     agent = agent_for(["agent=taco"])
-    assert all(not p.requires_grad for p in agent.critic_target.parameters())
-    target_before = [p.clone() for p in agent.critic_target.parameters()]
-    critic_before = [p.clone() for p in agent.critic.parameters()]
-    actor_before = [p.clone() for p in agent.actor.parameters()]
-    h = agent.encoder(agent.aug(make_batch()["obs"].float()))
-    agent._update_actor(h.detach(), 0)
-    assert all(torch.equal(a, b) for a, b in zip(target_before, agent.critic_target.parameters()))
-    assert all(torch.equal(a, b) for a, b in zip(critic_before, agent.critic.parameters()))  # Q is only read
-    assert any(not torch.equal(a, b) for a, b in zip(actor_before, agent.actor.parameters()))
+    assert all(not p.requires_grad for p in agent.backbone.critic_target.parameters())
+    target_before = [p.clone() for p in agent.backbone.critic_target.parameters()]
+    critic_before = [p.clone() for p in agent.backbone.critic.parameters()]
+    actor_before = [p.clone() for p in agent.backbone.actor.parameters()]
+    h = agent.backbone.encoder(agent.backbone.aug(make_batch()["obs"].float()))
+    agent.backbone.actor_step(h.detach(), 0)
+    assert all(torch.equal(a, b) for a, b in zip(target_before, agent.backbone.critic_target.parameters()))
+    assert all(torch.equal(a, b) for a, b in zip(critic_before, agent.backbone.critic.parameters()))  # Q is only read
+    assert any(not torch.equal(a, b) for a, b in zip(actor_before, agent.backbone.actor.parameters()))
     # inside a full update the actor gets the encoder's output with the gradient stopped
-    seen, actor_update = [], agent._update_actor
-    agent._update_actor = lambda h, step: seen.append(h.requires_grad) or actor_update(h, step)
+    seen, actor_step = [], agent.backbone.actor_step
+    agent.backbone.actor_step = lambda h, step: seen.append(h.requires_grad) or actor_step(h, step)
     agent.update(make_batch(), step=10)
     assert seen == [False]
 
 
 def test_aux_step_reaches_encoder_action_encoder_and_W():
     agent = agent_for(["agent=taco"])
-    agent._update_aux(make_batch())
-    assert agent.encoder.convnet[0].weight.grad.abs().sum() > 0
+    agent.backbone.aux_step(make_batch())
+    assert agent.backbone.encoder.convnet[0].weight.grad.abs().sum() > 0
     assert agent.action_encoder.seq[0].weight.grad.abs().sum() > 0
-    assert agent.shared.W.grad.abs().sum() > 0
+    assert agent.backbone.shared.W.grad.abs().sum() > 0
     for name in ("taco", "curl", "reward"):
-        assert name in agent.objectives
+        assert name in agent.backbone.objectives
 
 
 def test_full_update_returns_metrics_and_changes_parameters():
     agent = agent_for(["agent=taco"])
-    w0 = agent.encoder.convnet[0].weight.clone()
+    w0 = agent.backbone.encoder.convnet[0].weight.clone()
     metrics = agent.update(make_batch(), step=10)
     assert set(agent.metric_names()) <= set(metrics)
-    assert all(np.isfinite(v) for v in metrics.values())
-    assert not torch.equal(w0, agent.encoder.convnet[0].weight)
+    assert all(v.dim() == 0 and not v.requires_grad and torch.isfinite(v) for v in metrics.values())
+    assert not torch.equal(w0, agent.backbone.encoder.convnet[0].weight)
 
 
 def test_drqv2_has_no_auxiliary_parameters():
     agent = agent_for(["agent=drqv2"])
     assert set(agent.modules()) == {"encoder", "actor", "critic", "critic_target"}
-    assert agent.aux_opt is None and agent.action_encoder is None and agent.shared is None
-    assert agent.critic.q1[0].in_features == agent.cfg.feature_dim + 4  # raw actions
+    assert agent.backbone.aux_opt is None and agent.action_encoder is None and agent.backbone.shared is None
+    assert agent.backbone.critic.q1[0].in_features == agent.cfg.feature_dim + 4  # raw actions
     metrics = agent.update(make_batch(K=1), step=10)
     assert not any(k.startswith(("taco", "curl", "reward")) for k in metrics)
 
 
 def test_switches_remove_objectives_and_action_encoder():
     agent = agent_for(["agent.objectives.curl=0", "agent.objectives.reward=0"])
-    assert list(agent.objectives) == ["taco"]
+    assert list(agent.backbone.objectives) == ["taco"]
     agent = agent_for(["agent.action_encoder=false"])
     assert agent.action_encoder is None
-    assert agent.critic.q1[0].in_features == agent.cfg.feature_dim + 4
-    assert agent.objectives["taco"].proj_sa[0].in_features == agent.cfg.feature_dim + 3 * 4
+    assert agent.backbone.critic.q1[0].in_features == agent.cfg.feature_dim + 4
+    assert agent.backbone.objectives["taco"].proj_sa[0].in_features == agent.cfg.feature_dim + 3 * 4
     agent.update(make_batch(), step=10)
 
 

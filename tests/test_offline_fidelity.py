@@ -40,7 +40,7 @@ def test_cql_policy_samples_lie_within_stddev_clip_of_the_mean(agent: str, monke
     """With the policy mean forced to 0 and sigma 1 (update 0), every one of the 2 x B x N x A policy samples
     must lie in [-0.3, 0.3] (V-D4RL: sample(clip=stddev_clip)); unclipped, most would not."""
     lrn = learner(agent)
-    last = lrn.actor.policy[-1]
+    last = lrn.backbone.actor.policy[-1]
     with torch.no_grad():
         last.weight.zero_()
         last.bias.zero_()
@@ -106,8 +106,8 @@ def test_the_update_acts_with_the_vd4rl_sigma(agent: str, monkeypatch):
     """The std the actor is called with inside update(batch, 100000) is V-D4RL's 0.28, not 0.64."""
     lrn = learner(agent)
     stds: list[float] = []
-    real = lrn.actor.forward
-    monkeypatch.setattr(lrn.actor, "forward", lambda h, std: (stds.append(float(std)), real(h, std))[1])
+    real = lrn.backbone.actor.forward
+    monkeypatch.setattr(lrn.backbone.actor, "forward", lambda h, std: (stds.append(float(std)), real(h, std))[1])
     lrn.update(batch(), 100_000)
     assert stds and all(s == pytest.approx(0.28, rel=1e-12) for s in stds)
 
@@ -193,11 +193,11 @@ def test_iql_actor_cosine_lr_switch_is_optax_cosine_decay():
     hand = [1.0, (1 + math.sqrt(0.5)) / 2, 0.5, (1 - math.sqrt(0.5)) / 2, 0.0, 0.0]
     for u, factor in enumerate(hand):
         lrn.update(batch(), u)
-        assert lrn.actor_opt.param_groups[0]["lr"] == pytest.approx(base * factor, rel=1e-12, abs=1e-15)
-    assert lrn.critic_opt.param_groups[0]["lr"] == base and lrn.value_opt.param_groups[0]["lr"] == base
+        assert lrn.backbone.actor_opt.param_groups[0]["lr"] == pytest.approx(base * factor, rel=1e-12, abs=1e-15)
+    assert lrn.backbone.critic_opt.param_groups[0]["lr"] == base and lrn.value_opt.param_groups[0]["lr"] == base
     default = learner("iql")
     default.update(batch(), 3)
-    assert default.actor_opt.param_groups[0]["lr"] == base  # DrQ-v2's constant rate by default
+    assert default.backbone.actor_opt.param_groups[0]["lr"] == base  # DrQ-v2's constant rate by default
 
 
 def test_iql_learned_log_std_switch_is_the_jax_actor(monkeypatch):
@@ -205,7 +205,7 @@ def test_iql_learned_log_std_switch_is_the_jax_actor(monkeypatch):
     log_std zeros at start, trained by the actor's optimizer; checked in float64 at the first update."""
     lrn = learner("iql", **{"agent.iql.learned_log_std": True})
     assert dict(lrn.parameter_counts())["log_std"] == A and "log_std" in lrn.state_dict()["modules"]
-    actor_before = copy.deepcopy(lrn.actor)
+    actor_before = copy.deepcopy(lrn.backbone.actor)
     seen: dict = {}
     real_actor = iql_loss.actor_loss
 

@@ -39,12 +39,14 @@ def test_update_returns_exactly_the_metric_columns_and_trains_encoder_actor_crit
     lrn = learner(agent)
     b = batch(lrn)
     b["action"].requires_grad_(True)  # a dataset action must never receive a gradient
-    enc, act, cri, tgt = params(lrn.encoder), params(lrn.actor), params(lrn.critic), params(lrn.critic_target)
+    bb = lrn.backbone
+    enc, act, cri, tgt = params(bb.encoder), params(bb.actor), params(bb.critic), params(bb.critic_target)
     metrics = lrn.update(b, 0)
     assert sorted(metrics) == sorted(lrn.metric_names())
-    assert all(isinstance(v, float) for v in metrics.values())
-    assert changed(enc, lrn.encoder) and changed(act, lrn.actor) and changed(cri, lrn.critic)
-    assert changed(tgt, lrn.critic_target)  # the soft target update ran
+    # detached 0-d tensors: the loops average them on the device (no host sync in update)
+    assert all(isinstance(v, torch.Tensor) and v.dim() == 0 and not v.requires_grad for v in metrics.values())
+    assert changed(enc, bb.encoder) and changed(act, bb.actor) and changed(cri, bb.critic)
+    assert changed(tgt, bb.critic_target)  # the soft target update ran
     assert b["action"].grad is None
     assert ("aux_loss" in metrics) == agent.endswith("_taco")
 
@@ -53,7 +55,7 @@ def test_update_returns_exactly_the_metric_columns_and_trains_encoder_actor_crit
                                                       ("cql_taco", None)])
 def test_critic_sees_latent_actions_only_with_taco(agent: str, critic_action_dim: int | None):
     lrn = learner(agent)
-    first = lrn.critic.q1[0]
+    first = lrn.backbone.critic.q1[0]
     latent = lrn.action_encoder.latent_dim if lrn.action_encoder is not None else None
     assert first.in_features == lrn.cfg.feature_dim + (critic_action_dim or latent)
     assert (lrn.action_encoder is not None) == agent.endswith("_taco")
@@ -116,20 +118,20 @@ def test_cql_uniform_actions_raw_policy_samples_detached_and_encoded_for_the_cri
 def test_cql_policy_samples_do_not_train_the_actor(monkeypatch):
     """With the actor loss switched off, a CQL update leaves the actor exactly as it was."""
     lrn = learner("cql")
-    before = params(lrn.actor)
-    monkeypatch.setattr(lrn, "_update_actor", lambda h, step: {"actor_loss": 0.0, "actor_logprob": 0.0,
-                                                                "actor_ent": 0.0})
+    before = params(lrn.backbone.actor)
+    monkeypatch.setattr(lrn.backbone, "actor_step", lambda h, step: {"actor_loss": 0.0, "actor_logprob": 0.0,
+                                                                      "actor_ent": 0.0})
     lrn.update(batch(lrn), 0)
-    assert not changed(before, lrn.actor)
+    assert not changed(before, lrn.backbone.actor)
     # no optimizer steps the actor here, so the check that counts is that no gradient reached it: the policy
     # samples of the regulariser are drawn without gradient (a sample with one would leave a .grad here)
-    assert all(p.grad is None for p in lrn.actor.parameters())
+    assert all(p.grad is None for p in lrn.backbone.actor.parameters())
 
 
 def test_iql_order_value_then_actor_then_critic_and_target_from_v(monkeypatch):
     lrn = learner("iql")
     order: list[str] = []
-    for name in ("_update_value", "_update_actor_awr"):
+    for name in ("_value_step", "_actor_step"):
         real = getattr(lrn, name)
         monkeypatch.setattr(lrn, name, lambda *a, _r=real, _n=name, **k: (order.append(_n), _r(*a, **k))[1])
     real_critic = iql_loss.critic_loss
@@ -137,7 +139,7 @@ def test_iql_order_value_then_actor_then_critic_and_target_from_v(monkeypatch):
                         lambda *a, **k: (order.append("critic"), real_critic(*a, **k))[1])
     v_before = params(lrn.value)
     lrn.update(batch(lrn), 0)
-    assert order == ["_update_value", "_update_actor_awr", "critic"]
+    assert order == ["_value_step", "_actor_step", "critic"]
     assert changed(v_before, lrn.value)
     assert "value" in dict(lrn.parameter_counts()) and "value" in lrn.state_dict()["optimizers"]
 
@@ -146,10 +148,10 @@ def test_iql_critic_target_is_r_plus_discount_v_next(monkeypatch):
     """The target is r + discount * V(h'), h' the encoded next frames (before the critic step moves the encoder)
     and V after the value step (the JAX order), without gradient."""
     lrn = learner("iql")
-    monkeypatch.setattr(lrn, "aug", lambda x: x)  # no random shift, so h' can be recomputed here
+    monkeypatch.setattr(lrn.backbone, "aug", lambda x: x)  # no random shift, so h' can be recomputed here
     b = batch(lrn)
     with torch.no_grad():
-        next_h = lrn.encoder(b["next_obs"].float())
+        next_h = lrn.backbone.encoder(b["next_obs"].float())
     seen = {}
     real = iql_loss.critic_target
 

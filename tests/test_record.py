@@ -51,6 +51,9 @@ class _Policy:
         self.actor = Actor(self.encoder.repr_dim, 6, rc.agent.feature_dim, rc.agent.hidden_dim)
         self.stddev = rc.agent.stddev_schedule
 
+    def modules(self) -> dict[str, torch.nn.Module]:
+        return {"encoder": self.encoder, "actor": self.actor}
+
 
 def _synthetic_run(root: Path, lengths=(5, 7, 5, 6), returns=(0.0, 10.0, 4.0, 8.0), steps=(0, 10, 20, 23)) -> Path:
     """A run directory with a real config, recorded episodes of random frames and policy snapshots."""

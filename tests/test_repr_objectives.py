@@ -38,8 +38,9 @@ def agent_for(overrides: list[str], seed: int = 0) -> Agent:
 
 
 def aux_for(agent: Agent, batch: dict[str, torch.Tensor]) -> AuxBatch:
-    return AuxBatch(batch, agent.encoder, agent.aug, agent.encode_action_sequence, agent.cfg.reward_target,
-                    agent.encode_action_steps)
+    bb = agent.backbone
+    return AuxBatch(batch, bb.encoder, bb.aug, bb.encode_action_sequence, agent.cfg.reward_target,
+                    bb.encode_action_steps)
 
 
 def grad_norm(module: nn.Module) -> float:
@@ -56,8 +57,9 @@ def snapshot(module: nn.Module) -> list[torch.Tensor]:
 
 def plain_aux(agent: Agent, batch: dict[str, torch.Tensor]) -> AuxBatch:
     """Like aux_for but without augmentation, so every view can be recomputed outside the objective."""
-    return AuxBatch(batch, agent.encoder, lambda x: x, agent.encode_action_sequence, agent.cfg.reward_target,
-                    agent.encode_action_steps)
+    bb = agent.backbone
+    return AuxBatch(batch, bb.encoder, lambda x: x, bb.encode_action_sequence, agent.cfg.reward_target,
+                    bb.encode_action_steps)
 
 
 def f64(t: torch.Tensor) -> np.ndarray:
@@ -104,7 +106,7 @@ def test_momentum_target_ema_arithmetic():
 
 def test_atc_logits_known_answer():
     agent = agent_for(["agent=atc", "agent.feature_dim=2", "agent.objective_params.atc.predictor_hidden=4"])
-    atc = agent.objectives["atc"]
+    atc = agent.backbone.objectives["atc"]
     assert isinstance(atc, ATCObjective)
     with torch.no_grad():
         atc.predictor[-1].weight.zero_()  # residual predictor -> identity
@@ -133,7 +135,7 @@ def test_first_action_only_masks_later_steps():
 
 def test_driml_loss_equals_taco_at_k1_on_same_weights_and_batch():
     agent = agent_for(["agent=taco", "agent.K=1", "+agent.objectives.driml=1.0"])
-    taco, driml = agent.objectives["taco"], agent.objectives["driml"]
+    taco, driml = agent.backbone.objectives["taco"], agent.backbone.objectives["driml"]
     assert isinstance(driml, DRIMLObjective)
     driml.proj_sa.load_state_dict(taco.proj_sa.state_dict())
     aux = aux_for(agent, make_batch(K=1))
@@ -142,9 +144,9 @@ def test_driml_loss_equals_taco_at_k1_on_same_weights_and_batch():
     assert torch.equal(loss_t, loss_d)
     assert m_t["taco_acc"] == m_d["driml_acc"]
     agent = agent_for(["agent=taco", "agent.K=3", "+agent.objectives.driml=1.0"])  # with K=3 they differ
-    agent.objectives["driml"].proj_sa.load_state_dict(agent.objectives["taco"].proj_sa.state_dict())
+    agent.backbone.objectives["driml"].proj_sa.load_state_dict(agent.backbone.objectives["taco"].proj_sa.state_dict())
     aux = aux_for(agent, make_batch(K=3))
-    assert agent.objectives["taco"](aux)[0].item() != agent.objectives["driml"](aux)[0].item()
+    assert agent.backbone.objectives["taco"](aux)[0].item() != agent.backbone.objectives["driml"](aux)[0].item()
 
 
 def test_driml_agent_is_the_taco_agent_at_k1():
@@ -157,9 +159,9 @@ def test_driml_agent_is_the_taco_agent_at_k1():
             assert k == k2 and torch.equal(v, v2), (name, k)
     batch = make_batch(K=1)
     torch.manual_seed(7)
-    m_t = taco._update_aux(batch)
+    m_t = taco.backbone.aux_step(batch)
     torch.manual_seed(7)
-    m_d = driml._update_aux(batch)
+    m_d = driml.backbone.aux_step(batch)
     assert m_t["taco_loss"] == m_d["driml_loss"] and m_t["aux_loss"] == m_d["aux_loss"]
 
 
@@ -167,17 +169,17 @@ def test_driml_uses_only_the_first_action_at_k3():
     agent = agent_for(["agent=driml", "agent.K=3", "agent.objectives.curl=0", "agent.objectives.reward=0"])
     batch = make_batch(K=3)
     batch["action_seq"].requires_grad_(True)
-    loss, _ = agent.objectives["driml"](aux_for(agent, batch))
+    loss, _ = agent.backbone.objectives["driml"](aux_for(agent, batch))
     loss.backward()
     g = batch["action_seq"].grad
     assert g[:, 0].abs().sum() > 0 and torch.equal(g[:, 1:], torch.zeros_like(g[:, 1:]))
-    assert grad_norm(agent.action_encoder) > 0 and grad_norm(agent.encoder) > 0
+    assert grad_norm(agent.action_encoder) > 0 and grad_norm(agent.backbone.encoder) > 0
     # changing the later actions leaves the loss unchanged (same augmentations through the memo)
     aux = aux_for(agent, make_batch(K=3))
-    before = agent.objectives["driml"](aux)[0].item()
+    before = agent.backbone.objectives["driml"](aux)[0].item()
     aux.batch["action_seq"][:, 1:] = 0.5
     aux._cache.pop("u_first")
-    assert agent.objectives["driml"](aux)[0].item() == pytest.approx(before, abs=0.0)
+    assert agent.backbone.objectives["driml"](aux)[0].item() == pytest.approx(before, abs=0.0)
 
 
 # ----------------------------------------------------------------------------- SPR
@@ -186,50 +188,51 @@ def test_driml_uses_only_the_first_action_at_k3():
 def test_spr_gradient_flow_and_momentum_target():
     m = 0.9
     agent = agent_for(["agent=spr", f"agent.objective_params.spr.momentum={m}"])
-    spr = agent.objectives["spr"]
+    spr = agent.backbone.objectives["spr"]
     assert isinstance(spr, SPRObjective) and spr.target is not None
     batch = make_batch()
     loss, metrics = spr(plain_aux(agent, batch))
     assert metrics["spr_loss"] == pytest.approx(loss.item())
     # at construction the momentum target is a copy of (f, H, g): its latent of o_{t+k} is the online one's
     with torch.no_grad():
-        online = torch.stack([spr.projection(agent.shared.state_proj(agent.encoder(batch["future_obs_seq"][:, k]
-                                                                                  .float()))) for k in range(3)], 1)
+        bb = agent.backbone
+        online = torch.stack([spr.projection(bb.shared.state_proj(bb.encoder(batch["future_obs_seq"][:, k]
+                                                                             .float()))) for k in range(3)], 1)
     expected = neg_cos64(f64(spr.predict(plain_aux(agent, batch))), f64(online))
     assert loss.item() == pytest.approx(expected, rel=1e-5)
-    agent.aux_opt.zero_grad(set_to_none=True)
+    agent.backbone.aux_opt.zero_grad(set_to_none=True)
     loss.backward()
-    for mod in (agent.encoder, agent.action_encoder, agent.shared.state_proj, spr.transition, spr.projection,
+    for mod in (bb.encoder, agent.action_encoder, bb.shared.state_proj, spr.transition, spr.projection,
                 spr.prediction):
         assert grad_norm(mod) > 0
     assert has_no_grad(spr.target)
-    old_target, old_online = snapshot(spr.target), snapshot(agent.encoder)
-    agent.aux_opt.step()
+    old_target, old_online = snapshot(spr.target), snapshot(agent.backbone.encoder)
+    agent.backbone.aux_opt.step()
     assert all(torch.equal(a, b) for a, b in zip(old_target, snapshot(spr.target)))  # the optimizer leaves it
-    assert any(not torch.equal(a, b) for a, b in zip(old_online, snapshot(agent.encoder)))
+    assert any(not torch.equal(a, b) for a, b in zip(old_online, snapshot(agent.backbone.encoder)))
     spr.after_update()
-    online = [p.detach() for p in agent.encoder.parameters()]
+    online = [p.detach() for p in agent.backbone.encoder.parameters()]
     for old, new, on in zip(old_target[:len(online)], snapshot(spr.target["encoder"]), online):
         assert torch.allclose(new, m * old + (1 - m) * on, atol=1e-7)
 
 
 def test_spr_default_momentum_zero_is_the_online_network_without_gradient():
     agent = agent_for(["agent=spr"])
-    spr = agent.objectives["spr"]
+    spr = agent.backbone.objectives["spr"]
     assert spr.momentum == 0.0 and spr.target is None  # SPR with augmentation: tau = 0
     aux = aux_for(agent, make_batch())
     target = spr.target_projection(aux)
     assert not target.requires_grad and target.shape[:2] == (6, 3)  # one target per rollout step
     for k in (1, 2, 3):
-        assert torch.equal(target[:, k - 1], spr.projection(agent.shared.state_proj(aux.future_at(k))))
-    own = {id(p) for p in spr.parameters()} - {id(p) for p in agent.shared.parameters()}
+        assert torch.equal(target[:, k - 1], spr.projection(agent.backbone.shared.state_proj(aux.future_at(k))))
+    own = {id(p) for p in spr.parameters()} - {id(p) for p in agent.backbone.shared.parameters()}
     heads = [spr.transition, spr.projection, spr.prediction]
     assert own == {id(p) for mod in heads for p in mod.parameters()}  # no copy of the encoder
 
 
 def test_spr_rollout_predicts_every_step_with_per_step_actions():
     agent = agent_for(["agent=spr"])
-    spr = agent.objectives["spr"]
+    spr = agent.backbone.objectives["spr"]
     assert spr.rollout and spr.needs_future_seq and agent.sample_options == {"future_seq": True}
     assert spr.transition[0].in_features == agent.cfg.feature_dim + agent.action_encoder.latent_dim
     aux = aux_for(agent, make_batch())
@@ -244,8 +247,8 @@ def test_spr_rollout_predicts_every_step_with_per_step_actions():
     changed["action_seq"][:, 2] = -changed["action_seq"][:, 2]
 
     def plain(b):
-        return AuxBatch(b, agent.encoder, lambda x: x, agent.encode_action_sequence, "nstep",
-                        agent.encode_action_steps)
+        return AuxBatch(b, agent.backbone.encoder, lambda x: x, agent.backbone.encode_action_sequence, "nstep",
+                        agent.backbone.encode_action_steps)
 
     p1, p2 = spr.predict(plain(batch)), spr.predict(plain(changed))
     assert torch.equal(p1[:, :2], p2[:, :2]) and not torch.allclose(p1[:, 2], p2[:, 2])
@@ -253,7 +256,7 @@ def test_spr_rollout_predicts_every_step_with_per_step_actions():
 
 def test_spr_one_shot_variant_and_replay_without_future_seq():
     agent = agent_for(["agent=spr", "agent.objective_params.spr.rollout=false"])
-    spr = agent.objectives["spr"]
+    spr = agent.backbone.objectives["spr"]
     assert not spr.rollout and agent.sample_options == {"future_seq": False}
     assert spr.transition[0].in_features == agent.cfg.feature_dim + 3 * agent.action_encoder.latent_dim
     batch = make_batch()
@@ -261,18 +264,18 @@ def test_spr_one_shot_variant_and_replay_without_future_seq():
     loss, _ = spr(plain_aux(agent, batch))
     # one prediction of o_{t+K} from (z_t, u_t..u_{t+K-1}) against the stopped-gradient online latent of o_{t+K}
     with torch.no_grad():
-        z = agent.shared.state_proj(agent.encoder(batch["obs"].float()))
-        u = agent.encode_action_sequence(batch["action_seq"])
+        z = agent.backbone.shared.state_proj(agent.backbone.encoder(batch["obs"].float()))
+        u = agent.backbone.encode_action_sequence(batch["action_seq"])
         pred = spr.prediction(spr.projection(spr.transition(torch.cat([z, u], -1))))
-        target = spr.projection(agent.shared.state_proj(agent.encoder(batch["future_obs"].float())))
+        target = spr.projection(agent.backbone.shared.state_proj(agent.backbone.encoder(batch["future_obs"].float())))
     assert loss.item() == pytest.approx(neg_cos64(f64(pred), f64(target)), rel=1e-5)
     with pytest.raises(ValueError, match="future_obs_seq"):
-        agent_for(["agent=spr"]).objectives["spr"](aux_for(agent_for(["agent=spr"]), batch))
+        agent_for(["agent=spr"]).backbone.objectives["spr"](aux_for(agent_for(["agent=spr"]), batch))
 
 
 def test_spr_projection_dim_and_unknown_keys():
     agent = agent_for(["agent=spr", "agent.objective_params.spr.projection_dim=8"])
-    assert agent.objectives["spr"].prediction.weight.shape == (8, 8)
+    assert agent.backbone.objectives["spr"].prediction.weight.shape == (8, 8)
     with pytest.raises(ValueError, match="momentun"):
         agent_for(["agent=spr", "+agent.objective_params.spr.momentun=0.5"])
 
@@ -283,7 +286,7 @@ def test_spr_projection_dim_and_unknown_keys():
 def test_atc_gradient_flow_no_actions_and_momentum_target():
     agent = agent_for(["agent=atc", "agent.objectives.curl=0", "agent.objectives.reward=0",
                        "agent.objective_params.atc.predictor_hidden=16"])
-    atc = agent.objectives["atc"]
+    atc = agent.backbone.objectives["atc"]
     m = atc.target.momentum
     assert m == pytest.approx(0.99)
     batch = make_batch()
@@ -291,8 +294,8 @@ def test_atc_gradient_flow_no_actions_and_momentum_target():
     # by hand in float64: anchor c = H(f(o_t)), p = c + W2 relu(W1 c + b1) + b2, positive c~ = H_m(f_m(o_{t+K}))
     # (= the online H(f(o_{t+K})) before any update), InfoNCE of p W c~^T against the diagonal
     with torch.no_grad():
-        c = f64(agent.shared.state_proj(agent.encoder(batch["obs"].float())))
-        target = f64(agent.shared.state_proj(agent.encoder(batch["future_obs"].float())))
+        c = f64(agent.backbone.shared.state_proj(agent.backbone.encoder(batch["obs"].float())))
+        target = f64(agent.backbone.shared.state_proj(agent.backbone.encoder(batch["future_obs"].float())))
     l1, l2 = atc.predictor[0], atc.predictor[2]
     p = c + np.maximum(c @ f64(l1.weight).T + f64(l1.bias), 0) @ f64(l2.weight).T + f64(l2.bias)
     logits = p @ f64(atc.W) @ target.T
@@ -301,38 +304,39 @@ def test_atc_gradient_flow_no_actions_and_momentum_target():
     assert loss.item() == pytest.approx(float(-np.diag(log_soft).mean()), rel=1e-5)
     assert metrics["atc_loss"] == pytest.approx(loss.item())
     assert metrics["atc_acc"] == pytest.approx(float((logits.argmax(1) == np.arange(len(logits))).mean()))
-    agent.aux_opt.zero_grad(set_to_none=True)
+    agent.backbone.aux_opt.zero_grad(set_to_none=True)
     loss.backward()
-    assert grad_norm(agent.encoder) > 0 and grad_norm(agent.shared.state_proj) > 0
+    assert grad_norm(agent.backbone.encoder) > 0 and grad_norm(agent.backbone.shared.state_proj) > 0
     assert grad_norm(atc.predictor) > 0 and atc.W.grad is not None
     assert all(p.grad is None for p in agent.action_encoder.parameters())  # no actions in ATC's positive pair
     assert has_no_grad(atc.target)
     old = snapshot(atc.target)
-    agent.aux_opt.step()
+    agent.backbone.aux_opt.step()
     assert all(torch.equal(a, b) for a, b in zip(old, snapshot(atc.target)))
     atc.after_update()
-    online = [p.detach() for mod in (agent.encoder, agent.shared.state_proj) for p in mod.parameters()]
+    bb = agent.backbone
+    online = [p.detach() for mod in (bb.encoder, bb.shared.state_proj) for p in mod.parameters()]
     for o, new, on in zip(old, snapshot(atc.target), online):
         assert torch.allclose(new, m * o + (1 - m) * on, atol=1e-7)
 
 
 def test_full_update_moves_target_and_checkpoint_restores_it():
     agent = agent_for(["agent=atc", "agent.objective_params.atc.predictor_hidden=16"])
-    before = snapshot(agent.objectives["atc"].target)
+    before = snapshot(agent.backbone.objectives["atc"].target)
     metrics = agent.update(make_batch(), step=0)
     for key in ("atc_loss", "atc_acc", "curl_loss", "reward_loss", "aux_loss"):
         assert math.isfinite(metrics[key])
-    after = snapshot(agent.objectives["atc"].target)
+    after = snapshot(agent.backbone.objectives["atc"].target)
     assert any(not torch.equal(a, b) for a, b in zip(before, after))  # moved by after_update
-    atc = agent.objectives["atc"]  # counted once, without the frozen target copies
+    atc = agent.backbone.objectives["atc"]  # counted once, without the frozen target copies
     own = sum(p.numel() for p in atc.predictor.parameters()) + atc.W.numel()
     assert dict(agent.parameter_counts())["objective.atc"] == own
     restored = agent_for(["agent=atc", "agent.objective_params.atc.predictor_hidden=16"], seed=1)
     restored.load_state_dict(agent.state_dict())
-    assert all(torch.equal(a, b) for a, b in zip(after, snapshot(restored.objectives["atc"].target)))
-    restored.objectives["atc"].after_update()  # still tied to the restored agent's own encoder
-    online = next(restored.encoder.parameters()).detach()
-    first = next(restored.objectives["atc"].target.parameters()).detach()
+    assert all(torch.equal(a, b) for a, b in zip(after, snapshot(restored.backbone.objectives["atc"].target)))
+    restored.backbone.objectives["atc"].after_update()  # still tied to the restored agent's own encoder
+    online = next(restored.backbone.encoder.parameters()).detach()
+    first = next(restored.backbone.objectives["atc"].target.parameters()).detach()
     assert torch.allclose(first, 0.99 * after[0] + 0.01 * online, atol=1e-7)
 
 
@@ -379,11 +383,11 @@ def test_agent_file_builds_an_agent_whose_update_trains_its_objective(name: str)
     torch.manual_seed(0)
     agent = Agent(rc.agent, OBS, A)
     assert loss in agent.metric_names() and "aux_loss" in agent.metric_names()  # train.csv's columns
-    objectives = {k: snapshot(m) for k, m in agent.objectives.items() if any(True for _ in m.parameters())}
-    encoder = snapshot(agent.encoder)
+    objectives = {k: snapshot(m) for k, m in agent.backbone.objectives.items() if any(True for _ in m.parameters())}
+    encoder = snapshot(agent.backbone.encoder)
     metrics = agent.update(make_batch(K=rc.agent.K), step=10)
     assert math.isfinite(metrics[loss]) and math.isfinite(metrics["aux_loss"]) and metrics[loss] != 0.0
     assert set(agent.metric_names()) <= set(metrics)
     for key, before in objectives.items():  # every objective with parameters took a step
-        assert any(not torch.equal(b, p) for b, p in zip(before, agent.objectives[key].parameters())), key
-    assert any(not torch.equal(b, p) for b, p in zip(encoder, agent.encoder.parameters()))
+        assert any(not torch.equal(b, p) for b, p in zip(before, agent.backbone.objectives[key].parameters())), key
+    assert any(not torch.equal(b, p) for b, p in zip(encoder, agent.backbone.encoder.parameters()))

@@ -24,11 +24,11 @@ def run_update(flags: list[str]) -> tuple[dict, torch.Tensor, torch.Tensor]:
     assert rc.agent.lr == LR
     torch.manual_seed(0)
     agent = Agent(rc.agent, OBS, 4)
-    before = torch.cat([p.detach().flatten().clone() for p in agent.encoder.parameters()])
+    before = torch.cat([p.detach().flatten().clone() for p in agent.backbone.encoder.parameters()])
     torch.manual_seed(1)
     metrics = agent.update(make_batch(B=8), step=100)
-    after = torch.cat([p.detach().flatten() for p in agent.encoder.parameters()])
-    grad = torch.cat([p.grad.flatten() for p in agent.encoder.parameters()])
+    after = torch.cat([p.detach().flatten() for p in agent.backbone.encoder.parameters()])
+    grad = torch.cat([p.grad.flatten() for p in agent.backbone.encoder.parameters()])
     return metrics, after - before, grad
 
 

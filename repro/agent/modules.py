@@ -1,9 +1,16 @@
-"""What every learner with named modules and optimizers shares: parameter counts, checkpoint state, train mode."""
+"""What learners share: ``ModuleSet`` (named modules and optimizers: parameter counts, checkpoint state, train
+mode) and ``LearnerBase`` (the defaults of the learner protocol's optional hooks)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+from types import MappingProxyType
+
 import torch
 from torch import nn
+
+from repro.agent.networks import ActionEncoder
+from repro.config.schema import AgentConfig
 
 
 class ModuleSet:
@@ -47,3 +54,34 @@ class ModuleSet:
         for name, mod in self.modules().items():
             if name not in self.untrained:
                 mod.train(training)
+
+
+class LearnerBase:
+    """The defaults of the learner protocol's optional hooks (``repro/learners/base.py`` ``Learner``), for a learner
+    that does not need them: no auxiliary objectives, no action encoder, ``agent.batch_size`` transitions per
+    update, nothing to record in resolved.json and no use for the dataset's returns."""
+
+    cfg: AgentConfig
+
+    @property
+    def weights(self) -> Mapping[str, float]:
+        """The active auxiliary objectives' weights, by name."""
+        return MappingProxyType({})
+
+    @property
+    def action_encoder(self) -> ActionEncoder | None:
+        """TACO's action encoder, when the critic sees latent actions."""
+        return None
+
+    @property
+    def batch_size(self) -> int:
+        """Samples per update (a learner with its own batch size overrides this)."""
+        return int(self.cfg.batch_size)
+
+    @property
+    def resolved(self) -> dict[str, object]:
+        """Values this learner used that analysis reads (recorded in resolved.json), beyond the config's."""
+        return {}
+
+    def set_dataset_returns(self, returns: Sequence[float]) -> None:
+        """The offline dataset's episode returns (IQL's reward scaling reads them); default: unused."""

@@ -23,6 +23,7 @@ from repro.config.compose import ConfigError, compose, config_groups, typed
 from repro.config.schema import AgentConfig
 from repro.data.replay import ReplayBuffer
 from repro.envs import get_task
+from repro.learners.base import SequenceLearner
 from repro.learners.registry import LEARNERS, build_learner
 
 REFERENCE = "drqv2"  # the online update every ratio is taken against
@@ -53,13 +54,6 @@ def fill_buffer(episodes: Sequence[Mapping[str, np.ndarray]], cfg: AgentConfig, 
     return buf
 
 
-def own_batch_size(cfg: AgentConfig) -> int | None:
-    """A learner's own batch size when its config section has one (DT: ``agent.dt.batch_size``), else None."""
-    section = getattr(cfg, cfg.learner, None)
-    size = getattr(section, "batch_size", None)
-    return int(size) if isinstance(size, int) else None
-
-
 def available(agent: str) -> str | None:
     """None when ``agent`` can be built here, else why not (one line)."""
     if agent not in config_groups()["agent"]:
@@ -81,19 +75,17 @@ def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapp
     if agent in OFFLINE_AGENTS:  # a dataset kind resolves what depends on it (CQL's Table 6 alpha)
         overrides.append(f"offline.dataset={DATASET_KIND}")
     rc = typed(compose(overrides))
-    own = own_batch_size(rc.agent)  # DT samples its own number of windows whatever agent.batch_size says
-    if own is not None and own_batch is not None:
-        own = own_batch
-    size = own or batch_size
     action_dim = get_task(task).action_dim
     frame_stack = rc.env.frame_stack
     obs_shape = (FRAME_SHAPE[0] * frame_stack, *FRAME_SHAPE[1:])
     torch.manual_seed(0)
     learner = build_learner(rc.agent, obs_shape, action_dim, device=device)
-    make_sampler: Callable[..., Any] | None = getattr(learner, "make_sampler", None)
-    if make_sampler is not None:
-        sampler = make_sampler(episodes, seed=0)
-        batch: Any = sampler.sample(size)
+    # a sequence learner samples its own windows at its own batch size (DT: agent.dt.batch_size whatever
+    # agent.batch_size says); ``own_batch`` replaces that one
+    own = isinstance(learner, SequenceLearner)
+    size = own_batch if own and own_batch is not None else learner.batch_size
+    if isinstance(learner, SequenceLearner):
+        batch: Any = learner.make_sampler(episodes, seed=0).sample(size)
     else:
         buf = fill_buffer(episodes, rc.agent, frame_stack, seed=0, device=device)
         batch = buf.sample(size, **learner.sample_options)
@@ -101,7 +93,7 @@ def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapp
     for _ in range(warmup):
         learner.update(batch, STEP)
     times = [timed(lambda: learner.update(batch, STEP), device)[1] for _ in range(repeats)]
-    return {"agent": agent, "learner": rc.agent.learner, "batch_size": size, "own_batch": own is not None,
+    return {"agent": agent, "learner": rc.agent.learner, "batch_size": size, "own_batch": own,
             "update_seconds": statistics.median(times), "repeats": repeats, "warmup": warmup}
 
 

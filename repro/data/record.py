@@ -126,12 +126,13 @@ class Recorder:
                 shutil.copyfile(written, tmp)
 
     def snapshot(self, agent: Any, step: int, frame: int, eval_return: float) -> None:
-        """Keep the acting part of ``agent`` (``.encoder``, ``.actor``, ``.stddev(step)``) after the evaluation
-        at ``step``, with that evaluation's mean return."""
+        """Keep the acting part of ``agent`` (its modules ``encoder`` and ``actor``, ``.stddev(step)``) after the
+        evaluation at ``step``, with that evaluation's mean return."""
+        modules = agent.modules()
         state = {"format": SNAPSHOT_FORMAT, "step": int(step), "frame": int(frame),
                  "eval_return": float(eval_return), "stddev": float(agent.stddev(step)),
-                 "policy": self.policy.as_dict(), "encoder": _cpu_state(agent.encoder),
-                 "actor": _cpu_state(agent.actor)}
+                 "policy": self.policy.as_dict(), "encoder": _cpu_state(modules["encoder"]),
+                 "actor": _cpu_state(modules["actor"])}
 
         def write(f) -> None:
             buf = io.BytesIO()

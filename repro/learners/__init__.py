@@ -1,7 +1,15 @@
 """Learners: one protocol (base.Learner) and a registry keyed by ``agent.learner``."""
 
-from repro.learners.base import EpisodicActor, Learner, OnlineLearner, ReturnConditioned, Sampler, SequenceLearner
+from repro.learners.base import (
+    EpisodicActor,
+    Learner,
+    LearnerBase,
+    OnlineLearner,
+    ReturnConditioned,
+    Sampler,
+    SequenceLearner,
+)
 from repro.learners.registry import LEARNERS, build_learner, samples_episodes
 
-__all__ = ["LEARNERS", "EpisodicActor", "Learner", "OnlineLearner", "ReturnConditioned", "Sampler",
+__all__ = ["LEARNERS", "EpisodicActor", "Learner", "LearnerBase", "OnlineLearner", "ReturnConditioned", "Sampler",
            "SequenceLearner", "build_learner", "samples_episodes"]

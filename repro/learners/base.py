@@ -1,9 +1,16 @@
-"""The learner protocol: what a trainer (online or offline) needs from an algorithm.
+"""The learner protocol: what a trainer (online or offline) and the rest of the tree need from a learner.
 
 A learner owns its networks and optimizers. ``update`` takes one batch of tensors as returned by
-``ReplayBuffer.sample(batch_size, **learner.sample_options)`` and returns float metrics whose keys are
-``metric_names()`` (the train.csv columns); it never touches files. ``state_dict`` is plain tensors and
-containers (``{"modules": {...}, "optimizers": {...}}``) so checkpoints load with ``weights_only=True``.
+``ReplayBuffer.sample(batch_size, **learner.sample_options)`` and returns its metrics as detached 0-d tensors
+whose keys are ``metric_names()`` (the train.csv columns); it makes no host sync (no ``.item()``): the loops
+average the metrics on the device and fetch them when they write a row (``repro/train/common.py``
+``MetricMeans``). It never touches files. ``state_dict`` is plain tensors and containers (``{"modules": {...},
+"optimizers": {...}}``) so checkpoints load with ``weights_only=True``.
+
+Every hook a caller uses is a member of ``Learner``; ``LearnerBase`` (``repro/agent/modules.py``) holds the
+defaults of the optional ones (``weights``, ``action_encoder``, ``batch_size``, ``resolved``,
+``set_dataset_returns``). The learners on the DrQ-v2 backbone own it as an attribute
+(``repro/agent/backbone.py``). The narrower protocols below are capabilities a caller tests with ``isinstance``.
 """
 
 from __future__ import annotations
@@ -14,7 +21,13 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 import torch
 
+from repro.agent.losses import Metrics
+from repro.agent.modules import LearnerBase
+from repro.agent.networks import ActionEncoder
 from repro.config.schema import AgentConfig
+
+__all__ = ["EpisodicActor", "Learner", "LearnerBase", "Metrics", "OnlineLearner", "ReturnConditioned", "Sampler",
+           "SequenceLearner", "count_parameters"]
 
 
 @runtime_checkable
@@ -26,8 +39,9 @@ class Learner(Protocol):
         """Action for one stacked observation (C, H, W) uint8; ``eval_mode``: the policy mean."""
         ...
 
-    def update(self, batch: dict[str, torch.Tensor], step: int) -> dict[str, float]:
-        """One gradient update on ``batch``; ``step`` is the agent step (online) or update count (offline)."""
+    def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
+        """One gradient update on ``batch``; ``step`` is the agent step (online) or update count (offline).
+        Returns detached 0-d tensors (no host sync)."""
         ...
 
     def state_dict(self) -> dict:
@@ -44,6 +58,30 @@ class Learner(Protocol):
         ...
 
     def train(self, training: bool = True) -> None:
+        ...
+
+    @property
+    def weights(self) -> Mapping[str, float]:
+        """The active auxiliary objectives' weights (resolved.json's ``objectives``)."""
+        ...
+
+    @property
+    def action_encoder(self) -> ActionEncoder | None:
+        """The action encoder u when the critic sees latent actions (resolved.json's ``latent_action_dim``)."""
+        ...
+
+    @property
+    def batch_size(self) -> int:
+        """Samples per update (``agent.batch_size`` unless the learner has its own, e.g. DT's windows)."""
+        ...
+
+    @property
+    def resolved(self) -> Mapping[str, object]:
+        """Values the learner used that analysis reads, added to resolved.json (``rundir.resolved_values``)."""
+        ...
+
+    def set_dataset_returns(self, returns: Sequence[float]) -> None:
+        """The offline dataset's episode returns, before training (IQL's reward scaling reads them)."""
         ...
 
 

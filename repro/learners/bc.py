@@ -10,7 +10,8 @@ import numpy as np
 import torch
 
 from repro.agent.aug import RandomShift
-from repro.agent.modules import ModuleSet
+from repro.agent.losses import Metrics
+from repro.agent.modules import LearnerBase, ModuleSet
 from repro.agent.networks import Actor, Encoder
 from repro.config.schema import AgentConfig
 
@@ -24,7 +25,7 @@ def bc_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return (predicted - target).pow(2).mean()
 
 
-class BCLearner(ModuleSet):
+class BCLearner(LearnerBase, ModuleSet):
     """Offline learner ``bc``."""
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
@@ -61,11 +62,11 @@ class BCLearner(ModuleSet):
         obs_t = torch.as_tensor(obs, device=self.device).float().unsqueeze(0)
         return self.policy(obs_t).cpu().numpy()[0].astype(np.float32)
 
-    def update(self, batch: dict[str, torch.Tensor], step: int) -> dict[str, float]:
+    def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         loss = bc_loss(self.policy(self.aug(batch["obs"].float())), batch["action"])
         self.encoder_opt.zero_grad(set_to_none=True)
         self.actor_opt.zero_grad(set_to_none=True)
         loss.backward()
         self.actor_opt.step()
         self.encoder_opt.step()
-        return {"bc_loss": loss.item()}
+        return {"bc_loss": loss.detach()}

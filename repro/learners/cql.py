@@ -1,14 +1,14 @@
 """CQL (Kumar et al. 2020) as V-D4RL's pixel CQL (``drqbc/cql.py``) on the DrQ-v2 backbone: learner ``cql``
 (agent files ``cql`` and ``cql_taco``).
 
-Networks: the backbone's (encoder, actor, twin critic, target critic; with TACO the action encoder and the
-auxiliary heads); nothing of its own.
+Networks: the backbone's (``repro/agent/backbone.py``: encoder, actor, twin critic, target critic; with TACO the
+action encoder and the auxiliary heads); nothing of its own.
 
 Update, in V-D4RL's order:
 1. critic with the encoder: DrQ-v2's critic loss plus, for each head, CQL's regulariser alpha x (logsumexp
    over Q at uniform actions, policy samples at h and at h' (and the data action) - Q at the data action)
    (``losses/cql.py``); alpha is ``cql.alpha`` (Table 6's value for the task and dataset unless set);
-2. actor on sg(h): DrQ-v2's (the backbone agent's ``_update_actor``: -min_i Q_i(sg(h), u(a~)));
+2. actor on sg(h): DrQ-v2's (the backbone's ``actor_step``: -min_i Q_i(sg(h), u(a~)));
 3. target critic: soft update;
 4. with TACO, one auxiliary step.
 Uniform actions are drawn in raw action space and encoded like the data actions.
@@ -18,55 +18,60 @@ from __future__ import annotations
 
 import torch
 
-from repro.agent.agent import ACTOR_METRICS, CRITIC_METRICS
+from repro.agent.backbone import BackboneLearner, optimize
+from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics
 from repro.agent.networks import TruncatedNormal
-from repro.learners.backbone import OfflineBackbone
 from repro.learners.losses import cql as cql_loss
 
 REGULARISER_METRICS = tuple(f"cql_{part}_q{i}" for i in (1, 2)
                             for part in ("reg", "lse", "q_data", "q_uniform", "q_policy", "q_next_policy"))
 
 
-class CQL(OfflineBackbone):
+class CQL(BackboneLearner):
     """Offline learner ``cql``."""
 
-    algorithm = "cql"
     update_metrics = CRITIC_METRICS + REGULARISER_METRICS + ACTOR_METRICS
 
-    def update(self, batch: dict[str, torch.Tensor], step: int) -> dict[str, float]:
-        h, next_h, action, reward, discount = self.encode_batch(batch)
-        metrics = self._update_critic(h, action, reward, discount, next_h, step)
-        metrics.update(self._update_actor(h.detach(), step))
-        self.update_target()
-        metrics.update(self.auxiliary_step(batch))
+    @property
+    def resolved(self) -> dict[str, object]:
+        return {"algorithm": "cql", "cql_alpha": self.cfg.cql.alpha}
+
+    def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
+        bb = self.backbone
+        h, next_h, action, reward, discount = bb.encode_batch(batch, autocast=False)
+        metrics = self._critic_step(h, action, reward, discount, next_h, step)
+        metrics.update(bb.actor_step(h.detach(), step))
+        bb.update_target()
+        metrics.update(bb.aux_step(batch))
         return metrics
 
-    def _update_critic(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
-                       next_h: torch.Tensor, step: int) -> dict[str, float]:
+    def _critic_step(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
+                     next_h: torch.Tensor, step: int) -> Metrics:
         """One step of DrQ-v2's critic loss plus both heads' regularisers on the critic and the encoder."""
-        loss, q_data, metrics = self.critic_loss(h, action, reward, discount, next_h, step)
+        bb = self.backbone
+        loss, q_data, metrics = bb.critic_loss(h, action, reward, discount, next_h, step, autocast=False)
         regs, reg_metrics = self._regularisers(h, next_h, q_data, step)
         loss = loss + regs[0] + regs[1]
         metrics.update(reg_metrics)
-        metrics["critic_loss"] = loss.item()
-        self.optimize(loss, self.encoder_opt, self.critic_opt)
+        metrics["critic_loss"] = loss.detach()
+        optimize(loss, bb.encoder_opt, bb.critic_opt)
         return metrics
 
     def _regularisers(self, h: torch.Tensor, next_h: torch.Tensor, q_data: tuple[torch.Tensor, torch.Tensor],
-                      step: int) -> tuple[tuple[torch.Tensor, ...], dict[str, float]]:
+                      step: int) -> tuple[tuple[torch.Tensor, ...], Metrics]:
         """V-D4RL's draw order: N uniform actions, then N policy samples at h, then N at h' (each (B, N, A),
         noise clipped to ``stddev_clip`` unless ``cql.clip_policy_samples`` is off)."""
-        c = self.cfg.cql
+        bb, c = self.backbone, self.cfg.cql
         n, batch = c.n_samples, h.shape[0]
-        std = self.stddev(step)
+        std = bb.stddev(step)
         clip = self.cfg.stddev_clip if c.clip_policy_samples else None
-        uniform = cql_loss.uniform_actions(batch, n, self.action_dim, like=h)
+        uniform = cql_loss.uniform_actions(batch, n, bb.action_dim, like=h)
         with torch.no_grad():  # policy samples carry no gradient (CQL issue 5)
             policy, log_p = self._policy_samples(h.detach(), std, n, clip)
             next_policy, log_np = self._policy_samples(next_h, std, n, clip)
 
         def critic(h_rows: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-            return self.critic(h_rows, self.encode_action(actions))
+            return bb.critic(h_rows, bb.encode_action(actions))
 
         assert c.alpha is not None, "agent.cql.alpha is resolved when the config is composed"
         include_data = c.include_data_in_logsumexp and not c.importance_sampling  # V-D4RL: the no-IS form only
@@ -78,12 +83,8 @@ class CQL(OfflineBackbone):
     def _policy_samples(self, h: torch.Tensor, std: float, n: int,
                         clip: float | None) -> tuple[torch.Tensor, torch.Tensor]:
         """(B, N, A) samples of pi(.|h) and their (B, N) log-probabilities (summed over action dimensions)."""
-        dist = self.actor(h, std)
+        dist = self.backbone.actor(h, std)
         expanded = TruncatedNormal(dist.loc.unsqueeze(1).expand(-1, n, -1),
                                    dist.scale.unsqueeze(1).expand(-1, n, -1))
         samples = expanded.sample(clip=clip)
         return samples, expanded.log_prob(samples).sum(-1)
-
-    @property
-    def resolved(self) -> dict[str, object]:
-        return {**super().resolved, "cql_alpha": self.cfg.cql.alpha}

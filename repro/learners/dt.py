@@ -18,6 +18,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from repro.agent.losses import Metrics
+from repro.agent.modules import LearnerBase
 from repro.config.schema import AgentConfig
 from repro.learners.base import count_parameters
 from repro.learners.dt_model import DecisionTransformer, EvalContext, SequenceSampler, batch_to_tensors, make_optimizer
@@ -26,7 +28,7 @@ from repro.learners.losses.dt import action_loss
 METRICS = ("dt_loss", "lr", "grad_norm")  # grad_norm: before clipping; lr: the rate this update used
 
 
-class DTLearner:
+class DTLearner(LearnerBase):
     """Offline learner ``dt``."""
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
@@ -37,7 +39,6 @@ class DTLearner:
         self.device = torch.device(device)
         self.action_dim = action_dim
         self.frame_stack = obs_shape[0] // 3
-        self.batch_size = int(self.dt.batch_size)  # windows per update (the offline loop reads this)
         self.sample_options: dict[str, Any] = {}
         self.model = DecisionTransformer(obs_shape, action_dim, context=self.dt.context, embed_dim=self.dt.embed_dim,
                                          n_layers=self.dt.n_layers, n_heads=self.dt.n_heads, dropout=self.dt.dropout,
@@ -48,10 +49,18 @@ class DTLearner:
         self.sampler: SequenceSampler | None = None
         self.target_return = 0.0
         self._episode: EvalContext | None = None
-        self.resolved: dict[str, Any] = {"batch_size": self.batch_size}
         self.train(True)
 
     # ----------------------------------------------------------------- protocol
+    @property
+    def batch_size(self) -> int:
+        """Windows per update: ``agent.dt.batch_size`` (the offline loop and the bench read this)."""
+        return int(self.dt.batch_size)
+
+    @property
+    def resolved(self) -> dict[str, object]:
+        return {"batch_size": self.batch_size}
+
     def modules(self) -> dict[str, nn.Module]:
         """The model's parts, for the parameter table (``model`` holds them all)."""
         m = self.model
@@ -93,7 +102,7 @@ class DTLearner:
                                        action_pad=self.dt.action_pad)
         return self.sampler
 
-    def update(self, batch: Mapping[str, Any], step: int) -> dict[str, float]:
+    def update(self, batch: Mapping[str, Any], step: int) -> Metrics:
         """One AdamW step on a sampler batch (numpy arrays or tensors); ``step`` is unused (the warm-up
         schedule counts its own steps and is checkpointed)."""
         b = batch_to_tensors(batch, self.device)
@@ -102,10 +111,10 @@ class DTLearner:
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.dt.grad_clip)
-        lr = float(self.optimizer.param_groups[0]["lr"])
+        lr = torch.tensor(self.optimizer.param_groups[0]["lr"], dtype=torch.float64)  # a host value: no sync
         self.optimizer.step()
         self.scheduler.step()
-        return {"dt_loss": loss.item(), "lr": lr, "grad_norm": float(norm)}
+        return {"dt_loss": loss.detach(), "lr": lr, "grad_norm": norm.detach()}
 
     # ----------------------------------------------------------------- evaluation
     def set_target_return(self, value: float) -> None:

@@ -8,7 +8,7 @@ import torch
 
 from repro.agent.agent import Agent
 from repro.config.schema import AgentConfig, LearnerName, check_registry
-from repro.learners.base import Learner
+from repro.learners.base import Learner, SequenceLearner
 from repro.learners.bc import BCLearner
 from repro.learners.cql import CQL
 from repro.learners.dt import DTLearner
@@ -31,7 +31,8 @@ __all__ = ["LEARNERS", "LearnerFactory", "build_learner", "samples_episodes"]
 
 def samples_episodes(name: str) -> bool:
     """Whether learner ``name`` trains on episode windows (``make_sampler``) instead of a transition replay."""
-    return hasattr(LEARNERS[name], "make_sampler")
+    factory = LEARNERS[name]
+    return isinstance(factory, type) and issubclass(factory, SequenceLearner)
 
 
 def build_learner(cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,

@@ -123,11 +123,11 @@ def saved_config(path: str | Path) -> DictConfig:
 def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
     """What ``learner`` (as built for ``rc``) actually uses, as resolved.json records it (runformat.RESOLVED_FIELDS).
 
-    Read from the learner, not recomputed: the latent action dim is its ``action_encoder.latent_dim`` (None
-    without an action encoder), the objectives are its active ``weights``. A learner adds or replaces fields
-    (an offline learner: ``dataset``, ``cql_alpha``, ...) through a ``resolved`` dict attribute.
+    Read from the learner (``repro.learners.base.Learner``), not recomputed: the latent action dim is its
+    ``action_encoder.latent_dim`` (None without an action encoder), the objectives are its active ``weights``. A
+    learner adds or replaces fields (an offline learner: ``algorithm``, ``cql_alpha``, ...) through ``resolved``.
     """
-    encoder = getattr(learner, "action_encoder", None)
+    encoder = learner.action_encoder
     values: dict[str, Any] = {
         "learner": rc.agent.learner,
         "K": int(rc.agent.K),
@@ -136,11 +136,11 @@ def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
         "nstep": int(rc.agent.nstep),
         "action_encoder": encoder is not None,
         "latent_action_dim": None if encoder is None else int(encoder.latent_dim),
-        "objectives": {str(k): float(w) for k, w in getattr(learner, "weights", {}).items()},
+        "objectives": {str(k): float(w) for k, w in learner.weights.items()},
         "dataset": rc.offline.dataset if is_offline(rc.agent.learner) else None,
         "cql_alpha": None,
     }
-    values.update(getattr(learner, "resolved", None) or {})
+    values.update(learner.resolved)
     return values
 
 

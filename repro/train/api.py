@@ -418,9 +418,7 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, st
     try:
         spec = eval_env.spec
         learner = build_agent(rc, spec.obs_shape, spec.action_dim, device)
-        set_returns = getattr(learner, "set_dataset_returns", None)
-        if set_returns is not None:  # IQL's optional reward scaling reads the dataset's episode returns
-            set_returns([float(r) for r in data.manifest.returns])
+        learner.set_dataset_returns([float(r) for r in data.manifest.returns])  # IQL's optional reward scaling
         values = rundir.resolved_values(rc, learner)
         values.update({"dataset_dir": str(data.directory), "dataset_kind": data.manifest.kind,
                        "dataset_manifest_sha256": data.digest})

@@ -1,9 +1,13 @@
-"""What the online and offline loops share: episode seeds, evaluation rollouts, RNG state, wall-clock time."""
+"""What the online and offline loops share: episode seeds, evaluation rollouts and their eval.csv fields, RNG
+state, wall-clock time and the mean of the update metrics."""
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any, Union
 
 import numpy as np
 import torch
@@ -88,3 +92,61 @@ class WallClock:
 
     def resume(self, before: float) -> None:
         self.before, self._t0 = before, time.time()
+
+
+def eval_fields(result: EvalResult, has_success: bool) -> dict[str, Any]:
+    """The eval.csv fields both loops share: the mean and std of the returns, the success rate (None for a task
+    without success) and the number of episodes (NaN means without episodes)."""
+    returns = result.returns
+    return {"episode_reward": float(np.mean(returns)) if returns else math.nan,
+            "episode_reward_std": float(np.std(returns)) if returns else math.nan,
+            "success": float(np.mean(result.successes)) if (has_success and returns) else None,
+            "eval_episodes": len(returns)}
+
+
+Sum = Union[torch.Tensor, float]
+
+
+class MetricMeans:
+    """The mean of each update metric since the last ``reset``, summed where the metrics are (on the device).
+
+    ``add`` takes one update's metrics (detached 0-d tensors; a plain number works too) and makes no host sync;
+    ``means`` fetches every mean at once, when a row is written. The arithmetic is the loops' former Python
+    arithmetic: a float64 sum from 0.0 of each value in update order, divided by the number of updates, so the
+    logged values are the same bits. ``state``/``load`` carry the sums as floats through a checkpoint.
+    """
+
+    def __init__(self) -> None:
+        self.sums: dict[str, Sum] = {}
+        self.n = 0
+
+    def add(self, metrics: Mapping[str, torch.Tensor | float]) -> None:
+        for k, v in metrics.items():
+            value = v.detach().double() if isinstance(v, torch.Tensor) else float(v)
+            self.sums[k] = self.sums.get(k, 0.0) + value
+        self.n += 1
+
+    def means(self) -> dict[str, float]:
+        """Each metric's mean over the updates since the last reset (empty before the first update)."""
+        if not self.n:
+            return {}
+        return {k: s / self.n for k, s in self._fetch().items()}
+
+    def reset(self) -> None:
+        self.sums, self.n = {}, 0
+
+    def state(self) -> dict[str, Any]:
+        """The sums as floats and the count (a checkpoint's ``sums`` and ``n``)."""
+        return {"sums": self._fetch(), "n": self.n}
+
+    def load(self, sums: Mapping[str, float], n: int) -> None:
+        self.sums, self.n = {k: float(v) for k, v in sums.items()}, int(n)
+
+    def _fetch(self) -> dict[str, float]:
+        """The sums as Python floats: one transfer per device holding any."""
+        out: dict[str, float] = {k: v for k, v in self.sums.items() if not isinstance(v, torch.Tensor)}
+        held = {k: v for k, v in self.sums.items() if isinstance(v, torch.Tensor)}
+        for device in {v.device for v in held.values()}:
+            keys = [k for k, v in held.items() if v.device == device]
+            out.update(zip(keys, torch.stack([held[k] for k in keys]).tolist()))
+        return {k: out[k] for k in self.sums}

@@ -35,7 +35,15 @@ from repro.runs.logger import CsvPairLogger
 from repro.runs.runformat import OFFLINE_TRAIN_COLUMNS, offline_eval_columns
 from repro.runs.video import EvalVideos
 from repro.runs.wblog import WandbRun
-from repro.train.common import EvalResult, WallClock, rng_state, run_eval_episodes, set_rng_state
+from repro.train.common import (
+    EvalResult,
+    MetricMeans,
+    WallClock,
+    eval_fields,
+    rng_state,
+    run_eval_episodes,
+    set_rng_state,
+)
 
 BatchSource = Union[ReplayBuffer, Sampler]  # where update batches come from (both have ``rng`` and ``sample``)
 LEARNER_STATE = ("modules", "optimizers")  # learner state_dict keys stored as "agent" / "optimizers"
@@ -86,12 +94,11 @@ class OfflineTrainer:
         self.budget_ends = frozenset(budget_ends)
         self.has_success = eval_env.spec.has_success
         self.dataset_best_return = dataset_best_return  # a ReturnConditioned learner's second target
-        self.batch_size = int(getattr(learner, "batch_size", learner.cfg.batch_size))  # DT: agent.dt.batch_size
+        self.batch_size = learner.batch_size  # DT: agent.dt.batch_size
         self.update = 0
         self.clock = WallClock()
         self.last_eval: float | None = None
-        self._sums: dict[str, float] = {}  # metrics summed since the last train.csv row
-        self._n = 0
+        self.means = MetricMeans()  # the update metrics since the last train.csv row
         self._window_seconds = 0.0  # update time (evaluation excluded) since the last train.csv row
 
     def total_time(self) -> float:
@@ -101,7 +108,7 @@ class OfflineTrainer:
     def checkpoint_state(self) -> dict:
         state = self.learner.state_dict()
         return {"offline": {"update": self.update, "total_time": self.total_time(), "dataset": self.dataset_digest,
-                            "sums": dict(self._sums), "n": self._n, "window_seconds": self._window_seconds},
+                            **self.means.state(), "window_seconds": self._window_seconds},
                 "agent": state["modules"], "optimizers": state["optimizers"],
                 "learner": {k: v for k, v in state.items() if k not in LEARNER_STATE}, "rng": rng_state(),
                 "replay_rng": self.buffer.rng.bit_generator.state, "csv": self.logger.offsets(),
@@ -111,7 +118,7 @@ class OfflineTrainer:
         check_resume_dataset(state, self.dataset_digest)
         off = state["offline"]
         self.update = int(off["update"])
-        self._sums, self._n = dict(off["sums"]), int(off["n"])
+        self.means.load(off["sums"], off["n"])
         self._window_seconds = float(off["window_seconds"])
         self.learner.load_state_dict({**state.get("learner", {}), "modules": state["agent"],
                                       "optimizers": state["optimizers"]})
@@ -151,15 +158,11 @@ class OfflineTrainer:
         result = self._rollouts(video_size=self.videos.size if video and self.videos else None)
         if result.video and self.videos is not None:
             self.videos.save(self.update, result.video)
-        returns = result.returns
-        mean = float(np.mean(returns)) if returns else math.nan
-        self.last_eval = mean
-        self.logger.log_eval({**extra,
-            "update": self.update, "episode_reward": mean,
-            "episode_reward_std": float(np.std(returns)) if returns else math.nan,
-            "episode_length": float(np.mean(result.lengths)) * self.action_repeat if returns else math.nan,
-            "success": float(np.mean(result.successes)) if (self.has_success and returns) else None,
-            "eval_episodes": len(returns), "normalized_score": normalized_score(mean, self.reference_return),
+        shared = eval_fields(result, self.has_success)
+        mean = self.last_eval = shared["episode_reward"]
+        self.logger.log_eval({**extra, "update": self.update, **shared,
+            "episode_length": float(np.mean(result.lengths)) * self.action_repeat if result.returns else math.nan,
+            "normalized_score": normalized_score(mean, self.reference_return),
             "reference_return": self.reference_return, "score_reference": self.reference_kind,
             "total_time": round(self.total_time(), 3)})
 
@@ -167,12 +170,14 @@ class OfflineTrainer:
         """A train.csv row of the metrics since the last row on the grid; ``reset=False`` (a budget's end off the
         grid) keeps them summing, so the next grid row equals a run that never stopped there."""
         row: dict[str, Any] = {"update": self.update,
-                               "updates_per_s": round(self._n / max(self._window_seconds, 1e-9), 3),
+                               "updates_per_s": round(self.means.n / max(self._window_seconds, 1e-9), 3),
                                "total_time": round(self.total_time(), 3)}
-        row.update({k: self._sums[k] / self._n for k in self.learner.metric_names() if k in self._sums})
+        means = self.means.means()
+        row.update({k: means[k] for k in self.learner.metric_names() if k in means})
         self.logger.log_train(row)
         if reset:
-            self._sums, self._n, self._window_seconds = {}, 0, 0.0
+            self.means.reset()
+            self._window_seconds = 0.0
 
     # ----------------------------------------------------------------- loop
     def run(self) -> int:
@@ -188,11 +193,8 @@ class OfflineTrainer:
                 break
             started = time.time()
             batch: Any = self.buffer.sample(self.batch_size, **self.learner.sample_options)
-            metrics = self.learner.update(batch, self.update)
+            self.means.add(self.learner.update(batch, self.update))
             self.update += 1
-            for k, v in metrics.items():
-                self._sums[k] = self._sums.get(k, 0.0) + v
-            self._n += 1
             self._window_seconds += time.time() - started
             at_end = self.update >= cfg.updates or self.update in self.budget_ends
             on_grid = self.update % cfg.log_every_updates == 0

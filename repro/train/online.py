@@ -20,7 +20,15 @@ from repro.envs.base import Env
 from repro.learners.base import OnlineLearner
 from repro.runs.logger import RunLogger
 from repro.runs.video import EvalVideos
-from repro.train.common import episode_seed, rng_state, run_eval_episodes, set_rng_state
+from repro.train.common import (
+    MetricMeans,
+    WallClock,
+    episode_seed,
+    eval_fields,
+    rng_state,
+    run_eval_episodes,
+    set_rng_state,
+)
 
 __all__ = ["Counters", "Trainer", "episode_seed"]
 
@@ -29,7 +37,6 @@ __all__ = ["Counters", "Trainer", "episode_seed"]
 class Counters:
     step: int = 0  # agent steps
     episode: int = 0  # finished training episodes
-    total_time: float = 0.0  # wall-clock seconds before this process
 
 
 class Trainer:
@@ -49,9 +56,9 @@ class Trainer:
         # stopped there (an evaluation draws no training random number, so the trajectory is unchanged).
         self.budget_end_steps = frozenset(self._steps(f) for f in budget_ends)
         self.counters = Counters()
-        self.batch_size = agent.cfg.batch_size
+        self.batch_size = agent.batch_size
         self.has_success = env.spec.has_success
-        self._t0 = time.time()
+        self.clock = WallClock()
         self.last_eval: float | None = None
         self._eval_seconds = 0.0  # evaluation time inside the current training episode (excluded from fps)
 
@@ -61,7 +68,7 @@ class Trainer:
         return self.counters.step * self.action_repeat
 
     def total_time(self) -> float:
-        return self.counters.total_time + (time.time() - self._t0)
+        return self.clock.total()
 
     def _steps(self, frames: int) -> int:
         return max(frames // self.action_repeat, 1)
@@ -77,12 +84,12 @@ class Trainer:
 
     def restore(self, state: dict) -> None:
         c = state["counters"]
-        self.counters = Counters(int(c["step"]), int(c["episode"]), float(c["total_time"]))
+        self.counters = Counters(int(c["step"]), int(c["episode"]))
+        self.clock.resume(float(c["total_time"]))
         self.agent.load_state_dict({"modules": state["agent"], "optimizers": state["optimizers"]})
         set_rng_state(state["rng"])
         self.buffer.restore(state["buffer"], self.episodes.load)
         self.last_eval = state.get("last_eval")
-        self._t0 = time.time()
 
     # ----------------------------------------------------------------- evaluation
     def evaluate(self, final: bool = False) -> None:
@@ -104,18 +111,15 @@ class Trainer:
                                    video_size=self.videos.size if video and self.videos is not None else None)
         if result.video and self.videos is not None:
             self.videos.save(self.frame, result.video)
-        returns, successes, frames = result.returns, result.successes, result.frames
+        if result.frames and self.save_frames is not None:
+            self.save_frames(np.stack(result.frames))
         lengths = [n * self.action_repeat for n in result.lengths]  # in frames, as upstream
-        if frames and self.save_frames is not None:
-            self.save_frames(np.stack(frames))
-        mean = float(np.mean(returns)) if returns else float("nan")
-        self.last_eval = mean
+        shared = eval_fields(result, self.has_success)
+        self.last_eval = shared["episode_reward"]
         self.logger.log_eval({
-            "frame": self.frame, "step": self.counters.step, "episode": self.counters.episode,
-            "episode_reward": mean, "episode_reward_std": float(np.std(returns)) if returns else float("nan"),
+            "frame": self.frame, "step": self.counters.step, "episode": self.counters.episode, **shared,
             "episode_length": float(np.mean(lengths)) if lengths else float("nan"),
-            "success": float(np.mean(successes)) if (self.has_success and successes) else None,
-            "eval_episodes": len(returns), "total_time": round(self.total_time(), 3)})
+            "total_time": round(self.total_time(), 3)})
 
     # ----------------------------------------------------------------- training
     def _checkpoint(self) -> None:
@@ -137,8 +141,7 @@ class Trainer:
 
         ts = new_episode()
         ep_reward, ep_len, ep_success, ep_start = 0.0, 0, 0.0, time.time()
-        sums: dict[str, float] = {}
-        n_updates = 0
+        means = MetricMeans()  # the update metrics of the current episode
         while True:
             if (self.counters.step % eval_every == 0 or self.counters.step >= total_steps
                     or self.counters.step in self.budget_end_steps):
@@ -151,10 +154,7 @@ class Trainer:
             step = self.counters.step
             action = self.agent.act(ts.observation, step, eval_mode=False)
             if step >= seed_steps and step % cfg.update_every_steps == 0:
-                metrics = self.agent.update(self.buffer.sample(self.batch_size, **self.agent.sample_options), step)
-                for k, v in metrics.items():
-                    sums[k] = sums.get(k, 0.0) + v
-                n_updates += 1
+                means.add(self.agent.update(self.buffer.sample(self.batch_size, **self.agent.sample_options), step))
             ts = self.env.step(action)
             self.buffer.add(action, ts.reward, ts.discount, ts.observation[-3:])
             self.counters.step += 1
@@ -170,7 +170,8 @@ class Trainer:
                        "stddev": self.agent.stddev(self.counters.step),
                        "fps": round(ep_len * self.action_repeat / elapsed, 3),
                        "total_time": round(self.total_time(), 3)}
-                row.update({k: (sums[k] / n_updates if n_updates and k in sums else None) for k in metric_names})
+                episode_means = means.means()
+                row.update({k: episode_means.get(k) for k in metric_names})
                 self.logger.log_train(row)
                 episode = self.buffer.end_episode()
                 self.episodes.save(episode)
@@ -180,5 +181,6 @@ class Trainer:
                     self._checkpoint()
                 ts = new_episode()
                 ep_reward, ep_len, ep_success, ep_start = 0.0, 0, 0.0, time.time()
-                sums, n_updates, self._eval_seconds = {}, 0, 0.0
+                means.reset()
+                self._eval_seconds = 0.0
         return self.counters

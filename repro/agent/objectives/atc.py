@@ -61,10 +61,10 @@ class ATCObjective(Objective):
         h = self.target["encoder"](aux.aug(aux.batch["future_obs"].float()))
         return self.target["state_proj"](h)
 
-    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:
+    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         c = aux.memo("z_anchor", lambda: self.heads.state_proj(aux.anchor()))
         loss, acc = info_nce(self.logits(c, self.target_latent(aux)))
-        return loss, {"atc_loss": loss.item(), "atc_acc": acc}
+        return loss, {"atc_loss": loss.detach(), "atc_acc": acc}
 
     def after_update(self) -> None:
         self.target.update()

@@ -135,16 +135,17 @@ class Objective(nn.Module, abc.ABC):
         self.ctx = ctx
 
     @abc.abstractmethod
-    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:
-        """The objective's loss on this batch and its metrics (floats, keys from ``metric_keys``)."""
+    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """The objective's loss on this batch and its metrics (detached 0-d tensors, no host sync; keys from
+        ``metric_keys``)."""
 
     def after_update(self) -> None:
         """Called after the auxiliary optimizer step (e.g. to move an EMA target). Default: nothing."""
 
 
-def info_nce(logits: torch.Tensor) -> tuple[torch.Tensor, float]:
-    """Cross-entropy against the diagonal, and the accuracy of picking the diagonal."""
+def info_nce(logits: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Cross-entropy against the diagonal, and the accuracy of picking the diagonal (a 0-d tensor)."""
     labels = torch.arange(logits.shape[0], device=logits.device)
     loss = nn.functional.cross_entropy(logits, labels)
-    acc = (logits.argmax(dim=1) == labels).float().mean().item()
+    acc = (logits.detach().argmax(dim=1) == labels).float().mean()
     return loss, acc

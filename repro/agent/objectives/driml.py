@@ -43,10 +43,10 @@ class DRIMLObjective(Objective):
         # AuxBatch has no public hook for encoding another action tensor; its encoder is the agent's.
         return aux.memo("u_first", lambda: aux.encode_actions(first_action_only(aux.batch["action_seq"])))
 
-    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:
+    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         z = aux.memo("z_anchor", lambda: self.heads.state_proj(aux.anchor()))
         x = self.proj_sa(torch.cat([z, self.first_action_code(aux)], dim=-1))
         with torch.no_grad():
             y = self.heads.state_proj(aux.future())
         loss, acc = info_nce(self.heads.logits(x, y))
-        return loss, {"driml_loss": loss.item(), "driml_acc": acc}
+        return loss, {"driml_loss": loss.detach(), "driml_acc": acc}

@@ -86,10 +86,10 @@ class SPRObjective(Objective):
         K = aux.batch["action_seq"].shape[1]
         return torch.stack([self._target(aux, k) for k in range(1, K + 1)], dim=1)
 
-    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:
+    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         pred, target = self.predict(aux), self.target_projection(aux)
         loss = negative_cosine(pred.flatten(0, 1), target.flatten(0, 1))  # mean over rows and steps
-        return loss, {"spr_loss": loss.item()}
+        return loss, {"spr_loss": loss.detach()}
 
     def after_update(self) -> None:
         if self.target is not None:

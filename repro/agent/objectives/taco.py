@@ -22,13 +22,13 @@ class TACOObjective(Objective):
                                      nn.Linear(ctx.hidden_dim, ctx.feature_dim))
         self.proj_sa.apply(orthogonal_init)
 
-    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:
+    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         z = aux.memo("z_anchor", lambda: self.heads.state_proj(aux.anchor()))
         x = self.proj_sa(torch.cat([z, aux.action_sequence()], dim=-1))
         with torch.no_grad():
             y = self.heads.state_proj(aux.future())
         loss, acc = info_nce(self.heads.logits(x, y))
-        return loss, {"taco_loss": loss.item(), "taco_acc": acc}
+        return loss, {"taco_loss": loss.detach(), "taco_acc": acc}
 
 
 @register("curl")
@@ -41,12 +41,12 @@ class CURLObjective(Objective):
         super().__init__(ctx)
         self.heads = ctx.shared()
 
-    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:
+    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         x = aux.memo("z_anchor", lambda: self.heads.state_proj(aux.anchor()))
         with torch.no_grad():
             y = self.heads.state_proj(aux.positive())
         loss, acc = info_nce(self.heads.logits(x, y))
-        return loss, {"curl_loss": loss.item(), "curl_acc": acc}
+        return loss, {"curl_loss": loss.detach(), "curl_acc": acc}
 
 
 @register("reward")
@@ -60,8 +60,8 @@ class RewardObjective(Objective):
                                   nn.Linear(ctx.hidden_dim, 1))
         self.head.apply(orthogonal_init)
 
-    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, float]]:
+    def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         z = aux.memo("z_anchor", lambda: self.heads.state_proj(aux.anchor()))
         pred = self.head(torch.cat([z, aux.action_sequence()], dim=-1))
         loss = nn.functional.mse_loss(pred, aux.reward())
-        return loss, {"reward_loss": loss.item()}
+        return loss, {"reward_loss": loss.detach()}

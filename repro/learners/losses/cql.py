@@ -87,7 +87,7 @@ def critic_regularisers(critic: Callable[[torch.Tensor, torch.Tensor], Sequence[
                         temperature: float, *, importance_sampling: bool, include_data_in_logsumexp: bool,
                         log_prob_policy: torch.Tensor | None = None,
                         log_prob_next_policy: torch.Tensor | None = None,
-                        ) -> tuple[tuple[torch.Tensor, ...], dict[str, float]]:
+                        ) -> tuple[tuple[torch.Tensor, ...], dict[str, torch.Tensor]]:
     """The regulariser of every critic head, and metrics named per head (``cql_reg_q1`` ...).
 
     ``critic(h_rows, action_rows)`` returns one (rows, 1) or (rows,) tensor per head (the DrQ-v2 Critic, or a
@@ -108,7 +108,7 @@ def critic_regularisers(critic: Callable[[torch.Tensor, torch.Tensor], Sequence[
     if len(q_heads) != len(q_data):
         raise ValueError(f"the critic returned {len(q_heads)} heads but q_data has {len(q_data)}")
     regs: list[torch.Tensor] = []
-    metrics: dict[str, float] = {}
+    metrics: dict[str, torch.Tensor] = {}
     for i, (q_all, q_d) in enumerate(zip(q_heads, q_data), start=1):
         q_all = q_all.reshape(batch, 3 * n)
         q_u, q_p, q_np = q_all[:, :n], q_all[:, n:2 * n], q_all[:, 2 * n:]
@@ -117,10 +117,10 @@ def critic_regularisers(critic: Callable[[torch.Tensor, torch.Tensor], Sequence[
                                  log_prob_policy=log_prob_policy, log_prob_next_policy=log_prob_next_policy,
                                  include_data_in_logsumexp=include_data_in_logsumexp)
         regs.append(reg)
-        metrics[f"cql_reg_q{i}"] = reg.item()
-        metrics[f"cql_lse_q{i}"] = parts["lse"].item()
-        metrics[f"cql_q_data_q{i}"] = parts["q_data"].item()
-        metrics[f"cql_q_uniform_q{i}"] = q_u.mean().item()
-        metrics[f"cql_q_policy_q{i}"] = q_p.mean().item()
-        metrics[f"cql_q_next_policy_q{i}"] = q_np.mean().item()
+        metrics[f"cql_reg_q{i}"] = reg.detach()
+        metrics[f"cql_lse_q{i}"] = parts["lse"]
+        metrics[f"cql_q_data_q{i}"] = parts["q_data"]
+        metrics[f"cql_q_uniform_q{i}"] = q_u.detach().mean()
+        metrics[f"cql_q_policy_q{i}"] = q_p.detach().mean()
+        metrics[f"cql_q_next_policy_q{i}"] = q_np.detach().mean()
     return tuple(regs), metrics

@@ -25,7 +25,7 @@ from repro.learners.losses._checks import same_shape
 
 
 def value_loss(target_q1: torch.Tensor, target_q2: torch.Tensor, v: torch.Tensor,
-               expectile: float) -> tuple[torch.Tensor, dict[str, float]]:
+               expectile: float) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Expectile regression of V(s) onto min_i Qtarget_i(s, a); the target critic gets no gradient."""
     same_shape(target_q1=target_q1, target_q2=target_q2, v=v)
     if not 0.0 < expectile < 1.0:
@@ -33,7 +33,7 @@ def value_loss(target_q1: torch.Tensor, target_q2: torch.Tensor, v: torch.Tensor
     d = torch.min(target_q1, target_q2).detach() - v
     weight = torch.abs(expectile - (d < 0).to(d.dtype))
     loss = (weight * d.pow(2)).mean()
-    return loss, {"value_loss": loss.item(), "value_v": v.mean().item()}
+    return loss, {"value_loss": loss.detach(), "value_v": v.detach().mean()}
 
 
 def critic_target(reward: torch.Tensor, discount: torch.Tensor, next_v: torch.Tensor) -> torch.Tensor:
@@ -42,17 +42,18 @@ def critic_target(reward: torch.Tensor, discount: torch.Tensor, next_v: torch.Te
     return (reward + discount * next_v).detach()
 
 
-def critic_loss(q1: torch.Tensor, q2: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+def critic_loss(q1: torch.Tensor, q2: torch.Tensor, target: torch.Tensor
+                ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Sum over the twin heads of the mean squared error to the (detached) target."""
     same_shape(q1=q1, q2=q2, target=target)
     target = target.detach()
     loss = (q1 - target).pow(2).mean() + (q2 - target).pow(2).mean()
-    return loss, {"critic_loss": loss.item(), "critic_q1": q1.mean().item(), "critic_q2": q2.mean().item(),
-                  "critic_target_q": target.mean().item()}
+    return loss, {"critic_loss": loss.detach(), "critic_q1": q1.detach().mean(), "critic_q2": q2.detach().mean(),
+                  "critic_target_q": target.mean()}
 
 
 def actor_loss(log_prob: torch.Tensor, target_q1: torch.Tensor, target_q2: torch.Tensor, v: torch.Tensor,
-               beta: float, max_weight: float) -> tuple[torch.Tensor, dict[str, float]]:
+               beta: float, max_weight: float) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Advantage-weighted regression: -mean min(exp(beta * adv), max_weight) * log pi(a|s).
 
     ``log_prob``: log pi(a|s) of the dataset action, summed over action dimensions, same shape as ``v``.
@@ -62,8 +63,8 @@ def actor_loss(log_prob: torch.Tensor, target_q1: torch.Tensor, target_q2: torch
     adv = (torch.min(target_q1, target_q2) - v).detach()
     weight = torch.clamp(torch.exp(beta * adv), max=max_weight)
     loss = -(weight * log_prob).mean()
-    return loss, {"actor_loss": loss.item(), "actor_adv": adv.mean().item(),
-                  "actor_weight": weight.mean().item(), "actor_logprob": log_prob.mean().item()}
+    return loss, {"actor_loss": loss.detach(), "actor_adv": adv.mean(),
+                  "actor_weight": weight.detach().mean(), "actor_logprob": log_prob.detach().mean()}
 
 
 def cosine_lr(base_lr: float, update: int, decay_updates: int) -> float:

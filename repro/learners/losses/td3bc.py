@@ -22,7 +22,7 @@ from repro.learners.losses._checks import same_shape
 
 
 def actor_loss(q1: torch.Tensor, q2: torch.Tensor, policy_action: torch.Tensor, data_action: torch.Tensor,
-               alpha: float, lambda_from: LambdaFrom | str) -> tuple[torch.Tensor, dict[str, float]]:
+               alpha: float, lambda_from: LambdaFrom | str) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """TD3+BC actor loss and its metrics.
 
     ``q1``, ``q2``: the critic's heads at (sg(h), u(policy_action)), same shape (e.g. (B, 1)).
@@ -42,6 +42,6 @@ def actor_loss(q1: torch.Tensor, q2: torch.Tensor, policy_action: torch.Tensor, 
     q_term = q.mean()
     bc = F.mse_loss(policy_action, data_action.detach())
     loss = -lam * q_term + bc
-    metrics = {"actor_loss": loss.item(), "actor_lambda": lam.item(), "actor_bc": bc.item(),
-               "actor_q": q_term.item()}
+    metrics = {"actor_loss": loss.detach(), "actor_lambda": lam.detach(), "actor_bc": bc.detach(),
+               "actor_q": q_term.detach()}
     return loss, metrics

@@ -1,0 +1,309 @@
+"""The DrQ-v2 pixel backbone as one component: what the online agent (``agent.py``) and the offline learners on it
+(TD3+BC, CQL, IQL: ``repro/learners/``) own as their ``backbone`` attribute.
+
+It holds the networks (encoder, optional action encoder u, actor, twin critic, target critic), the auxiliary
+objectives (``agent.objectives``) and their shared heads, the optimizers (built in one place,
+``_build_optimizers``), the augmentation ``aug`` and the encode function ``_encode`` (the compiled encoder with
+``agent.compile``), and the steps an update is made of: encoding a batch, DrQ-v2's critic loss and step, its actor
+step, the target update and the auxiliary step. Each learner's ``update()`` calls them in its reference's order.
+The losses are the pure functions of ``repro/agent/losses.py``.
+
+``autocast``: the online agent runs its forward passes under ``agent.amp``'s bfloat16 autocast; the offline
+learners encode and compute the critic loss without it (``autocast=False``), as they always have.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Callable, Mapping
+from typing import ClassVar, cast
+
+import numpy as np
+import torch
+from torch import nn
+
+from repro.agent import losses
+from repro.agent.aug import RandomShift
+from repro.agent.losses import Metrics
+from repro.agent.modules import LearnerBase, ModuleSet
+from repro.agent.networks import ActionEncoder, Actor, Critic, Encoder, default_latent_action_dim
+from repro.agent.objectives import OBJECTIVES, AuxBatch, Objective, ObjectiveContext
+from repro.config.schema import AgentConfig
+
+EncodedBatch = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]  # h, h', a, r, discount
+
+
+def soft_update(net: nn.Module, target: nn.Module, tau: float) -> None:
+    """Polyak averaging: target <- (1 - tau) target + tau net."""
+    with torch.no_grad():
+        for p, tp in zip(net.parameters(), target.parameters()):
+            tp.lerp_(p, tau)
+
+
+def optimize(loss: torch.Tensor, *opts: torch.optim.Optimizer) -> None:
+    """Zero the gradients of ``opts``, backpropagate ``loss`` and step each optimizer."""
+    for opt in opts:
+        opt.zero_grad(set_to_none=True)
+    loss.backward()
+    for opt in opts:
+        opt.step()
+
+
+class DrQV2Backbone:
+    """DrQ-v2's networks, optimizers and update steps, with an optional action encoder and auxiliary objectives."""
+
+    def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
+                 device: torch.device | str = "cpu"):
+        self.cfg = cfg
+        self.device = torch.device(device)
+        self.action_dim = action_dim
+        self.aug: Callable[[torch.Tensor], torch.Tensor] = RandomShift(pad=4)
+        self._build_networks(obs_shape)
+        self._build_objectives()
+        self._build_optimizers()
+
+    # ----------------------------------------------------------------- building (in this order: it draws the init)
+    def _build_networks(self, obs_shape: tuple[int, int, int]) -> None:
+        """Encoder, action encoder (``agent.action_encoder``), actor, critic and its target (a copy)."""
+        cfg = self.cfg
+        self.encoder = Encoder(obs_shape).to(self.device)
+        # Opt-in speedup: a compiled encoder for updates (acting uses the plain one).
+        self._encode: Callable[[torch.Tensor], torch.Tensor] = (
+            torch.compile(self.encoder, dynamic=False) if cfg.compile else self.encoder)
+        self.repr_dim = repr_dim = self.encoder.repr_dim
+        self.action_encoder: ActionEncoder | None = None
+        if cfg.action_encoder:
+            latent = cfg.latent_action_dim or default_latent_action_dim(self.action_dim, cfg.latent_action_rounding)
+            self.action_encoder = ActionEncoder(self.action_dim, latent, cfg.K, cfg.action_hidden_dim).to(self.device)
+            self.step_dim = latent
+        else:
+            self.step_dim = self.action_dim  # one encoded action: d_u, or |A| without an action encoder
+        self.actor = Actor(repr_dim, self.action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
+        self.critic = Critic(repr_dim, self.step_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
+        self.critic_target = Critic(repr_dim, self.step_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
+        self.critic_target.load_state_dict(self.critic.state_dict())
+        self.critic_target.requires_grad_(False)
+
+    def _build_objectives(self) -> None:
+        """The objectives of nonzero weight, in ``agent.objectives`` order, and the heads they share."""
+        cfg = self.cfg
+        active = [name for name, w in cfg.objectives.items() if w]
+        ctx = ObjectiveContext(repr_dim=self.repr_dim, feature_dim=cfg.feature_dim, hidden_dim=cfg.hidden_dim,
+                               action_dim=self.action_dim, K=cfg.K, seq_dim=cfg.K * self.step_dim,
+                               step_dim=self.step_dim, encoder=self.encoder)
+        objectives = OrderedDict()
+        for name in active:
+            ctx.params = dict(cfg.objective_params.get(name, {}))
+            objectives[name] = OBJECTIVES[name](ctx)
+        self.objectives = nn.ModuleDict(objectives).to(self.device)
+        self.shared = ctx._shared.to(self.device) if ctx._shared is not None else None
+        self.weights = {name: float(cfg.objectives[name]) for name in active}
+        # what the replay must return for these objectives (passed to ReplayBuffer.sample)
+        self.sample_options = {"future_seq": any(o.needs_future_seq for o in self.objectives.values())}
+
+    def _build_optimizers(self) -> None:
+        """Adam for the encoder, the actor, the critic (with the action encoder) and, with objectives, one for the
+        auxiliary step over the encoder, the action encoder, the shared heads and the objectives."""
+        lr = self.cfg.lr
+        self.encoder_opt = torch.optim.Adam(self.encoder.parameters(), lr=lr)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr)
+        critic_params = list(self.critic.parameters())
+        if self.action_encoder is not None:
+            critic_params += list(self.action_encoder.parameters())
+        self.critic_opt = torch.optim.Adam(critic_params, lr=lr)
+        self.aux_opt: torch.optim.Optimizer | None = None
+        if self.objectives:
+            aux_params = list(self.encoder.parameters()) + list(self.objectives.parameters())
+            if self.action_encoder is not None:
+                aux_params += list(self.action_encoder.parameters())
+            if self.shared is not None:
+                aux_params += list(self.shared.parameters())
+            self.aux_opt = torch.optim.Adam(_unique(aux_params), lr=lr)
+
+    # ----------------------------------------------------------------- modules and state
+    def modules(self) -> dict[str, nn.Module]:
+        """Every module with parameters, by name (the checkpoint's keys)."""
+        mods: dict[str, nn.Module] = {"encoder": self.encoder, "actor": self.actor, "critic": self.critic,
+                                      "critic_target": self.critic_target}
+        if self.action_encoder is not None:
+            mods["action_encoder"] = self.action_encoder
+        if self.shared is not None:
+            mods["shared_heads"] = self.shared
+        for name, obj in self.objectives.items():
+            mods[f"objective.{name}"] = obj
+        return mods
+
+    def optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        opts: dict[str, torch.optim.Optimizer] = {"encoder": self.encoder_opt, "actor": self.actor_opt,
+                                                  "critic": self.critic_opt}
+        if self.aux_opt is not None:
+            opts["aux"] = self.aux_opt
+        return opts
+
+    def aux_metric_names(self) -> list[str]:
+        """The auxiliary step's train.csv columns (none without objectives)."""
+        names: list[str] = []
+        for objective in cast("dict[str, Objective]", self.objectives).values():
+            names += objective.metric_keys()
+        return names + ["aux_loss"] if self.objectives else names
+
+    # ----------------------------------------------------------------- acting
+    def encode_action(self, action: torch.Tensor) -> torch.Tensor:
+        return self.action_encoder(action) if self.action_encoder is not None else action
+
+    def encode_action_steps(self, actions: torch.Tensor) -> torch.Tensor:
+        """(B, K, |A|) -> (B, K, step_dim): each action encoded alone (raw without an action encoder)."""
+        return self.action_encoder(actions) if self.action_encoder is not None else actions
+
+    def encode_action_sequence(self, actions: torch.Tensor) -> torch.Tensor:
+        if self.action_encoder is not None:
+            return self.action_encoder.encode_sequence(actions)
+        return actions.flatten(1)
+
+    def stddev(self, step: int) -> float:
+        return self.cfg.stddev_schedule(step)
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, step: int, eval_mode: bool, explore_steps: int = 0) -> np.ndarray:
+        """Mean action in eval mode; otherwise a noisy sample, uniform during the first ``explore_steps``."""
+        obs_t = torch.as_tensor(obs, device=self.device).float().unsqueeze(0)
+        dist = self.actor(self.encoder(obs_t), self.stddev(step))
+        if eval_mode:
+            action = dist.mean
+        else:
+            action = dist.sample(clip=None)
+            if step < explore_steps:
+                action.uniform_(-1.0, 1.0)
+        return action.cpu().numpy()[0].astype(np.float32)
+
+    # ----------------------------------------------------------------- the steps an update is made of
+    def autocast(self, enabled: bool = True) -> torch.autocast:
+        """bfloat16 autocast of forward passes when ``agent.amp`` is on and ``enabled`` (losses stay float32)."""
+        return torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=enabled and self.cfg.amp)
+
+    def encode_batch(self, batch: dict[str, torch.Tensor], autocast: bool = True) -> EncodedBatch:
+        """(h, h', a, r, discount): the shifted frames encoded (h with the encoder's gradient, h' without) and the
+        batch's action, reward and discount (gamma^n x not-done). Actions are data: no gradient flows into them."""
+        obs = self.aug(batch["obs"].float())
+        next_obs = self.aug(batch["next_obs"].float())
+        with self.autocast(autocast):
+            h = self._encode(obs)
+            with torch.no_grad():
+                next_h = self._encode(next_obs)
+        return h, next_h, batch["action"].detach(), batch["reward"], batch["discount"]
+
+    def critic_loss(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
+                    next_h: torch.Tensor, step: int, autocast: bool = True
+                    ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], Metrics]:
+        """DrQ-v2's critic loss sum_i mse(Q_i(h, u(a)), r + discount x min_i Qtarget_i(h', u(a'))), a' a
+        clipped-noise policy sample at h'; returns the loss, (Q1, Q2) at the data actions and the metrics."""
+        with self.autocast(autocast):
+            with torch.no_grad():
+                dist = self.actor(next_h, self.stddev(step))
+                next_action = self.encode_action(dist.sample(clip=self.cfg.stddev_clip))
+                tq1, tq2 = self.critic_target(next_h, next_action)
+                target_q = losses.critic_target(reward, discount, tq1, tq2)
+            q1, q2 = self.critic(h, self.encode_action(action))
+            loss, (q1, q2) = losses.critic_loss(q1, q2, target_q)
+        return loss, (q1, q2), losses.critic_metrics(loss, q1, q2, target_q)
+
+    def critic_step(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
+                    next_h: torch.Tensor, step: int, autocast: bool = True) -> Metrics:
+        """One step of DrQ-v2's critic loss on the critic (with the action encoder) and the encoder."""
+        loss, _, metrics = self.critic_loss(h, action, reward, discount, next_h, step, autocast)
+        optimize(loss, self.critic_opt, self.encoder_opt)
+        return metrics
+
+    def actor_step(self, h: torch.Tensor, step: int) -> Metrics:
+        """One step of DrQ-v2's actor loss -min_i Q_i(h, u(a~)) on the actor (``h``: detached features)."""
+        with self.autocast():
+            dist = self.actor(h, self.stddev(step))
+            action = dist.sample(clip=self.cfg.stddev_clip)
+            log_prob = dist.log_prob(action).sum(-1, keepdim=True)
+            q1, q2 = self.critic(h, self.encode_action(action))
+            loss = losses.actor_loss(q1, q2)
+        optimize(loss, self.actor_opt)
+        return losses.actor_metrics(loss, log_prob, dist.entropy().sum(-1))
+
+    def update_target(self) -> None:
+        """Polyak averaging of the target critic (``critic_target_tau``)."""
+        soft_update(self.critic, self.critic_target, self.cfg.critic_target_tau)
+
+    def aux_step(self, batch: dict[str, torch.Tensor]) -> Metrics:
+        """One step of the weighted sum of the auxiliary objectives (with their own fresh shifts of the frames);
+        without objectives nothing, and no metrics."""
+        if self.aux_opt is None:
+            return {}
+        aux = AuxBatch(batch, self._encode, self.aug, self.encode_action_sequence, self.cfg.reward_target,
+                       self.encode_action_steps)
+        total = torch.zeros((), device=self.device)
+        metrics: Metrics = {}
+        with self.autocast():
+            for name, objective in self.objectives.items():
+                loss, m = objective(aux)
+                total = total + self.weights[name] * loss.float()
+                metrics.update(m)
+        optimize(total, self.aux_opt)
+        for objective in cast("dict[str, Objective]", self.objectives).values():
+            objective.after_update()
+        metrics["aux_loss"] = total.detach()
+        return metrics
+
+
+class BackboneLearner(LearnerBase, ModuleSet):
+    """What a learner that owns a ``DrQV2Backbone`` (as ``backbone``) forwards to it: its modules and optimizers
+    (a learner with networks of its own extends them), acting, the noise schedule, the objectives' weights, the
+    action encoder and the auxiliary step's metric names after the learner's own ``update_metrics``. Its
+    constructor builds the backbone (the learner registry's signature); a learner with networks of its own builds
+    them after it. Not a learner itself: a learner adds ``update()``."""
+
+    untrained = ("critic_target",)  # the target critic follows by soft updates: not counted
+    update_metrics: ClassVar[tuple[str, ...]]  # the train.csv columns of update(), before the auxiliary step's
+    explores: ClassVar[bool] = False  # whether acting explores (online): offline learners ignore explore_steps
+
+    def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
+                 device: torch.device | str = "cpu", explore_steps: int = 0):
+        self.cfg = cfg
+        self.explore_steps = explore_steps if self.explores else 0  # agent steps of uniform random actions
+        self.backbone = DrQV2Backbone(cfg, obs_shape, action_dim, device)
+        self.sample_options = self.backbone.sample_options  # what the replay returns for the objectives
+
+    def modules(self) -> dict[str, nn.Module]:
+        return self.backbone.modules()
+
+    def optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        return self.backbone.optimizers()
+
+    def metric_names(self) -> list[str]:
+        return list(self.update_metrics) + self.backbone.aux_metric_names()
+
+    @property
+    def action_dim(self) -> int:
+        return self.backbone.action_dim
+
+    @property
+    def device(self) -> torch.device:
+        return self.backbone.device
+
+    @property
+    def weights(self) -> Mapping[str, float]:
+        return self.backbone.weights
+
+    @property
+    def action_encoder(self) -> ActionEncoder | None:
+        return self.backbone.action_encoder
+
+    def stddev(self, step: int) -> float:
+        return self.backbone.stddev(step)
+
+    def act(self, obs: np.ndarray, step: int, eval_mode: bool) -> np.ndarray:
+        return self.backbone.act(obs, step, eval_mode, self.explore_steps)
+
+
+def _unique(params: list[nn.Parameter]) -> list[nn.Parameter]:
+    seen, out = set(), []
+    for p in params:
+        if id(p) not in seen:
+            seen.add(id(p))
+            out.append(p)
+    return out
