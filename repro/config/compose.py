@@ -16,6 +16,7 @@ from omegaconf.errors import OmegaConfBaseException
 from repro.config.plugins import PluginError
 from repro.config.schema import (
     BUDGET_KEYS,
+    AgentConfig,
     LearnerName,
     RunConfig,
     choice_fields,
@@ -216,8 +217,10 @@ def _structure(raw: DictConfig) -> DictConfig:
     schema = OmegaConf.structured(RunConfig)
     section = plugin_section(learner)
     if section is not None:
-        with open_dict(schema.agent):
-            schema.agent[learner] = OmegaConf.structured(section)
+        agent = OmegaConf.structured(AgentConfig)
+        with open_dict(agent):
+            agent[learner] = OmegaConf.structured(section)
+        schema.agent = agent
     return schema
 
 

@@ -169,7 +169,8 @@ class OfflineTrainer:
         row: dict[str, Any] = {"update": self.update,
                                "updates_per_s": round(self._n / max(self._window_seconds, 1e-9), 3),
                                "total_time": round(self.total_time(), 3)}
-        row.update({k: self._sums[k] / self._n for k in self.learner.metric_names() if k in self._sums})
+        # float(): a learner may return its metrics as 0-d tensors (summed on the device, fetched here)
+        row.update({k: float(self._sums[k] / self._n) for k in self.learner.metric_names() if k in self._sums})
         self.logger.log_train(row)
         if reset:
             self._sums, self._n, self._window_seconds = {}, 0, 0.0
