@@ -43,7 +43,7 @@ except importlib.metadata.PackageNotFoundError:  # the suite needs it: say how t
                        "(make test installs it)") from None
 
 TINY = ["task=cheetah_run", "profile=tiny", "env.image_size=32", "agent.feature_dim=16", "agent.hidden_dim=16",
-        "runtime.threads=1"]
+        "runtime.threads=1", "env.max_episode_frames=20"]  # 10-step episodes: rendering is most of the time
 OFFLINE = ["offline.dataset=medium", "offline.updates=4", "offline.eval_every_updates=4", "offline.eval_episodes=1",
            "offline.checkpoint_every_updates=4", "offline.log_every_updates=2"]
 
@@ -84,7 +84,8 @@ def test_a_plugin_learner_s_section_is_typed_and_held_by_its_runs_only():
 
 
 @pytest.mark.parametrize("override, message", [
-    ("agent.learner=toy_rwbcc", "agent.learner=toy_rwbcc is not one of actor_critic, bc, td3bc, cql, iql, dt, toy_rwbc."),
+    ("agent.learner=toy_rwbcc",
+     "agent.learner=toy_rwbcc is not one of actor_critic, bc, td3bc, cql, iql, dt, toy_rwbc."),
     ("+agent.objectives.toy_invv=1", "unknown objective 'toy_invv'. Did you mean: toy_inv?"),
 ])
 def test_a_misspelled_registered_name_is_one_line_and_exit_2(tmp_path, override: str, message: str):
@@ -122,6 +123,7 @@ def test_the_toy_learner_weights_bc_by_return_and_returns_detached_scalars():
     assert float(metrics["rwbc_max_weight"]) == pytest.approx(float((w / w.mean()).max()))
 
 
+@pytest.mark.slow
 def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_path):
     """The offline learner through `repro sweep` and `repro status`, the objective through `repro train`'s API;
     the analysis table of their run directories shows each one's registered label."""
@@ -139,8 +141,8 @@ def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_pa
     assert out.exit_code == 0, out.output
     status = runner.invoke(app, ["status", "toy", "--results-root", str(root)])
     assert status.exit_code == 0 and "1 done" in status.output, status.output
-    online = api.train([*TINY, "agent=toy_inv", f"runtime.results_root={root}", "experiment=toy", "train.frames=100",
-                        "train.seed_frames=50", "train.eval_every_frames=100", "env.max_episode_frames=50",
+    online = api.train([*TINY, "agent=toy_inv", f"runtime.results_root={root}", "experiment=toy", "train.frames=40",
+                        "train.seed_frames=20", "train.explore_steps=10", "train.eval_every_frames=40",
                         "train.eval_episodes=1", "train.save_frames=false"], echo=lambda s: None)
     runs = {yaml.safe_load(p.read_text())["agent"]["name"]: p.parent for p in root.rglob(rundir.CONFIG)}
     assert set(runs) == {"toy_rwbc", "toy_inv"} and runs["toy_inv"] == online
