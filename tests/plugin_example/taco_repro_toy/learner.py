@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from torch import nn
 
 from repro.agent.aug import RandomShift
 from repro.agent.modules import ModuleSet
@@ -21,7 +22,8 @@ METRICS = ("rwbc_loss", "rwbc_max_weight")
 
 
 class RWBC(ModuleSet):
-    """Offline learner ``toy_rwbc``: the signature every learner factory has (repro/learners/registry.py)."""
+    """Offline learner ``toy_rwbc``: the signature every learner factory has (repro/learners/registry.py). One Adam
+    over the encoder and the actor, which the weighted loss trains together."""
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
@@ -29,41 +31,39 @@ class RWBC(ModuleSet):
         self.own: RWBCConfig = learner_section(cfg, RWBCConfig)  # agent.toy_rwbc, typed
         self.device = torch.device(device)
         self.aug = RandomShift(pad=4)
-        self.encoder = Encoder(obs_shape).to(self.device)
-        self.actor = Actor(self.encoder.repr_dim, action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
-        self.encoder_opt = torch.optim.Adam(self.encoder.parameters(), lr=cfg.lr)
-        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr)
+        encoder = Encoder(obs_shape)
+        self.nets = nn.ModuleDict({"encoder": encoder, "actor": Actor(encoder.repr_dim, action_dim, cfg.feature_dim,
+                                                                      cfg.hidden_dim)}).to(self.device)
+        self.opt = torch.optim.Adam(self.nets.parameters(), lr=cfg.lr)
         self.sample_options: dict = {}
         self.train(True)
 
-    def modules(self) -> dict[str, torch.nn.Module]:
-        return {"encoder": self.encoder, "actor": self.actor}
+    def modules(self) -> dict[str, nn.Module]:
+        return dict(self.nets.items())
 
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:
-        return {"encoder": self.encoder_opt, "actor": self.actor_opt}
+        return {"rwbc": self.opt}
 
     def metric_names(self) -> list[str]:
         return list(METRICS)
 
-    def policy(self, obs: torch.Tensor) -> torch.Tensor:
-        """Deterministic action in [-1, 1] (the actor's tanh mean) for float observations (B, C, H, W)."""
-        return self.actor(self.encoder(obs), 1.0).mean
-
     def stddev(self, step: int) -> float:
-        return 0.0
+        return 0.0  # a deterministic policy
+
+    def policy(self, obs: torch.Tensor) -> torch.Tensor:
+        """The actor's tanh mean, in [-1, 1], for float observations (B, C, H, W)."""
+        return self.nets["actor"](self.nets["encoder"](obs), 1.0).mean
 
     @torch.no_grad()
     def act(self, obs: np.ndarray, step: int, eval_mode: bool) -> np.ndarray:
-        obs_t = torch.as_tensor(obs, device=self.device).float().unsqueeze(0)
-        return self.policy(obs_t).cpu().numpy()[0].astype(np.float32)
+        action = self.policy(torch.as_tensor(obs[None], device=self.device).float())
+        return action[0].cpu().numpy().astype(np.float32)
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> dict[str, torch.Tensor]:
         """One step on the weighted loss; the metrics are detached 0-d tensors (no host sync)."""
         weights = return_weights(batch["reward"], self.own.temperature, self.own.max_weight)
         loss = weighted_bc_loss(self.policy(self.aug(batch["obs"].float())), batch["action"], weights)
-        self.encoder_opt.zero_grad(set_to_none=True)
-        self.actor_opt.zero_grad(set_to_none=True)
+        self.opt.zero_grad(set_to_none=True)
         loss.backward()
-        self.actor_opt.step()
-        self.encoder_opt.step()
+        self.opt.step()
         return {"rwbc_loss": loss.detach(), "rwbc_max_weight": weights.max()}
