@@ -151,3 +151,15 @@ def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_pa
         assert len(values) and all(math.isfinite(float(v)) for v in values), (run, column)
     table = to_markdown(final_scores(load_results(root))[["method", "task", "seed", "score"]])
     assert "| RWBC " in table and "| InvDyn " in table, table
+
+
+def test_the_paper_s_offline_sweeps_list_every_packaged_offline_agent_file_and_no_plugin_s():
+    """A learner added to the tree without its agent files in the two offline sweeps fails here; a plugin's learner
+    goes in a sweep file of its own (it is not the paper's)."""
+    from repro.config.compose import CONF_DIR
+    from repro.launch import spec as specs
+
+    packaged = {a for a in offline_agents() if (CONF_DIR / "agent" / f"{a}.yaml").is_file()}
+    assert "toy_rwbc" not in packaged and {"bc", "cql", "dt"} <= packaged
+    for sweep in ("offline", "tiny_offline"):
+        assert set(specs.load(sweep).agents) == packaged, sweep

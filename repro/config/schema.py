@@ -58,8 +58,11 @@ def is_offline(learner: str) -> bool:
 
 def learner_sections(learner: str) -> tuple[str, ...]:
     """The dotted config sections a learner alone reads: its own ``agent.<name>`` (when it registers a section)
-    and, offline, ``offline``."""
-    spec = learner_specs()[str(learner)]
+    and, offline, ``offline``. A learner nobody registers here (a run of a plugin not installed): ``offline``; its
+    own section, unknown, is left as its run wrote it."""
+    spec = learner_specs().get(str(learner))
+    if spec is None:
+        return ("offline",)
     return ((f"agent.{spec.name}",) if spec.section is not None else ()) + (("offline",) if spec.offline else ())
 
 
