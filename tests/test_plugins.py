@@ -30,7 +30,7 @@ from repro.config.compose import (
     run_keys,
     typed,
 )
-from repro.config.plugins import LearnerSpec, PluginError, discover
+from repro.config.plugins import LearnerSpec, PluginError, discover, load_factory
 from repro.config.schema import is_offline, learner_names, objective_names, unread_keys
 from repro.learners import build_learner
 from repro.runs import rundir
@@ -106,6 +106,10 @@ def test_a_broken_registration_is_one_line(monkeypatch):
     monkeypatch.setattr("repro.config.plugins.entry_points", lambda group: [EntryPoint()])
     with pytest.raises(PluginError, match="registers 'toy_rwbc' under the entry-point name 'other'"):
         discover("taco_repro.learners", LearnerSpec)
+    with pytest.raises(PluginError, match=r"^'gone': cannot import its factory taco_repro_toy\.nope:Gone: "
+                                          "ModuleNotFoundError") as err:
+        load_factory(LearnerSpec("gone", offline=True, label="Gone", factory="taco_repro_toy.nope:Gone"))
+    assert "\n" not in str(err.value)
 
 
 def test_the_toy_learner_weights_bc_by_return_and_returns_detached_scalars():
