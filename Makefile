@@ -33,12 +33,19 @@ $(WANDB_STAMP): $(STAMP)
 	$(BIN)/pip install -q -e '.[wandb]'
 	touch $(WANDB_STAMP)
 
+# The worked example of docs/extending.md, a plugin package installed as a user would: tests/test_plugins.py trains
+# its learner and objective through the entry points it registers.
+PLUGIN_STAMP := $(VENV)/.installed-plugin-example
+$(PLUGIN_STAMP): $(STAMP) tests/plugin_example/pyproject.toml
+	$(BIN)/pip install -q --no-deps -e tests/plugin_example
+	touch $(PLUGIN_STAMP)
+
 # The main job: a tiny end-to-end reproduction on the defaults.
 repro: $(STAMP)
 	$(BIN)/repro reproduce
 
 # Static checks on the packages (ruff: pyproject [tool.ruff]; mypy: pyproject [tool.mypy]).
-lint: $(STAMP) $(WANDB_STAMP)
+lint: $(STAMP) $(WANDB_STAMP) $(PLUGIN_STAMP)
 	$(BIN)/ruff check repro repro_data analysis paper_figures repro_app tests benchmarks
 	$(BIN)/mypy
 
@@ -51,11 +58,11 @@ XDIST ?= -n 2 --dist loadgroup
 test: lint
 	$(BIN)/python -m pytest -q -ra $(XDIST) --durations=15 -m "not device_script" $(PYTEST_ARGS)
 
-test-device-script: $(STAMP) $(WANDB_STAMP)
+test-device-script: $(STAMP) $(WANDB_STAMP) $(PLUGIN_STAMP)
 	$(BIN)/python -m pytest -q -ra -m device_script $(PYTEST_ARGS)
 
 # The inner loop: unit tests only (no end-to-end runs, no SLURM), a few minutes.
-test-fast: $(STAMP) $(WANDB_STAMP)
+test-fast: $(STAMP) $(WANDB_STAMP) $(PLUGIN_STAMP)
 	$(BIN)/python -m pytest -q -ra $(XDIST) -m "not slow and not slurm" $(PYTEST_ARGS)
 
 bench: $(STAMP)

@@ -2,32 +2,40 @@
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Mapping
 from typing import Any
 
-from repro.config.schema import LearnerName, is_offline
+from repro.config.schema import is_offline, learner_specs, objective_specs
 
-# agent.name (normalised: lower case, alphanumerics only) -> the paper's label
-ALGO_LABELS: dict[str, str] = {
-    "taco": "TACO",
+# agent.name (normalised: lower case, alphanumerics only) -> the paper's label, for the algorithms no registration
+# names: the online learner without an objective, and the baselines whose published curves the paper compares to
+UNREGISTERED_LABELS: dict[str, str] = {
     "drqv2": "DrQ-v2",
     "alix": "A-LIX",
     "drq": "DrQ",
-    "curl": "CURL",
     "dreamerv3": "DreamerV3",
     "tdmpc": "TD-MPC",
-    "spr": "SPR",
-    "atc": "ATC",
-    "driml": "DRIML",
-    "td3bc": "TD3+BC",
-    "cql": "CQL",
-    "iql": "IQL",
-    "bc": "BC",
-    "dt": "DT",
 }
-# the offline learners' names (agent.learner; also agent.name of their plain agent files), from the config schema
-OFFLINE_LEARNERS = frozenset(str(n) for n in LearnerName if is_offline(n))
+
+
+@functools.cache
+def algo_labels() -> dict[str, str]:
+    """Normalised ``agent.name`` -> the paper's label: an offline learner's from its registration (its plain agent
+    file is named after it), an objective's (the online agent named after it: ``spr`` -> SPR), and
+    :data:`UNREGISTERED_LABELS`. Plugins' learners and objectives included."""
+    labels = dict(UNREGISTERED_LABELS)
+    labels.update({algo_key(s.name): s.label for s in objective_specs().values() if s.label is not None})
+    labels.update({algo_key(s.name): s.label for s in learner_specs().values() if s.offline})
+    return labels
+
+
+@functools.cache
+def offline_learners() -> frozenset[str]:
+    """The offline learners' names, normalised (agent.name of their plain agent files), from the registry."""
+    return frozenset(algo_key(n) for n in learner_specs() if is_offline(n))
+
 
 # Names the paper prints that a plain title-casing would get wrong.
 _TASK_NAMES: dict[str, str] = {
@@ -65,8 +73,8 @@ def method_label(name: Any, objectives: tuple[str, ...] = ()) -> str:
     ``name``: an online run's algorithm (``agent.name``) or an offline run's learner (``agent.learner``: ``cql``
     for the ``cql_taco`` agent)."""
     key = algo_key(name)
-    label = ALGO_LABELS.get(key, str(name))
-    if key in OFFLINE_LEARNERS and "taco" in objectives:
+    label = algo_labels().get(key, str(name))
+    if key in offline_learners() and "taco" in objectives:
         label += "+TACO"
     return label
 

@@ -36,6 +36,7 @@ def train(ctx: typer.Context,
     if dry_run:
         _dry_run(cfg)
         return
+    from repro.config.plugins import PluginError
     from repro.data.offline_replay import DatasetError
     from repro.runs.fsutil import write_error_message
     from repro.runs.rundir import RunDirMismatch, RunLocked
@@ -44,8 +45,8 @@ def train(ctx: typer.Context,
 
     try:
         path = train_config(cfg, echo=typer.echo, progress=progress)
-    except (RunDirMismatch, DatasetError, DeviceError, CheckpointError, RunLocked, WandbError) as exc:
-        fail(str(exc))
+    except (RunDirMismatch, DatasetError, DeviceError, CheckpointError, RunLocked, WandbError, PluginError) as exc:
+        fail(str(exc))  # PluginError: a plugin whose code does not import
     except OSError as exc:  # a full disk or a file size limit: every file is written atomically or truncated on resume
         fail(write_error_message(exc), code=1)
     typer.echo(f"run directory: {path}")

@@ -12,10 +12,10 @@ import typer
 from typer.testing import CliRunner
 
 from helpers import bench_app
-from repro.bench import OFFLINE_AGENTS
 from repro.bench.cli import same_run_ratios
 from repro.bench.data import episode_lengths, synthetic_episode
 from repro.bench.offline_update import available, run_offline_bench
+from repro.config.compose import offline_agents
 
 
 def _app() -> typer.Typer:
@@ -76,7 +76,7 @@ def test_offline_bench_prints_each_learners_ratio_to_drqv2_from_this_run(tmp_pat
     ref = report["results"][0]
     assert ref["agent"] == "drqv2" and ref["batch_size"] == 2 and ref["repeats"] == 1 and ref["warmup"] == 0
     timed = {r["agent"]: r for r in report["results"][1:]}
-    expected = [a for a in OFFLINE_AGENTS if available(a) is None]
+    expected = [a for a in offline_agents() if available(a) is None]
     assert list(timed) == expected and {"bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql"} <= set(timed)
     lines = {m.group(1): m for m in map(OFFLINE_LINE.match, out) if m}
     assert set(lines) == set(expected)
@@ -87,7 +87,7 @@ def test_offline_bench_prints_each_learners_ratio_to_drqv2_from_this_run(tmp_pat
         ratio = row["update_seconds"] / ref["update_seconds"]  # recomputed from this run's two timings
         assert float(m.group(5)) == pytest.approx(ratio, abs=0.006)
         assert report["ratios"][f"{agent}_b{row['batch_size']}_over_drqv2_b2"] == round(ratio, 3)
-    for agent in set(OFFLINE_AGENTS) - set(expected):
+    for agent in set(offline_agents()) - set(expected):
         assert f"{agent}: skipped (" in result.output
     assert "upstream" not in result.output.lower() and "paper" not in result.output.lower()
 

@@ -11,39 +11,49 @@ import pytest
 from omegaconf import OmegaConf
 
 from repro.config import schema
-from repro.config.schema import DatasetKind, LearnerName, ObjectiveName, check_registry, is_offline, normalize_dataset
+from repro.config.schema import (
+    DatasetKind,
+    LearnerName,
+    ObjectiveName,
+    check_registry,
+    is_offline,
+    learner_names,
+    normalize_dataset,
+)
 
 
 def test_check_registry_names_what_is_missing_and_what_is_extra():
-    check_registry("learner", {n.value: None for n in LearnerName}, LearnerName)  # equal keys pass
-    with pytest.raises(ValueError, match=r"missing: iql; not in the schema: -") as err:
-        check_registry("learner", {n.value: None for n in LearnerName if n != LearnerName.iql}, LearnerName)
+    check_registry("learner", {n: None for n in learner_names()}, learner_names())  # equal keys pass
+    with pytest.raises(ValueError, match=r"missing: iql; not registered: -") as err:
+        check_registry("learner", {n: None for n in learner_names() if n != "iql"}, learner_names())
     assert "\n" not in str(err.value)
-    with pytest.raises(ValueError, match=r"missing: -; not in the schema: sac"):
-        check_registry("learner", [*LearnerName.values(), "sac"], LearnerName)
+    with pytest.raises(ValueError, match=r"missing: -; not registered: sac"):
+        check_registry("learner", [*learner_names(), "sac"], learner_names())
 
 
-def _one_more(enum: type[schema.Choice], extra: str) -> type[schema.Choice]:
-    return schema.Choice(enum.__name__, {**{v: v for v in enum.values()}, extra: extra})  # type: ignore[return-value]
-
-
-@pytest.mark.parametrize("module, attribute, what", [("repro.learners.registry", "LearnerName", "learner"),
-                                                     ("repro.agent.objectives", "ObjectiveName", "objective")])
-def test_a_registry_that_lacks_a_schema_name_fails_at_import(monkeypatch, module: str, attribute: str, what: str):
-    """Re-running the registry module's import against a schema with one name more (so the registry lacks it)."""
+@pytest.mark.parametrize("module, specs, spec", [
+    ("repro.learners.registry", "BUILTIN_LEARNERS", schema.LearnerSpec("newname", offline=True, label="New")),
+    ("repro.agent.objectives", "BUILTIN_OBJECTIVES", schema.ObjectiveSpec("newname"))])
+def test_a_registry_that_lacks_a_registered_name_fails_at_import(monkeypatch, module: str, specs: str, spec):
+    """Re-running the registry module's import with one registration more whose code it does not have."""
     mod = importlib.import_module(module)
-    monkeypatch.setattr(schema, attribute, _one_more(getattr(schema, attribute), "newname"))
+    what = "learner" if "learners" in module else "objective"
+    monkeypatch.setattr(schema, specs, (*getattr(schema, specs), spec))
+    schema.learner_specs.cache_clear(), schema.objective_specs.cache_clear()
     try:
         with pytest.raises(ValueError, match=f"the {what} registry .* missing: newname"):
             importlib.reload(mod)
     finally:
         monkeypatch.undo()
+        schema.learner_specs.cache_clear(), schema.objective_specs.cache_clear()
         importlib.reload(mod)
 
 
-def test_the_offline_flag_is_schema_data():
+def test_the_offline_flag_is_registry_data():
     assert not is_offline(LearnerName.actor_critic) and not is_offline("actor_critic")
     assert all(is_offline(n) for n in ("bc", "td3bc", "cql", "iql", "dt"))
+    assert [s.name for s in schema.BUILTIN_LEARNERS] == list(LearnerName.values())
+    assert [s.name for s in schema.BUILTIN_OBJECTIVES] == list(ObjectiveName.values())
     import repro.learners
     import repro.learners.registry
 
@@ -55,8 +65,7 @@ def test_every_choice_member_is_named_by_its_value():
     """OmegaConf reads and writes an Enum field by member name: a name other than the value would change the
     YAML a run writes and the overrides it accepts."""
     fields = schema.choice_fields()
-    assert fields["agent.learner"] is LearnerName
-    for enum in {*fields.values(), ObjectiveName, DatasetKind}:
+    for enum in {*fields.values(), LearnerName, ObjectiveName, DatasetKind}:
         assert all(m.name == m.value for m in enum), enum
         assert all(str(m) == f"{m}" == m.value for m in enum), enum
 
@@ -129,14 +138,14 @@ def _sections(section: type = schema.RunConfig):
 def test_the_schema_gives_types_only_and_the_yaml_every_value():
     """One source for each default: no dataclass default repeats a YAML value, and every agent's config is
     complete from the packaged YAML alone."""
-    from repro.config.compose import compose, config_groups
+    from repro.config.compose import agent_learner, compose, config_groups
 
     with_default = [f"{s.__name__}.{f.name}" for s in _sections() for f in dataclasses.fields(s)
                     if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING]
     assert not with_default, with_default
     for agent in config_groups()["agent"]:
         cfg = compose([f"agent={agent}", "offline.dataset=medium", "agent.cql.alpha=1.0"]
-                      if agent not in ("taco", "drqv2", "spr", "atc", "driml", "curl") else [f"agent={agent}"])
+                      if is_offline(agent_learner(agent)) else [f"agent={agent}"])
         assert not OmegaConf.missing_keys(cfg), agent
 
 

@@ -1,7 +1,7 @@
 """Layer 4: ``repro bench``: update, sampler and offline-data throughput, reported as ratios measured in one run.
 
-Its modules import torch (and the learners) when a benchmark runs, not when `repro` starts."""
+Its modules import torch (and the learners) when a benchmark runs, not when `repro` starts. The offline agent files
+it times are those whose learner trains offline, plugins' included (``repro.config.compose.offline_agents``)."""
 
-OFFLINE_AGENTS = ("bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "dt")  # agent files (repro/conf/agent)
 # The speed-up paths `repro bench` times (update and --e2e) and the config overrides that turn each on
 SPEEDUP_FLAGS = {"plain": [], "amp": ["agent.amp=true"], "compile": ["agent.compile=true"]}

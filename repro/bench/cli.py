@@ -23,7 +23,6 @@ from typing import TYPE_CHECKING, Optional
 
 import typer
 
-from repro.bench import OFFLINE_AGENTS
 from repro.bench.online_update import time_update
 from repro.runs.console import fail
 from repro.runs.fsutil import atomic_write_text
@@ -179,7 +178,8 @@ def register(app: typer.Typer) -> None:
               offline: bool = typer.Option(False, "--offline", help="Instead: one update of each offline learner "
                                            "as a ratio to the DrQ-v2 update, measured side by side."),
               learner: Optional[list[str]] = typer.Option(
-                  None, "--learner", help=f"With --offline: these agent files only ({', '.join(OFFLINE_AGENTS)})."),
+                  None, "--learner", help="With --offline: these agent files only (default: every agent file whose "
+                                       "learner trains offline, plugins' included)."),
               dt_batch: Optional[int] = typer.Option(
                   None, "--dt-batch", help="With --offline: batch of learners with their own (default: DT's 64)."),
               offline_data: bool = typer.Option(False, "--offline-data", help="Instead: load time, memory and "
@@ -208,6 +208,7 @@ def register(app: typer.Typer) -> None:
 
         from repro.bench.data import run_data_bench
         from repro.bench.offline_update import run_offline_bench
+        from repro.config.compose import offline_agents
 
         if device.startswith("cuda") and not torch.cuda.is_available():
             fail("--device cuda but no CUDA device is available")
@@ -216,9 +217,10 @@ def register(app: typer.Typer) -> None:
                 fail(f"unknown algo '{a}' (taco, drqv2)")
         if any(b < 1 for b in batch or []):
             fail("--batch must be >= 1")
+        agents = offline_agents() if offline and learner else ()
         for name in learner or []:
-            if name not in OFFLINE_AGENTS:
-                fail(f"unknown offline learner '{name}' ({', '.join(OFFLINE_AGENTS)})")
+            if name not in agents:
+                fail(f"unknown offline learner '{name}' ({', '.join(agents)})")
         if dt_batch is not None and dt_batch < 1:
             fail("--dt-batch must be >= 1")
         if transitions < 1 or sample_batches < 1 or episode_length < 3:
@@ -238,7 +240,7 @@ def register(app: typer.Typer) -> None:
         meta = {"hardware": hardware(device), "device": device, "host": host, "torch": torch.__version__,
                 "python": platform.python_version(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         if offline:
-            report = run_offline_bench((batch or [256])[0], repeats, warmup, device, learner or OFFLINE_AGENTS,
+            report = run_offline_bench((batch or [256])[0], repeats, warmup, device, learner or None,
                                        echo=typer.echo, own_batch=dt_batch)
             _write_report(out_dir, f"bench-offline-{host}-{dev}.json", {**meta, **report}, typer.echo)
         if offline_data:

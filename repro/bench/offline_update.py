@@ -17,9 +17,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from repro.bench import OFFLINE_AGENTS
 from repro.bench.clock import timed
-from repro.config.compose import ConfigError, compose, config_groups, typed
+from repro.config.compose import ConfigError, compose, config_groups, offline_agents, typed
 from repro.config.schema import AgentConfig
 from repro.data.replay import ReplayBuffer
 from repro.envs import get_task
@@ -72,7 +71,7 @@ def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapp
     """Median seconds of one update of ``agent`` (built from its agent file through the registry) at
     ``batch_size``, or, for a learner with its own batch size (DT), at that one (``own_batch`` replaces it)."""
     overrides = [f"agent={agent}", f"task={task}", f"agent.batch_size={batch_size}"]
-    if agent in OFFLINE_AGENTS:  # a dataset kind resolves what depends on it (CQL's Table 6 alpha)
+    if agent in offline_agents():  # a dataset kind resolves what depends on it (CQL's Table 6 alpha)
         overrides.append(f"offline.dataset={DATASET_KIND}")
     rc = typed(compose(overrides))
     action_dim = get_task(task).action_dim
@@ -97,7 +96,7 @@ def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapp
             "update_seconds": statistics.median(times), "repeats": repeats, "warmup": warmup}
 
 
-def run_offline_bench(batch_size: int, repeats: int, warmup: int, device: str, agents: Sequence[str] = OFFLINE_AGENTS,
+def run_offline_bench(batch_size: int, repeats: int, warmup: int, device: str, agents: Sequence[str] | None = None,
                       task: str = "cheetah_run", echo: Callable[[str], None] = print,
                       own_batch: int | None = None) -> dict[str, Any]:
     """Time DrQ-v2 and each available offline learner; print each one's ratio to DrQ-v2 measured here.
@@ -107,7 +106,7 @@ def run_offline_bench(batch_size: int, repeats: int, warmup: int, device: str, a
     echo(f"{REFERENCE} (online) batch {ref['batch_size']}: {ref['update_seconds']:.4f} s/update "
          f"({warmup} warm-up + {repeats} timed updates, median, {device})")
     rows, ratios, skipped = [ref], {}, {}
-    for agent in agents:
+    for agent in offline_agents() if agents is None else agents:
         why = available(agent)
         if why:
             skipped[agent] = why

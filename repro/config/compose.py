@@ -9,16 +9,22 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, cast
 
-from omegaconf import DictConfig, OmegaConf
+import yaml
+from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
+from repro.config.plugins import PluginError
 from repro.config.schema import (
     BUDGET_KEYS,
+    AgentConfig,
     LearnerName,
-    ObjectiveName,
     RunConfig,
     choice_fields,
     is_offline,
+    learner_names,
+    objective_names,
+    plugin_conf_dirs,
+    plugin_section,
     unread_keys,
 )
 
@@ -35,9 +41,43 @@ def is_folder_value(value: str) -> bool:
     return "/" in value or value.startswith("~") or value in (".", "..")
 
 
+def conf_dirs() -> tuple[Path, ...]:
+    """The packaged conf folder, then the registered plugins' (their agent files compose as the packaged ones)."""
+    try:
+        return (CONF_DIR, *(Path(d) for d in plugin_conf_dirs()))
+    except PluginError as exc:
+        raise ConfigError(str(exc)) from None
+
+
 def group_options(group: str) -> list[str]:
-    """Names of the YAML files in a config group (e.g. ``task`` or ``agent``)."""
-    return sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
+    """Names of the YAML files in a config group (e.g. ``task`` or ``agent``), the plugins' included."""
+    return sorted({p.stem for conf in conf_dirs() for p in (conf / group).glob("*.yaml")})
+
+
+def agent_learner(agent: str) -> str:
+    """The ``agent.learner`` the agent file ``agent`` composes to, read from YAML without composing (fast enough
+    for command-line checks): its own ``learner`` key, else that of the last agent file its ``defaults`` inherit,
+    else conf/config.yaml's. tests/test_plugins.py checks it against Hydra's composition."""
+    path = next(p for p in (conf / "agent" / f"{agent}.yaml" for conf in conf_dirs()) if p.is_file())
+    data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    if "learner" in data:
+        return str(data["learner"])
+    agents = group_options("agent")
+    for entry in reversed(data.get("defaults") or []):
+        parent = entry.partition("@")[0] if isinstance(entry, str) else ""
+        if parent in agents:
+            return agent_learner(parent)
+    top = yaml.safe_load((CONF_DIR / "config.yaml").read_text(encoding="utf-8"))
+    return str(top["agent"]["learner"])
+
+
+def offline_agents() -> tuple[str, ...]:
+    """The agent files whose learner trains offline (`repro bench --offline`'s list), in the learners' registration
+    order, each learner's agents by name."""
+    order = {name: i for i, name in enumerate(learner_names())}
+    learners = {agent: agent_learner(agent) for agent in group_options("agent")}
+    offline = [a for a, learner in learners.items() if learner in order and is_offline(learner)]
+    return tuple(sorted(offline, key=lambda a: (order[learners[a]], a)))
 
 
 def config_groups() -> dict[str, list[str]]:
@@ -94,10 +134,12 @@ def compose(overrides: list[str] | tuple[str, ...] = ()) -> DictConfig:
 
     overrides = list(overrides)
     _check_group_overrides(overrides)
+    plugins = [f"'file://{conf}'" for conf in conf_dirs()[1:]]  # the plugins' agent files (Hydra's search path)
+    search = [f"hydra.searchpath=[{','.join(plugins)}]"] if plugins else []
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            raw = hydra_compose(config_name="config", overrides=overrides)
+            raw = hydra_compose(config_name="config", overrides=[*overrides, *search])
     except (HydraException, OmegaConfBaseException) as exc:
         # Hydra's messages are multi-line; keep the first line and name close keys when possible.
         first = str(exc).strip().splitlines()[0]
@@ -131,7 +173,7 @@ def validate(raw: DictConfig) -> DictConfig:
     Enum there) and the values' ranges."""
     try:
         OmegaConf.resolve(raw)
-        cfg = cast(DictConfig, OmegaConf.merge(OmegaConf.structured(RunConfig), raw))  # dict merged into dict
+        cfg = cast(DictConfig, OmegaConf.merge(_structure(raw), raw))  # dict merged into dict
     except OmegaConfBaseException as exc:
         key = getattr(exc, "full_key", None)
         allowed = choice_fields().get(str(key))
@@ -156,10 +198,30 @@ def validate(raw: DictConfig) -> DictConfig:
     if cfg.train.video_size < 16 or cfg.train.video_size % 2:
         raise ConfigError(f"train.video_size must be an even number >= 16 (got {cfg.train.video_size}).")
     for name in cfg.agent.objectives:
-        if name not in ObjectiveName.values():
-            raise ConfigError(f"unknown objective '{name}'." + close_matches(str(name), sorted(ObjectiveName.values())))
+        if name not in objective_names():
+            raise ConfigError(f"unknown objective '{name}'." + close_matches(str(name), sorted(objective_names())))
     _check_learner(cfg)
     return cfg
+
+
+def _structure(raw: DictConfig) -> DictConfig:
+    """The typed schema for ``raw``: :class:`RunConfig`, and the section of its learner when a plugin registers one
+    (``agent.<learner>``: only that learner's runs hold it). ConfigError for a learner nobody registered."""
+    learner = str(OmegaConf.select(raw, "agent.learner", default=""))
+    try:
+        names, _ = learner_names(), objective_names()  # every registration loads (one line if one does not)
+    except PluginError as exc:
+        raise ConfigError(str(exc)) from None
+    if learner not in names:
+        raise ConfigError(f"agent.learner={learner} is not one of {', '.join(names)}.")
+    schema = OmegaConf.structured(RunConfig)
+    section = plugin_section(learner)
+    if section is not None:
+        agent = OmegaConf.structured(AgentConfig)
+        with open_dict(agent):
+            agent[learner] = OmegaConf.structured(section)
+        schema.agent = agent
+    return schema
 
 
 # The lowest value of each numeric key (counts, sizes, rates): key -> (lowest allowed, whether the lowest is allowed
@@ -206,7 +268,7 @@ def _check_ranges(cfg: DictConfig) -> None:
 
 
 def _check_learner(cfg: DictConfig) -> None:
-    """``offline.*`` is consistent with ``agent.learner`` (a :class:`LearnerName`, checked by the schema)."""
+    """``offline.*`` is consistent with ``agent.learner`` (a registered learner, checked by :func:`_structure`)."""
     learner = str(cfg.agent.learner)
     dataset = cfg.offline.dataset
     if not is_offline(learner):

@@ -10,8 +10,12 @@ import dataclasses
 import enum
 import math
 import typing
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any, Optional
+from functools import cache
+from typing import Any, Optional, TypeVar
+
+from repro.config.plugins import LEARNER_GROUP, OBJECTIVE_GROUP, LearnerSpec, ObjectiveSpec, PluginError, discover
 
 
 class Choice(str, enum.Enum):
@@ -35,7 +39,8 @@ class Choice(str, enum.Enum):
 
 
 class LearnerName(Choice):
-    """``agent.learner``: the keys of the learner registry (repro/learners/registry.py checks it at import)."""
+    """The built-in learners' names (``BUILTIN_LEARNERS`` below); ``agent.learner`` takes these and every learner a
+    package registers (:func:`learner_names`)."""
 
     actor_critic = "actor_critic"  # DrQ-v2 / TACO and the representation ablations (online)
     bc = "bc"  # behaviour cloning (offline)
@@ -45,25 +50,23 @@ class LearnerName(Choice):
     dt = "dt"  # Decision Transformer on pixels (offline)
 
 
-# The learners that train online (in an environment); every other learner trains from offline.dataset.
-ONLINE_LEARNERS = frozenset({LearnerName.actor_critic})
-
-
 def is_offline(learner: str) -> bool:
-    """Whether ``learner`` (an ``agent.learner`` value) trains from a fixed dataset (offline.dataset)."""
-    return learner not in ONLINE_LEARNERS
+    """Whether ``learner`` (an ``agent.learner`` value) trains from a fixed dataset (offline.dataset): its
+    registration says so (an unregistered name: offline, as every learner but the online ones)."""
+    spec = learner_specs().get(str(learner))
+    return spec is None or spec.offline
 
 
-# What a run reads, as data (issue 24): a run's config.yaml and identity hold every key but those its learner does
-# not read. A learner's own sections (below) are read by it alone; the online-loop keys by the online learners alone.
-LEARNER_SECTIONS: dict[LearnerName, tuple[str, ...]] = {
-    LearnerName.actor_critic: (),
-    LearnerName.bc: ("offline",),
-    LearnerName.td3bc: ("agent.td3bc", "offline"),
-    LearnerName.cql: ("agent.cql", "offline"),
-    LearnerName.iql: ("agent.iql", "offline"),
-    LearnerName.dt: ("agent.dt", "offline"),
-}
+def learner_sections(learner: str) -> tuple[str, ...]:
+    """The dotted config sections a learner alone reads: its own ``agent.<name>`` (when it registers a section)
+    and, offline, ``offline``. A learner nobody registers here (a run of a plugin not installed): ``offline``; its
+    own section, unknown, is left as its run wrote it."""
+    spec = learner_specs().get(str(learner))
+    if spec is None:
+        return ("offline",)
+    return ((f"agent.{spec.name}",) if spec.section is not None else ()) + (("offline",) if spec.offline else ())
+
+
 # Keys only the online loop reads (repro/train/online.py, the replay it fills); an offline run reads none of them.
 ONLINE_LOOP_KEYS = ("train.frames", "train.seed_frames", "train.explore_steps", "train.update_every_steps",
                     "train.eval_every_frames", "train.eval_episodes", "train.checkpoint_every_episodes",
@@ -74,10 +77,10 @@ BUDGET_KEYS = ("train.frames", "task.frames", "offline.updates")
 
 
 def unread_keys(learner: str) -> tuple[str, ...]:
-    """Dotted config keys (sections or leaves) that ``learner`` never reads: other learners' sections and, for an
-    offline learner, the online loop's keys. Left out of its run's config.yaml and identity."""
-    own = LEARNER_SECTIONS[LearnerName(learner)]
-    others = [s for sections in LEARNER_SECTIONS.values() for s in sections if s not in own]
+    """Dotted config keys (sections or leaves) that ``learner`` never reads (issue 24): other learners' sections
+    and, for an offline learner, the online loop's keys. Left out of its run's config.yaml and identity."""
+    own = learner_sections(learner)
+    others = [s for name in learner_specs() for s in learner_sections(name) if s not in own]
     return tuple(dict.fromkeys([*others, *(ONLINE_LOOP_KEYS if is_offline(learner) else ())]))
 
 
@@ -87,7 +90,8 @@ def budget_key(learner: str) -> str:
 
 
 class ObjectiveName(Choice):
-    """The keys of ``agent.objectives``: the auxiliary objectives (repro/agent/objectives/ checks them at import)."""
+    """The built-in auxiliary objectives' names (``BUILTIN_OBJECTIVES`` below); the keys of ``agent.objectives`` are
+    these and every objective a package registers (:func:`objective_names`)."""
 
     taco = "taco"  # InfoNCE of (z_t, u_t..u_{t+K-1}) against z_{t+K}
     curl = "curl"  # InfoNCE between two augmentations of one observation
@@ -206,13 +210,13 @@ def normalize_dataset(name: Any) -> str | None:
     return DATASET_ALIASES.get(text, text) or None
 
 
-def check_registry(what: str, keys: Any, names: type[Choice]) -> None:
-    """Raise ValueError (one line) unless the ``keys`` of a registry are exactly the values of ``names``."""
-    keys, allowed = {str(k) for k in keys}, set(names.values())
+def check_registry(what: str, keys: Iterable[Any], names: Iterable[str]) -> None:
+    """Raise ValueError (one line) unless the ``keys`` of a registry of code are exactly the registered ``names``."""
+    keys, allowed = {str(k) for k in keys}, {str(n) for n in names}
     if keys != allowed:
         missing, extra = sorted(allowed - keys), sorted(keys - allowed)
-        raise ValueError(f"the {what} registry must hold exactly the names of {names.__name__} in "
-                         f"repro/config/schema.py; missing: {', '.join(missing) or '-'}; not in the schema: "
+        raise ValueError(f"the {what} registry must hold exactly the registered {what}s (repro/config/schema.py and "
+                         f"the installed plugins); missing: {', '.join(missing) or '-'}; not registered: "
                          f"{', '.join(extra) or '-'}")
 
 
@@ -298,7 +302,7 @@ class AgentConfig:
     unless the agent file sets them, the four learner sections from conf/agent/shared/)."""
 
     name: str
-    learner: LearnerName
+    learner: str  # a registered learner (learner_names(); checked by repro.config.compose.validate)
     lr: float
     feature_dim: int
     hidden_dim: int
@@ -314,8 +318,8 @@ class AgentConfig:
     latent_action_rounding: LatentRounding
     action_hidden_dim: int
     reward_target: RewardTarget
-    objectives: dict[str, float]  # ObjectiveName -> loss weight
-    objective_params: dict[str, Any]  # ObjectiveName -> its parameters
+    objectives: dict[str, float]  # a registered objective (objective_names()) -> loss weight
+    objective_params: dict[str, Any]  # a registered objective -> its parameters
     compile: bool
     amp: bool
     fast: bool  # agent.fast: repro/agent/fast.py resolves what it turns on
@@ -424,3 +428,87 @@ def choice_fields(section: type = RunConfig, prefix: str = "") -> dict[str, type
         elif isinstance(kind, type) and dataclasses.is_dataclass(kind):
             out.update(choice_fields(kind, f"{prefix}{f.name}."))
     return out
+
+
+# ------------------------------------------------------------------------------------ the registry (one source)
+# The built-in learners and objectives, registered as a plugin registers its own (repro/config/plugins.py); their
+# classes are imported by repro/learners/registry.py and repro/agent/objectives/, which check at import that they
+# build exactly the registered names. Order: the paper's (bench reports, help texts).
+BUILTIN_LEARNERS = (
+    LearnerSpec(LearnerName.actor_critic.value, offline=False, label="DrQ-v2"),
+    LearnerSpec(LearnerName.bc.value, offline=True, label="BC"),
+    LearnerSpec(LearnerName.td3bc.value, offline=True, label="TD3+BC", section=TD3BCConfig),
+    LearnerSpec(LearnerName.cql.value, offline=True, label="CQL", section=CQLConfig),
+    LearnerSpec(LearnerName.iql.value, offline=True, label="IQL", section=IQLConfig),
+    LearnerSpec(LearnerName.dt.value, offline=True, label="DT", section=DTConfig),
+)
+BUILTIN_OBJECTIVES = (
+    ObjectiveSpec(ObjectiveName.taco.value, label="TACO"),
+    ObjectiveSpec(ObjectiveName.curl.value, label="CURL"),
+    ObjectiveSpec(ObjectiveName.reward.value),
+    ObjectiveSpec(ObjectiveName.spr.value, label="SPR"),
+    ObjectiveSpec(ObjectiveName.atc.value, label="ATC"),
+    ObjectiveSpec(ObjectiveName.driml.value, label="DRIML"),
+)
+AGENT_FIELDS = frozenset(f.name for f in dataclasses.fields(AgentConfig))
+
+
+@cache
+def learner_specs() -> dict[str, LearnerSpec]:
+    """Every registered learner by name: the built-in ones, then the installed plugins' (entry-point group
+    ``taco_repro.learners``) by name. PluginError (one line) for a plugin that clashes with one."""
+    specs = {s.name: s for s in BUILTIN_LEARNERS}
+    for spec in discover(LEARNER_GROUP, LearnerSpec):
+        if spec.name in specs or spec.name in AGENT_FIELDS:
+            raise PluginError(f"learner '{spec.name}' ({LEARNER_GROUP}): the name is taken (a built-in learner or an "
+                              "agent.* field).")
+        specs[spec.name] = spec
+    return specs
+
+
+@cache
+def objective_specs() -> dict[str, ObjectiveSpec]:
+    """Every registered objective by name: the built-in ones, then the plugins' (``taco_repro.objectives``)."""
+    specs = {s.name: s for s in BUILTIN_OBJECTIVES}
+    for spec in discover(OBJECTIVE_GROUP, ObjectiveSpec):
+        if spec.name in specs:
+            raise PluginError(f"objective '{spec.name}' ({OBJECTIVE_GROUP}): the name is taken by a built-in one.")
+        specs[spec.name] = spec
+    return specs
+
+
+def learner_names() -> tuple[str, ...]:
+    """The values ``agent.learner`` accepts, built-in first."""
+    return tuple(learner_specs())
+
+
+def objective_names() -> tuple[str, ...]:
+    """The keys ``agent.objectives`` accepts, built-in first."""
+    return tuple(objective_specs())
+
+
+def plugin_conf_dirs() -> tuple[str, ...]:
+    """The plugins' conf folders (each with an ``agent/`` group), in registration order, once each."""
+    specs: list[LearnerSpec | ObjectiveSpec] = [*learner_specs().values(), *objective_specs().values()]
+    return tuple(dict.fromkeys(str(s.conf) for s in specs if s.conf is not None))
+
+
+def plugin_section(learner: str) -> type | None:
+    """The typed section a plugin learner adds as ``agent.<learner>`` (None for a built-in learner, whose sections
+    are fields of :class:`AgentConfig`, and for a learner without one)."""
+    spec = learner_specs().get(str(learner))
+    if spec is None or spec.section is None or spec.name in AGENT_FIELDS:
+        return None
+    return spec.section
+
+
+S = TypeVar("S")
+
+
+def learner_section(agent: AgentConfig, kind: type[S]) -> S:
+    """A plugin learner's own typed section (``agent.<learner>``, an instance of ``kind``) of a typed agent config."""
+    section = vars(agent).get(str(agent.learner))
+    if not isinstance(section, kind):
+        raise TypeError(f"agent.{agent.learner} is not a {kind.__name__} (is {agent.learner} registered with "
+                        f"section={kind.__name__}?)")
+    return section

@@ -1,13 +1,19 @@
-"""Learners by ``agent.learner``: the online actor-critic agent and the offline learners."""
+"""Learners by ``agent.learner``: the online actor-critic agent, the offline learners and the plugins' learners.
+
+The names (and which train offline, their sections and labels) are registered in repro/config/schema.py
+(``learner_specs``: the built-in ones and the entry-point group ``taco_repro.learners``); this table holds their
+code: the built-in classes imported here, a plugin's the ``factory`` its registration names."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import cast
 
 import torch
 
 from repro.agent.agent import Agent
-from repro.config.schema import AgentConfig, LearnerName, check_registry
+from repro.config.plugins import load_factory
+from repro.config.schema import AgentConfig, check_registry, learner_names, learner_specs
 from repro.learners.base import Learner, SequenceLearner
 from repro.learners.bc import BCLearner
 from repro.learners.cql import CQL
@@ -25,7 +31,9 @@ LEARNERS: dict[str, LearnerFactory] = {
     "iql": IQL,  # IQL on the DrQ-v2 backbone (offline)
     "dt": DTLearner,  # Decision Transformer on pixels (offline; samples episode windows, return-conditioned)
 }
-check_registry("learner", LEARNERS, LearnerName)  # the names (and which train offline) are schema data
+LEARNERS.update({spec.name: cast(LearnerFactory, load_factory(spec))
+                 for spec in learner_specs().values() if spec.factory is not None})
+check_registry("learner", LEARNERS, learner_names())  # every registered learner has its code, nothing else is here
 __all__ = ["LEARNERS", "LearnerFactory", "build_learner", "samples_episodes"]
 
 

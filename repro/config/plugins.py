@@ -1,0 +1,107 @@
+"""Registrations of learners and auxiliary objectives, and their discovery through entry points.
+
+A learner or an objective is registered by one :class:`LearnerSpec` / :class:`ObjectiveSpec`: the built-in ones in
+``repro/config/schema.py`` (``BUILTIN_LEARNERS``, ``BUILTIN_OBJECTIVES``), a package outside this tree through the
+entry-point groups :data:`LEARNER_GROUP` and :data:`OBJECTIVE_GROUP` (its pyproject.toml's
+``[project.entry-points."taco_repro.learners"]``: ``NAME = "its_module:ITS_SPEC"``). A spec is data: its module
+must stay light (no torch), since the config loads it to validate names; the code it names by ``factory`` is
+imported only by the layer that builds it (``repro.learners.registry``, ``repro.agent.objectives``).
+docs/extending.md walks through one of each.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import TypeVar
+
+LEARNER_GROUP = "taco_repro.learners"
+OBJECTIVE_GROUP = "taco_repro.objectives"
+NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
+
+
+class PluginError(ValueError):
+    """A registration that cannot be used, in one line."""
+
+
+@dataclass(frozen=True)
+class LearnerSpec:
+    """What the tool needs to treat a learner as first-class.
+
+    ``name`` is the ``agent.learner`` value (the registry key). ``offline``: it trains from ``offline.dataset``
+    (else in an environment, as the online actor-critic). ``label``: the paper-style method label of its runs in
+    tables and figures. ``section``: its typed settings, a dataclass whose values are the ``agent.<name>`` section
+    of its agent files (read by it alone: other learners' runs neither hold nor check it). ``factory``: the learner
+    class (or a callable with its signature, ``repro.learners.registry.LearnerFactory``) as ``"module:attribute"``;
+    None only for the built-in learners, whose classes ``repro/learners/registry.py`` imports. ``conf``: a folder
+    holding ``agent/<agent>.yaml`` files that use it (added to Hydra's search path, so ``agent=<agent>`` composes).
+    """
+
+    name: str
+    offline: bool
+    label: str
+    section: type | None = None
+    factory: str | None = None
+    conf: str | Path | None = None
+
+
+@dataclass(frozen=True)
+class ObjectiveSpec:
+    """An auxiliary objective: ``name`` is its key in ``agent.objectives``; ``label`` the method label of an online
+    agent named after it (``taco`` -> ``TACO``; None: no agent of its own); ``factory``, ``conf``: as
+    :class:`LearnerSpec` (the class is an ``repro.agent.objectives.base.Objective``)."""
+
+    name: str
+    label: str | None = None
+    factory: str | None = None
+    conf: str | Path | None = None
+
+
+Spec = TypeVar("Spec", LearnerSpec, ObjectiveSpec)
+
+
+def check_spec(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
+    """Raise PluginError (one line) when a registration cannot be used: a bad name, no factory, a missing conf."""
+    if not NAME_RE.match(spec.name):
+        raise PluginError(f"{where}: name '{spec.name}' must be lower-case letters, digits and '_'.")
+    if spec.factory is None or ":" not in spec.factory:
+        raise PluginError(f"{where}: factory must be 'module:attribute' (got {spec.factory!r}).")
+    if spec.conf is not None and not (Path(spec.conf) / "agent").is_dir():
+        raise PluginError(f"{where}: conf folder {spec.conf} has no agent/ folder.")
+    if isinstance(spec, LearnerSpec) and spec.section is not None and not hasattr(spec.section, "__dataclass_fields__"):
+        raise PluginError(f"{where}: section must be a dataclass (got {spec.section!r}).")
+
+
+def discover(group: str, kind: type[Spec]) -> tuple[Spec, ...]:
+    """The registrations of the installed packages in the entry-point ``group``, sorted by name; PluginError (one
+    line) for one that does not load, is not a ``kind`` or is registered under another name than its own."""
+    out: list[Spec] = []
+    for ep in sorted(entry_points(group=group), key=lambda e: e.name):
+        where = f"entry point '{ep.name}' of {group} ({ep.value})"
+        try:
+            spec = ep.load()
+        except Exception as exc:  # a plugin's import error, whatever it is, is one line naming the plugin
+            raise PluginError(f"{where}: cannot load: {type(exc).__name__}: {exc}") from None
+        if not isinstance(spec, kind):
+            raise PluginError(f"{where}: is a {type(spec).__name__}, not a {kind.__name__}.")
+        if spec.name != ep.name:
+            raise PluginError(f"{where}: registers '{spec.name}' under the entry-point name '{ep.name}'.")
+        check_spec(spec, where)
+        out.append(spec)
+    return tuple(out)
+
+
+def load_factory(spec: LearnerSpec | ObjectiveSpec) -> object:
+    """The object a plugin's ``factory`` names, imported by ``pkgutil.resolve_name``; PluginError (one line) when it
+    fails. Called by the layer that builds it (``repro.learners.registry``, ``repro.agent.objectives``); a plugin's
+    modules are outside this project, so tests/test_layers.py's one-way rule does not apply to them."""
+    import pkgutil
+
+    assert spec.factory is not None
+    try:
+        return pkgutil.resolve_name(spec.factory)
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise PluginError(f"'{spec.name}': cannot import its factory {spec.factory}: {type(exc).__name__}: {exc}") \
+            from None

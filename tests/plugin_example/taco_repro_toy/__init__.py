@@ -1,0 +1,29 @@
+"""A taco-repro plugin: reward-weighted behaviour cloning (learner ``toy_rwbc``) and an inverse-dynamics auxiliary
+objective (``toy_inv``), registered through pyproject.toml's entry points (docs/extending.md).
+
+This module is what the entry points load: data only (no torch), since taco-repro loads it to validate config
+names. The code is named by ``factory`` and imported when a run builds it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from repro.config.plugins import LearnerSpec, ObjectiveSpec
+
+CONF = Path(__file__).resolve().parent / "conf"  # agent/toy_rwbc.yaml, agent/toy_inv.yaml
+
+
+@dataclass
+class RWBCConfig:
+    """``agent.toy_rwbc``: the learner's own section (its values: conf/agent/toy_rwbc.yaml)."""
+
+    temperature: float  # weight exp((r - max r) / temperature), r the transition's n-step return
+    max_weight: float  # cap of a weight after normalising the batch's weights to mean 1
+
+
+LEARNER = LearnerSpec(name="toy_rwbc", offline=True, label="RWBC", section=RWBCConfig,
+                      factory="taco_repro_toy.learner:RWBC", conf=CONF)
+OBJECTIVE = ObjectiveSpec(name="toy_inv", label="InvDyn", factory="taco_repro_toy.objective:InverseDynamics",
+                          conf=CONF)

@@ -1,0 +1,169 @@
+"""The open registries (issue 25) through the worked example of docs/extending.md: tests/plugin_example, the package
+``taco-repro-toy`` installed as a user would (``pip install -e tests/plugin_example``; ``make test`` does it). It
+registers a learner (``toy_rwbc``) and an objective (``toy_inv``) through the entry-point groups; nothing in the
+tree names them, and each is first-class: config, train, sweep, status, bench, tables."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import math
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import torch
+import yaml
+from typer.testing import CliRunner
+
+from analysis.identity import algo_labels, method_label
+from analysis.load import load_results
+from analysis.scores import final_scores
+from analysis.tables import to_markdown
+from helpers import launch_app
+from offline_fixtures import write_dataset
+from repro.config.compose import (
+    ConfigError,
+    agent_learner,
+    compose,
+    config_groups,
+    offline_agents,
+    run_keys,
+    typed,
+)
+from repro.config.plugins import LearnerSpec, PluginError, discover, load_factory
+from repro.config.schema import is_offline, learner_names, objective_names, unread_keys
+from repro.learners import build_learner
+from repro.runs import rundir
+from repro.train import api
+
+try:
+    TOY = importlib.metadata.distribution("taco-repro-toy")
+except importlib.metadata.PackageNotFoundError:  # the suite needs it: say how to install it, once
+    raise RuntimeError("tests/test_plugins.py needs the example plugin: pip install -e tests/plugin_example "
+                       "(make test installs it)") from None
+
+TINY = ["task=cheetah_run", "profile=tiny", "env.image_size=32", "agent.feature_dim=16", "agent.hidden_dim=16",
+        "runtime.threads=1", "env.max_episode_frames=20"]  # 10-step episodes: rendering is most of the time
+OFFLINE = ["offline.dataset=medium", "offline.updates=4", "offline.eval_every_updates=4", "offline.eval_episodes=1",
+           "offline.checkpoint_every_updates=4", "offline.log_every_updates=2"]
+
+
+def test_the_example_registers_through_its_entry_points_only():
+    groups = {ep.group: ep.name for ep in TOY.entry_points}
+    assert groups == {"taco_repro.learners": "toy_rwbc", "taco_repro.objectives": "toy_inv"}
+    assert "toy_rwbc" in learner_names() and is_offline("toy_rwbc") and "toy_inv" in objective_names()
+    assert {"toy_rwbc", "toy_inv"} <= set(config_groups()["agent"])  # its conf folder is on the search path
+    # the bench list: the built-in offline agent files in the paper's order, then the plugin's
+    assert offline_agents() == ("bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "dt", "toy_rwbc")
+    labels = algo_labels()
+    assert (labels["toyrwbc"], labels["toyinv"]) == ("RWBC", "InvDyn")
+    assert method_label("toy_rwbc", ("taco",)) == "RWBC+TACO"  # an offline learner with TACO, as CQL+TACO
+    root = Path(__file__).resolve().parent
+    assert not [p for p in (root.parent / "repro").rglob("*.py") if "toy_rwbc" in p.read_text()]
+
+
+def test_the_light_agent_file_reading_agrees_with_hydra():
+    """offline_agents reads each agent file's learner from YAML (inherited files followed); Hydra composes it."""
+    for agent in config_groups()["agent"]:
+        learner = agent_learner(agent)
+        if agent in ("taco", "drqv2", "spr", "td3bc_taco", "cql_taco", "toy_inv", "toy_rwbc"):  # each path once
+            over = ["offline.dataset=medium"] if is_offline(learner) else []
+            assert str(compose([f"agent={agent}", *over]).agent.learner) == learner, agent
+
+
+def test_a_plugin_learner_s_section_is_typed_and_held_by_its_runs_only():
+    cfg = compose(["agent=toy_rwbc", "offline.dataset=medium", "agent.toy_rwbc.temperature=0.5"])
+    section = typed(cfg).agent.toy_rwbc  # type: ignore[attr-defined]
+    assert type(section).__name__ == "RWBCConfig" and section.temperature == 0.5
+    assert run_keys(cfg)["agent"]["toy_rwbc"] == {"temperature": 0.5, "max_weight": 20.0}
+    assert "toy_rwbc" not in run_keys(compose(["agent=cql", "offline.dataset=medium"]))["agent"]
+    assert "agent.toy_rwbc" in unread_keys("cql") and "agent.cql" in unread_keys("toy_rwbc")
+    with pytest.raises(ConfigError, match=r"^agent\.toy_rwbc\.temperature: Value 'hot'") as err:
+        compose(["agent=toy_rwbc", "offline.dataset=medium", "agent.toy_rwbc.temperature=hot"])
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("override, message", [
+    ("agent.learner=toy_rwbcc",
+     "agent.learner=toy_rwbcc is not one of actor_critic, bc, td3bc, cql, iql, dt, toy_rwbc."),
+    ("+agent.objectives.toy_invv=1", "unknown objective 'toy_invv'. Did you mean: toy_inv?"),
+])
+def test_a_misspelled_registered_name_is_one_line_and_exit_2(tmp_path, override: str, message: str):
+    from repro_app.cli import app
+
+    out = CliRunner().invoke(app, ["train", "agent=toy_inv", override, f"runtime.results_root={tmp_path}"])
+    assert out.exit_code == 2 and message in out.output and len(out.output.strip().splitlines()) == 1, out.output
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_broken_registration_is_one_line(monkeypatch):
+    class EntryPoint:
+        name, group, value = "other", "taco_repro.learners", "taco_repro_toy:LEARNER"
+
+        def load(self) -> LearnerSpec:
+            return LearnerSpec("toy_rwbc", offline=True, label="X", factory="m:a")
+
+    monkeypatch.setattr("repro.config.plugins.entry_points", lambda group: [EntryPoint()])
+    with pytest.raises(PluginError, match="registers 'toy_rwbc' under the entry-point name 'other'"):
+        discover("taco_repro.learners", LearnerSpec)
+    with pytest.raises(PluginError, match=r"^'gone': cannot import its factory taco_repro_toy\.nope:Gone: "
+                                          "ModuleNotFoundError") as err:
+        load_factory(LearnerSpec("gone", offline=True, label="Gone", factory="taco_repro_toy.nope:Gone"))
+    assert "\n" not in str(err.value)
+
+
+def test_the_toy_learner_weights_bc_by_return_and_returns_detached_scalars():
+    torch.manual_seed(0)
+    learner = build_learner(typed(compose(["agent=toy_rwbc", *TINY, "offline.dataset=medium"])).agent, (9, 32, 32), 6,
+                            "cpu")
+    g = torch.Generator().manual_seed(0)
+    batch = {"obs": torch.randint(0, 256, (4, 9, 32, 32), generator=g, dtype=torch.uint8),
+             "action": torch.rand(4, 6, generator=g) * 2 - 1, "reward": torch.tensor([0.0, 1.0, 2.0, 3.0])}
+    metrics = learner.update(batch, 0)
+    assert set(metrics) == set(learner.metric_names())
+    assert all(isinstance(v, torch.Tensor) and v.dim() == 0 and not v.requires_grad for v in metrics.values())
+    # exp((r - 3) / 1) normalised to mean 1: the best transition weighs most
+    w = torch.exp(torch.tensor([0.0, 1.0, 2.0, 3.0]) - 3.0)
+    assert float(metrics["rwbc_max_weight"]) == pytest.approx(float((w / w.mean()).max()))
+
+
+@pytest.mark.slow
+def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_path):
+    """The offline learner through `repro sweep` and `repro status`, the objective through `repro train`'s API;
+    the analysis table of their run directories shows each one's registered label."""
+    root = tmp_path / "runs"
+    write_dataset(root / "datasets" / "cheetah_run" / "medium", task="cheetah_run", action_dim=6,
+                  frame_shape=(3, 32, 32), best_return=200.0)
+    sweep = tmp_path / "toy.yaml"
+    sweep.write_text(yaml.safe_dump({
+        "name": "toy", "description": "the plugin's learner", "artifacts": [], "experiment": "toy",
+        "tasks": ["cheetah_run"], "agents": ["toy_rwbc"], "seeds": 1, "frames": None,
+        "eval": {"every_frames": None, "episodes": None},
+        "common": [o for o in TINY if o != "task=cheetah_run"] + OFFLINE, "variants": {"base": []}}))
+    runner, app = CliRunner(), launch_app()
+    out = runner.invoke(app, ["sweep", str(sweep), "--results-root", str(root)])
+    assert out.exit_code == 0, out.output
+    status = runner.invoke(app, ["status", "toy", "--results-root", str(root)])
+    assert status.exit_code == 0 and "1 done" in status.output, status.output
+    online = api.train([*TINY, "agent=toy_inv", f"runtime.results_root={root}", "experiment=toy", "train.frames=40",
+                        "train.seed_frames=20", "train.explore_steps=10", "train.eval_every_frames=40",
+                        "train.eval_episodes=1", "train.save_frames=false"], echo=lambda s: None)
+    runs = {yaml.safe_load(p.read_text())["agent"]["name"]: p.parent for p in root.rglob(rundir.CONFIG)}
+    assert set(runs) == {"toy_rwbc", "toy_inv"} and runs["toy_inv"] == online
+    for run, column in ((runs["toy_rwbc"], "rwbc_loss"), (runs["toy_inv"], "toy_inv_loss")):
+        values = pd.read_csv(run / "train.csv")[column].dropna()  # online: no update before train.seed_frames
+        assert len(values) and all(math.isfinite(float(v)) for v in values), (run, column)
+    table = to_markdown(final_scores(load_results(root))[["method", "task", "seed", "score"]])
+    assert "| RWBC " in table and "| InvDyn " in table, table
+
+
+def test_the_paper_s_offline_sweeps_list_every_packaged_offline_agent_file_and_no_plugin_s():
+    """A learner added to the tree without its agent files in the two offline sweeps fails here; a plugin's learner
+    goes in a sweep file of its own (it is not the paper's)."""
+    from repro.config.compose import CONF_DIR
+    from repro.launch import spec as specs
+
+    packaged = {a for a in offline_agents() if (CONF_DIR / "agent" / f"{a}.yaml").is_file()}
+    assert "toy_rwbc" not in packaged and {"bc", "cql", "dt"} <= packaged
+    for sweep in ("offline", "tiny_offline"):
+        assert set(specs.load(sweep).agents) == packaged, sweep
