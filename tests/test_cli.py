@@ -31,7 +31,7 @@ def test_the_command_line_starts_without_torch():
 def test_a_run_without_runtime_wandb_does_not_import_wandb(tmp_path):
     """The trainer, both loops and their loggers (TensorBoard on) write rows without loading wandb; with
     runtime.wandb=true the same logger does (so this test can fail)."""
-    code = ("import sys, pathlib; from repro.train import api, online, offline; "
+    code = ("import sys, pathlib; from repro.train import api, online_loop, offline_loop; "
             "from repro.runs.logger import RunLogger; pathlib.Path(sys.argv[1]).mkdir(); "
             "from repro.runs.wblog import WandbRun; wb = WandbRun('offline', 'p', None, 'g', 'g/n', ('seed=1',)); "
             "log = RunLogger(sys.argv[1], [], echo=lambda s: None, tensorboard=True, "

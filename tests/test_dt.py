@@ -26,13 +26,13 @@ from repro.learners import (  # noqa: E402
     build_learner,
     samples_episodes,
 )
-from repro.learners.dt import DTLearner  # noqa: E402
+from repro.learners.dt import DT  # noqa: E402
 from repro.learners.losses.dt import action_loss  # noqa: E402
 from repro.runs.checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
 from repro.runs.runformat import OFFLINE_EVAL_COLUMNS, RETURN_TARGET_EVAL_COLUMNS, offline_eval_columns  # noqa: E402
 from repro.train import api  # noqa: E402
 from repro.train.common import run_eval_episodes  # noqa: E402
-from repro.train.offline import OfflineLogger, OfflineTrainer  # noqa: E402
+from repro.train.offline_loop import OfflineLogger, OfflineLoop  # noqa: E402
 from repro_app.cli import app  # noqa: E402
 
 OBS = (9, 32, 32)
@@ -41,12 +41,12 @@ SMALL = {"agent.dt.context": 4, "agent.dt.embed_dim": 16, "agent.dt.n_layers": 1
          "agent.dt.dropout": 0.0, "agent.dt.warmup_steps": 1, "agent.dt.lr": 1e-3}
 
 
-def _dt(seed: int = 0, **over) -> DTLearner:
+def _dt(seed: int = 0, **over) -> DT:
     values = {**SMALL, **over}
     rc = typed(compose(["agent=dt", "profile=tiny", "task=hopper_hop"] + [f"{k}={v}" for k, v in values.items()]))
     torch.manual_seed(seed)
     learner = build_learner(rc.agent, OBS, A_DIM, "cpu")
-    assert isinstance(learner, DTLearner)
+    assert isinstance(learner, DT)
     return learner
 
 
@@ -67,7 +67,7 @@ def test_config_defaults_are_the_dt_papers():
 
 def test_protocol_registry_and_parameter_table():
     learner = _dt()
-    assert LEARNERS["dt"] is DTLearner and samples_episodes("dt") and not samples_episodes("bc")
+    assert LEARNERS["dt"] is DT and samples_episodes("dt") and not samples_episodes("bc")
     for proto in (Learner, SequenceLearner, EpisodicActor, ReturnConditioned):
         assert isinstance(learner, proto), proto
     rows = learner.parameter_counts()
@@ -109,7 +109,7 @@ def test_warmup_and_gradient_clip():
     assert clipped.item() == pytest.approx(1e-3, rel=1e-3)
 
 
-def _spy(learner: DTLearner) -> list[dict[str, np.ndarray]]:
+def _spy(learner: DT) -> list[dict[str, np.ndarray]]:
     """Record every model input of ``learner.act`` (numpy copies); the model still runs."""
     seen: list[dict[str, np.ndarray]] = []
     forward = learner.model.forward
@@ -181,7 +181,7 @@ class _CountingEnv:
 class _TargetEnv(_CountingEnv):
     """Rewards that depend on the action taken; logs (the learner's target, the episode's return)."""
 
-    def __init__(self, learner: DTLearner):
+    def __init__(self, learner: DT):
         self.learner, self.log = learner, []
 
     def reset(self, seed: int):
@@ -231,7 +231,7 @@ def test_state_dict_round_trip_gives_the_identical_next_updates(tmp_path: Path):
 
 
 # ----------------------------------------------------------------------------- offline loop hooks
-def _trainer(tmp_path: Path, learner: DTLearner, data_dir: Path, updates: int, eval_episodes: int,
+def _loop(tmp_path: Path, learner: DT, data_dir: Path, updates: int, eval_episodes: int,
              env=None, state: dict | None = None, saved: list | None = None):
     data = load_offline_episodes(data_dir, task="hopper_hop", action_dim=A_DIM, frame_shape=(3, 32, 32))
     assert data.buffer is None and data.episodes is not None and len(data.episodes) == 3
@@ -240,13 +240,13 @@ def _trainer(tmp_path: Path, learner: DTLearner, data_dir: Path, updates: int, e
                          "offline.checkpoint_every_updates=2", "offline.log_every_updates=1"])).offline
     logger = OfflineLogger(tmp_path, learner.metric_names(), offsets=state["csv"] if state else None,
                            echo=lambda s: None, return_conditioned=True)
-    trainer = OfflineTrainer(cfg, 1, 2, env or SimpleNamespace(spec=SimpleNamespace(has_success=False)), learner,
+    loop = OfflineLoop(cfg, 1, 2, env or SimpleNamespace(spec=SimpleNamespace(has_success=False)), learner,
                              api._batch_source(learner, data, 1), logger,
                              (lambda s: saved.append(_frozen(s))) if saved is not None else (lambda s: None),
                              (200.0, "source"), data.digest, dataset_best_return=data.best_return)
     if state is not None:
-        trainer.restore(state)
-    return trainer, logger, data
+        loop.restore(state)
+    return loop, logger, data
 
 
 def _frozen(state: dict) -> dict:
@@ -268,17 +268,17 @@ def test_offline_loop_resume_from_checkpoint_is_exact(tmp_path: Path):
     torch.manual_seed(0)
     saved: list[dict] = []
     (tmp_path / "ref").mkdir()
-    trainer, logger, _ = _trainer(tmp_path / "ref", _dt(**over), data_dir, 6, 0, saved=saved)
-    trainer.run()
+    loop, logger, _ = _loop(tmp_path / "ref", _dt(**over), data_dir, 6, 0, saved=saved)
+    loop.run()
     logger.close()
     mid = next(s for s in saved if s["offline"]["update"] == 2)
     assert set(mid["learner"]) == {"schedulers", "sampler"}
     (tmp_path / "resumed").mkdir()
     for name in ("train.csv", "eval.csv"):  # the rows written up to the checkpoint
         (tmp_path / "resumed" / name).write_bytes((tmp_path / "ref" / name).read_bytes()[:mid["csv"][name[:-4]]])
-    trainer, logger, _ = _trainer(tmp_path / "resumed", _dt(seed=5, **over), data_dir, 6, 0, state=mid)
-    assert trainer.update == 2
-    trainer.run()
+    loop, logger, _ = _loop(tmp_path / "resumed", _dt(seed=5, **over), data_dir, 6, 0, state=mid)
+    assert loop.update == 2
+    loop.run()
     logger.close()
     ref, res = _deterministic(tmp_path / "ref" / "train.csv"), _deterministic(tmp_path / "resumed" / "train.csv")
     assert list(ref["update"]) == [1, 2, 3, 4, 5, 6]
@@ -291,9 +291,9 @@ def test_offline_loop_evaluates_at_both_targets(tmp_path: Path):
     learner = _dt()
     env = _TargetEnv(learner)
     (tmp_path / "run").mkdir()
-    trainer, logger, data = _trainer(tmp_path / "run", learner, data_dir, 2, 1, env=env)
+    loop, logger, data = _loop(tmp_path / "run", learner, data_dir, 2, 1, env=env)
     assert data.best_return == best == max(float(e["rewards"].sum()) for e in data.episodes) != 200.0
-    trainer.run()
+    loop.run()
     logger.close()
     ev = pd.read_csv(tmp_path / "run" / "eval.csv")
     assert list(ev.columns) == offline_eval_columns(True) == OFFLINE_EVAL_COLUMNS + RETURN_TARGET_EVAL_COLUMNS
@@ -308,8 +308,8 @@ def test_offline_loop_evaluates_at_both_targets(tmp_path: Path):
     assert np.allclose(ev["normalized_score"], 100 * ev["episode_reward"] / 200.0)
     assert np.allclose(ev["normalized_score_dataset_target"], 100 * ev["episode_reward_dataset_target"] / 200.0)
     # without an online reference the primary target falls back to the dataset's best
-    trainer.reference_return, trainer.reference_kind = None, "none"
-    assert trainer.eval_targets() == [(best, "dataset"), (best, "dataset")]
+    loop.reference_return, loop.reference_kind = None, "none"
+    assert loop.eval_targets() == [(best, "dataset"), (best, "dataset")]
 
 
 # ----------------------------------------------------------------------------- CLI and end to end

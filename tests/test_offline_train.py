@@ -237,17 +237,17 @@ def test_offline_sigkill_and_resume_matches_uninterrupted_run(reference: Path, t
 def test_resume_refused_when_the_dataset_changed(tmp_path: Path):
     from types import SimpleNamespace
 
-    from repro.train.offline import OfflineLogger, OfflineTrainer
+    from repro.train.offline_loop import OfflineLogger, OfflineLoop
 
     data = _load(write_dataset(tmp_path / "d", frame_shape=(3, 32, 32)), frame_shape=(3, 32, 32))
     env = SimpleNamespace(spec=SimpleNamespace(has_success=False))
     cfg = typed(compose(TINY)).offline
     (tmp_path / "run").mkdir()
     logger = OfflineLogger(tmp_path / "run", ["bc_loss"], echo=lambda s: None)
-    trainer = OfflineTrainer(cfg, 1, 2, env, _bc(), data.buffer, logger, lambda s: None, (None, "none"), data.digest)
-    state = trainer.checkpoint_state()
-    other = OfflineTrainer(cfg, 1, 2, env, _bc(), data.buffer, logger, lambda s: None, (None, "none"), "f" * 64)
+    loop = OfflineLoop(cfg, 1, 2, env, _bc(), data.buffer, logger, lambda s: None, (None, "none"), data.digest)
+    state = loop.checkpoint_state()
+    other = OfflineLoop(cfg, 1, 2, env, _bc(), data.buffer, logger, lambda s: None, (None, "none"), "f" * 64)
     with pytest.raises(DatasetError, match="dataset changed"):
         other.restore(state)
-    trainer.restore(state)  # the same dataset resumes
+    loop.restore(state)  # the same dataset resumes
     logger.close()

@@ -70,7 +70,7 @@ def test_mirror_equals_csv_and_a_resume_rebuilds_it_without_repeated_steps(tmp_p
 
 def _offline_rows(tmp_path: Path, **mirror: Any) -> None:
     """Two eval rows (updates 0 and 1000) and one train row of an offline run, through its logger's mirrors."""
-    from repro.train.offline import OfflineLogger
+    from repro.train.offline_loop import OfflineLogger
 
     log = OfflineLogger(tmp_path, ["actor_loss"], echo=lambda s: None, **mirror)
     for update in (0, 1000):

@@ -1,6 +1,6 @@
 """`repro bench --e2e`: a short real training loop, timed per phase (docs/performance.md).
 
-The loop is the online loop's (repro/train/online.py) without evaluation, logging, checkpoints and the episode
+The loop is the online loop's (repro/train/online_loop.py) without evaluation, logging, checkpoints and the episode
 files: the environment, agent and replay are built as a run builds them (repro/train/api.py), the seed frames are
 stepped untimed, then ``frames`` frames are timed phase by phase. The phases:
 

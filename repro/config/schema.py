@@ -67,7 +67,7 @@ def learner_sections(learner: str) -> tuple[str, ...]:
     return ((f"agent.{spec.name}",) if spec.section is not None else ()) + (("offline",) if spec.offline else ())
 
 
-# Keys only the online loop reads (repro/train/online.py, the replay it fills); an offline run reads none of them.
+# Keys only the online loop reads (repro/train/online_loop.py, the replay it fills); an offline run reads none of them.
 ONLINE_LOOP_KEYS = ("train.frames", "train.seed_frames", "train.explore_steps", "train.update_every_steps",
                     "train.eval_every_frames", "train.eval_episodes", "train.checkpoint_every_episodes",
                     "train.save_frames", "replay.capacity")

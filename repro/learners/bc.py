@@ -25,7 +25,7 @@ def bc_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return (predicted - target).pow(2).mean()
 
 
-class BCLearner(LearnerBase, ModuleSet):
+class BC(LearnerBase, ModuleSet):
     """Offline learner ``bc``."""
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,

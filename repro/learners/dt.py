@@ -28,7 +28,7 @@ from repro.learners.losses.dt import action_loss
 METRICS = ("dt_loss", "lr", "grad_norm")  # grad_norm: before clipping; lr: the rate this update used
 
 
-class DTLearner(LearnerBase):
+class DT(LearnerBase):
     """Offline learner ``dt``."""
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,

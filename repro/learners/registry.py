@@ -15,9 +15,9 @@ from repro.agent.agent import Agent
 from repro.config.plugins import load_factory
 from repro.config.schema import AgentConfig, check_registry, learner_names, learner_specs
 from repro.learners.base import Learner, SequenceLearner
-from repro.learners.bc import BCLearner
+from repro.learners.bc import BC
 from repro.learners.cql import CQL
-from repro.learners.dt import DTLearner
+from repro.learners.dt import DT
 from repro.learners.iql import IQL
 from repro.learners.td3bc import TD3BC
 
@@ -25,11 +25,11 @@ LearnerFactory = Callable[..., Learner]  # (cfg, obs_shape, action_dim, device=,
 
 LEARNERS: dict[str, LearnerFactory] = {
     "actor_critic": Agent,  # DrQ-v2 / TACO and the representation ablations (online)
-    "bc": BCLearner,  # behaviour cloning (offline)
+    "bc": BC,  # behaviour cloning (offline)
     "td3bc": TD3BC,  # TD3+BC on the DrQ-v2 backbone (offline; agent=td3bc | td3bc_taco)
     "cql": CQL,  # CQL on the DrQ-v2 backbone (offline; agent=cql | cql_taco)
     "iql": IQL,  # IQL on the DrQ-v2 backbone (offline)
-    "dt": DTLearner,  # Decision Transformer on pixels (offline; samples episode windows, return-conditioned)
+    "dt": DT,  # Decision Transformer on pixels (offline; samples episode windows, return-conditioned)
 }
 LEARNERS.update({spec.name: cast(LearnerFactory, load_factory(spec))
                  for spec in learner_specs().values() if spec.factory is not None})

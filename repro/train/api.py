@@ -45,8 +45,8 @@ from repro.runs.logger import RunLogger
 from repro.runs.runformat import TRAIN
 from repro.runs.video import VIDEO_DIR, EvalVideos
 from repro.runs.wblog import WandbRun, check_wandb
-from repro.train.offline import BatchSource, OfflineLogger, OfflineTrainer, check_resume_dataset
-from repro.train.online import Trainer
+from repro.train.offline_loop import BatchSource, OfflineLogger, OfflineLoop, check_resume_dataset
+from repro.train.online_loop import OnlineLoop
 
 T = TypeVar("T")
 T_co = TypeVar("T_co", covariant=True)
@@ -316,16 +316,16 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
         logger = RunLogger(path, agent.metric_names(), offsets=state["csv"] if state else None, echo=echo,
                            tensorboard=rc.runtime.tensorboard, wandb=_with_resolved(wandb, values))
         bar = _progress(rc, progress)
-        trainer = Trainer(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
+        loop = OnlineLoop(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
                           lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
                           save_frames=lambda frames: _save_frames(path / "frames.npz", frames), recorder=recorder,
                           videos=eval_videos(rc, path, "frame"), budget_ends=ends)
 
         def resumed(saved: dict) -> None:
             episodes.prune({rec[0] for rec in saved["buffer"]["episodes"]})
-            echo(f"resumed {path} at frame {trainer.frame}")
+            echo(f"resumed {path} at frame {loop.frame}")
 
-        _restore_run_finish(path, trainer, state, resumed, bar, logger,
+        _restore_run_finish(path, loop, state, resumed, bar, logger,
                             lambda c: {"frame": c.step * rc.env.action_repeat, "step": c.step, "episode": c.episode},
                             rc.train.frames)
         if not rc.runtime.keep_replay:
@@ -336,7 +336,7 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
 
 
 class _Loop(Protocol[T_co]):
-    """The part of :class:`Trainer` and :class:`OfflineTrainer` that :func:`_restore_run_finish` drives."""
+    """The part of :class:`OnlineLoop` and :class:`OfflineLoop` that :func:`_restore_run_finish` drives."""
 
     def restore(self, state: dict) -> None: ...
 
@@ -349,17 +349,17 @@ class _Closing(Protocol):
     def close(self, failing: bool = False) -> None: ...
 
 
-def _restore_run_finish(path: Path, trainer: _Loop[T], state: dict | None, resumed: Callable[[dict], None],
+def _restore_run_finish(path: Path, loop: _Loop[T], state: dict | None, resumed: Callable[[dict], None],
                         bar: _Progress | None, logger: _Closing, done: Callable[[T], dict[str, Any]],
                         budget: int) -> None:
     """What an online and an offline run share once built: restore ``state`` (then ``resumed(state)``), run
     the loop, close the progress bar and the logger even when the loop fails, and mark the run done with
     ``done(result)`` followed by its total time and finishing time, ``budget`` recorded as reached."""
     if state is not None:
-        trainer.restore(state)
+        loop.restore(state)
         resumed(state)
     try:
-        result = trainer.run()
+        result = loop.run()
     except BaseException:  # a kill, a requeue's SystemExit, an error: closed, then raised as it was
         if bar:
             bar.close()
@@ -368,7 +368,7 @@ def _restore_run_finish(path: Path, trainer: _Loop[T], state: dict | None, resum
     if bar:
         bar.close()
     logger.close()
-    rundir.write_done(path, {**done(result), "total_time": round(trainer.total_time(), 3),
+    rundir.write_done(path, {**done(result), "total_time": round(loop.total_time(), 3),
                              "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, budget)
 
 
@@ -427,13 +427,13 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, st
                                return_conditioned=isinstance(learner, ReturnConditioned),
                                tensorboard=rc.runtime.tensorboard, wandb=_with_resolved(wandb, values))
         bar = _progress(rc, progress, total=rc.offline.updates, unit="updates/s")
-        trainer = OfflineTrainer(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner,
+        loop = OfflineLoop(rc.offline, rc.seed, rc.env.action_repeat, eval_env, learner,
                                  _batch_source(learner, data, rc.seed), logger, lambda s: save_checkpoint(ckpt_file, s),
                                  reference=score_reference(rc.task.name, data.manifest.source),
                                  dataset_digest=data.digest, progress=bar.update if bar else None,
                                  dataset_best_return=data.best_return, videos=eval_videos(rc, path, "update"),
                                  budget_ends=ends)
-        _restore_run_finish(path, trainer, state, lambda _: echo(f"resumed {path} at update {trainer.update}"), bar,
+        _restore_run_finish(path, loop, state, lambda _: echo(f"resumed {path} at update {loop.update}"), bar,
                             logger, lambda updates: {"update": updates, "dataset": str(data.directory),
                                                      "dataset_sha256": data.digest}, rc.offline.updates)
     finally:

@@ -43,7 +43,7 @@ from repro.envs import TASKS
 from repro.runs import rundir
 from repro.runs.fsutil import holder_words, try_flock
 from repro.train.api import DeviceError, build_env, resolve_device, run_action_dim
-from repro.train.online import episode_seed
+from repro.train.online_loop import episode_seed
 
 DEFAULTS_FILE = CONF_DIR / "datasets.yaml"
 ROLLOUT_KIND = 2  # episode_seed kind of dataset rollouts (0: training, 1: evaluation)

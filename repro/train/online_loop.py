@@ -1,7 +1,7 @@
 """The online training loop (as upstream DrQ-v2): it receives env, learner, buffer and logger.
 
 Shared pieces (episode seeds, evaluation rollouts, RNG state) live in repro/train/common.py; the offline
-loop is repro/train/offline.py.
+loop is repro/train/offline_loop.py.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from repro.train.common import (
     set_rng_state,
 )
 
-__all__ = ["Counters", "Trainer", "episode_seed"]
+__all__ = ["Counters", "OnlineLoop", "episode_seed"]
 
 
 @dataclass
@@ -39,7 +39,7 @@ class Counters:
     episode: int = 0  # finished training episodes
 
 
-class Trainer:
+class OnlineLoop:
     def __init__(self, cfg: TrainConfig, seed: int, action_repeat: int, env: Env, eval_env: Env, agent: OnlineLearner,
                  buffer: ReplayBuffer, logger: RunLogger, episodes: EpisodeStore,
                  save_checkpoint: Callable[[dict], None], progress=None,

@@ -76,7 +76,7 @@ class OfflineLogger(CsvPairLogger):
                   f" ± {row['episode_reward_std']:.2f}{extra}")
 
 
-class OfflineTrainer:
+class OfflineLoop:
     def __init__(self, cfg: OfflineConfig, seed: int, action_repeat: int, eval_env: Env, learner: Learner,
                  buffer: BatchSource, logger: OfflineLogger, save_checkpoint: Callable[[dict], None],
                  reference: tuple[float | None, str], dataset_digest: str,
