@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +17,7 @@ from repro.config.schema import TrainConfig
 from repro.data.episodes import EpisodeStore
 from repro.data.record import Recorder
 from repro.data.replay import ReplayBuffer
-from repro.envs.base import Env
+from repro.envs.base import Env, TimeStep
 from repro.learners.base import OnlineLearner
 from repro.runs.logger import RunLogger
 from repro.runs.video import EvalVideos
@@ -39,7 +40,29 @@ class Counters:
     episode: int = 0  # finished training episodes
 
 
+@dataclass
+class _Episode:
+    """The training episode in progress: its last time step, its running return, length and success, when it
+    started (wall clock) and its update metrics."""
+
+    ts: TimeStep
+    reward: float = 0.0
+    length: int = 0  # agent steps
+    success: float = 0.0
+    started: float = field(default_factory=time.time)
+    means: MetricMeans = field(default_factory=MetricMeans)
+
+    def add(self, ts: TimeStep) -> None:
+        self.ts = ts
+        self.reward += ts.reward
+        self.length += 1
+        self.success = max(self.success, float(ts.info.get("success", 0.0)))
+
+
 class OnlineLoop:
+    """Drives an online run: the environment, the learner, its replay and the logs, from a fresh start or a
+    checkpoint to ``train.frames``."""
+
     def __init__(self, cfg: TrainConfig, seed: int, action_repeat: int, env: Env, eval_env: Env, agent: OnlineLearner,
                  buffer: ReplayBuffer, logger: RunLogger, episodes: EpisodeStore,
                  save_checkpoint: Callable[[dict], None], progress=None,
@@ -55,8 +78,12 @@ class OnlineLoop:
         # Budgets (frames) this run reached before it was extended: it evaluates there again, as it did when it
         # stopped there (an evaluation draws no training random number, so the trajectory is unchanged).
         self.budget_end_steps = frozenset(self._steps(f) for f in budget_ends)
+        self.total_steps = self._steps(cfg.frames)
+        self.eval_every = self._steps(cfg.eval_every_frames)
+        self.seed_steps = cfg.seed_frames // action_repeat
         self.counters = Counters()
         self.batch_size = agent.batch_size
+        self.metric_names = agent.metric_names()
         self.has_success = env.spec.has_success
         self.clock = WallClock()
         self.last_eval: float | None = None
@@ -128,59 +155,68 @@ class OnlineLoop:
         self.episodes.prune({rec[0] for rec in state["buffer"]["episodes"]})
 
     def run(self) -> Counters:
-        cfg = self.cfg
-        total_steps = self._steps(cfg.frames)
-        eval_every = self._steps(cfg.eval_every_frames)
-        seed_steps = cfg.seed_frames // self.action_repeat
-        metric_names = self.agent.metric_names()
-
-        def new_episode():
-            ts = self.env.reset(seed=episode_seed(self.seed, 0, self.counters.episode))
-            self.buffer.start_episode(ts.observation[-3:])
-            return ts
-
-        ts = new_episode()
-        ep_reward, ep_len, ep_success, ep_start = 0.0, 0, 0.0, time.time()
-        means = MetricMeans()  # the update metrics of the current episode
+        """Train to ``train.frames``: at each agent step, evaluate when due, then act, update and step the
+        environment (upstream's order); a finished episode writes its train.csv row and starts the next."""
+        episode = self._start_episode()
         while True:
-            if (self.counters.step % eval_every == 0 or self.counters.step >= total_steps
-                    or self.counters.step in self.budget_end_steps):
-                if cfg.eval_episodes > 0:
-                    self.evaluate(final=self.counters.step >= total_steps)
+            self._maybe_evaluate()
             if self.progress is not None:
                 self.progress(self.frame, self.last_eval)
-            if self.counters.step >= total_steps:
-                break
-            step = self.counters.step
-            action = self.agent.act(ts.observation, step, eval_mode=False)
-            if step >= seed_steps and step % cfg.update_every_steps == 0:
-                means.add(self.agent.update(self.buffer.sample(self.batch_size, **self.agent.sample_options), step))
-            ts = self.env.step(action)
-            self.buffer.add(action, ts.reward, ts.discount, ts.observation[-3:])
-            self.counters.step += 1
-            ep_reward += ts.reward
-            ep_len += 1
-            ep_success = max(ep_success, float(ts.info.get("success", 0.0)))
-            if ts.last:
-                self.counters.episode += 1
-                elapsed = max(time.time() - ep_start - self._eval_seconds, 1e-9)
-                row = {"frame": self.frame, "step": self.counters.step, "episode": self.counters.episode,
-                       "episode_reward": ep_reward, "episode_length": ep_len * self.action_repeat,
-                       "success": ep_success if self.has_success else None, "buffer_size": len(self.buffer),
-                       "stddev": self.agent.stddev(self.counters.step),
-                       "fps": round(ep_len * self.action_repeat / elapsed, 3),
-                       "total_time": round(self.total_time(), 3)}
-                episode_means = means.means()
-                row.update({k: episode_means.get(k) for k in metric_names})
-                self.logger.log_train(row)
-                episode = self.buffer.end_episode()
-                self.episodes.save(episode)
-                if self.recorder is not None:
-                    self.recorder.episode(episode, written=self.episodes.path(int(episode["ep_id"])))
-                if self.counters.episode % cfg.checkpoint_every_episodes == 0:
-                    self._checkpoint()
-                ts = new_episode()
-                ep_reward, ep_len, ep_success, ep_start = 0.0, 0, 0.0, time.time()
-                means.reset()
-                self._eval_seconds = 0.0
-        return self.counters
+            if self.counters.step >= self.total_steps:
+                return self.counters
+            self._act_update_step(episode)
+            if episode.ts.last:
+                self._end_episode(episode)
+                episode = self._start_episode()
+
+    def _start_episode(self) -> _Episode:
+        """Reset the environment with the next training episode's seed and open the episode in the buffer."""
+        ts = self.env.reset(seed=episode_seed(self.seed, 0, self.counters.episode))
+        self.buffer.start_episode(ts.observation[-3:])
+        self._eval_seconds = 0.0
+        return _Episode(ts)
+
+    def _maybe_evaluate(self) -> None:
+        """Evaluate every ``train.eval_every_frames``, at the end and at a budget the run reached before."""
+        step = self.counters.step
+        due = step % self.eval_every == 0 or step >= self.total_steps or step in self.budget_end_steps
+        if due and self.cfg.eval_episodes > 0:
+            self.evaluate(final=step >= self.total_steps)
+
+    def _act_update_step(self, episode: _Episode) -> None:
+        """One agent step in upstream's order: act on the current observation, update on a sampled batch (past the
+        seed frames, every ``train.update_every_steps`` steps), step the environment, store the transition."""
+        step = self.counters.step
+        action = self.agent.act(episode.ts.observation, step, eval_mode=False)
+        if step >= self.seed_steps and step % self.cfg.update_every_steps == 0:
+            episode.means.add(self.agent.update(self.buffer.sample(self.batch_size, **self.agent.sample_options), step))
+        ts = self.env.step(action)
+        self.buffer.add(action, ts.reward, ts.discount, ts.observation[-3:])
+        self.counters.step += 1
+        episode.add(ts)
+
+    def _end_episode(self, episode: _Episode) -> None:
+        """Count the finished episode, write its train.csv row, store it (and record it), checkpoint when due."""
+        self.counters.episode += 1
+        self.logger.log_train(self._episode_row(episode))
+        stored = self.buffer.end_episode()
+        self.episodes.save(stored)
+        if self.recorder is not None:
+            self.recorder.episode(stored, written=self.episodes.path(int(stored["ep_id"])))
+        if self.counters.episode % self.cfg.checkpoint_every_episodes == 0:
+            self._checkpoint()
+
+    def _episode_row(self, episode: _Episode) -> dict[str, Any]:
+        """The train.csv row of a finished episode: its return, length and success, the buffer's size, the
+        exploration stddev, its frame rate (evaluation excluded) and the mean of its update metrics."""
+        elapsed = max(time.time() - episode.started - self._eval_seconds, 1e-9)
+        row: dict[str, Any] = {
+            "frame": self.frame, "step": self.counters.step, "episode": self.counters.episode,
+            "episode_reward": episode.reward, "episode_length": episode.length * self.action_repeat,
+            "success": episode.success if self.has_success else None, "buffer_size": len(self.buffer),
+            "stddev": self.agent.stddev(self.counters.step),
+            "fps": round(episode.length * self.action_repeat / elapsed, 3),
+            "total_time": round(self.total_time(), 3)}
+        means = episode.means.means()
+        row.update({k: means.get(k) for k in self.metric_names})
+        return row
