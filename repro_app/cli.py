@@ -41,7 +41,9 @@ def train(ctx: typer.Context,
     from repro.runs.fsutil import write_error_message
     from repro.runs.rundir import RunDirMismatch, RunLocked
     from repro.runs.wblog import WandbError
-    from repro.train.api import CheckpointError, DeviceError, train_config
+    from repro.train.api import train_config
+    from repro.train.devices import DeviceError
+    from repro.train.start import CheckpointError
 
     try:
         path = train_config(cfg, echo=typer.echo, progress=progress)
@@ -56,7 +58,7 @@ def _dry_run(cfg) -> None:
     from rich.table import Table
 
     from repro.config.compose import typed
-    from repro.train.api import build_agent, run_action_dim
+    from repro.train.build import build_agent, run_action_dim
 
     rc = typed(cfg)
     con = console(min_width=120)

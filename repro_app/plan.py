@@ -187,7 +187,7 @@ class _Params:
     def count(self, cfg: Any, rc: Any) -> int:
         from omegaconf import OmegaConf
 
-        from repro.train.api import build_agent, run_action_dim
+        from repro.train.build import build_agent, run_action_dim
 
         action_dim = run_action_dim(rc)
         obs = (3 * rc.env.frame_stack, rc.env.image_size, rc.env.image_size)
@@ -202,7 +202,7 @@ def run_cost(sweep: str, planned: Any, bench: Bench | None, params: _Params | No
     from repro.config.compose import typed
     from repro.data.replay import ReplayBuffer
     from repro.launch.status import progress
-    from repro.train.api import run_action_dim
+    from repro.train.build import run_action_dim
 
     rc = typed(planned.cfg)
     offline = planned.run.dataset is not None

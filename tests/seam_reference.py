@@ -23,7 +23,7 @@ import torch
 
 from repro.config.compose import compose, typed
 from repro.data.replay import ReplayBuffer
-from repro.train import api
+from repro.train import build
 
 AGENTS = ("taco", "drqv2")
 UPDATES = 3
@@ -72,7 +72,7 @@ def record(agent_name: str, overrides: Sequence[str] = ()) -> dict:
     rc = typed(cfg)
     obs_shape = (3 * rc.env.frame_stack, rc.env.image_size, rc.env.image_size)
     action_dim = 6
-    agent = api.build_agent(rc, obs_shape, action_dim, "cpu")
+    agent = build.build_agent(rc, obs_shape, action_dim, "cpu")
     buffer = ReplayBuffer(rc.replay.capacity, (3, *obs_shape[1:]), action_dim, rc.env.frame_stack,
                           rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed)
     rng = np.random.default_rng(123)

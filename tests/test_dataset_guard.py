@@ -19,7 +19,7 @@ from repro.data import dataset as dataset_mod  # noqa: E402
 from repro.data.formats import vd4rl64, vd4rl84  # noqa: E402
 from repro.data.offline_replay import DatasetError  # noqa: E402
 from repro.runs.fsutil import atomic_write_text  # noqa: E402
-from repro.train import api  # noqa: E402
+from repro.train import build  # noqa: E402
 from repro_app.cli import app  # noqa: E402
 
 TINY = ["agent=bc", "task=cheetah_run", "profile=tiny", "seed=2", "runtime.threads=1", "offline.dataset=medium",
@@ -52,7 +52,7 @@ def _one_line(out) -> str:
 
 
 def _load(root: Path, agent: str = "bc") -> None:
-    api._load_dataset(typed(compose([*TINY, f"agent={agent}", f"runtime.results_root={root}"])))
+    build.load_dataset(typed(compose([*TINY, f"agent={agent}", f"runtime.results_root={root}"])))
 
 
 # ----------------------------------------------------------------------------- point 2: train checks what check checks

@@ -30,7 +30,7 @@ from repro.learners.dt import DT  # noqa: E402
 from repro.learners.losses.dt import action_loss  # noqa: E402
 from repro.runs.checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
 from repro.runs.runformat import OFFLINE_EVAL_COLUMNS, RETURN_TARGET_EVAL_COLUMNS, offline_eval_columns  # noqa: E402
-from repro.train import api  # noqa: E402
+from repro.train import api, build  # noqa: E402
 from repro.train.common import run_eval_episodes  # noqa: E402
 from repro.train.offline_loop import OfflineLogger, OfflineLoop  # noqa: E402
 from repro_app.cli import app  # noqa: E402
@@ -241,7 +241,7 @@ def _loop(tmp_path: Path, learner: DT, data_dir: Path, updates: int, eval_episod
     logger = OfflineLogger(tmp_path, learner.metric_names(), offsets=state["csv"] if state else None,
                            echo=lambda s: None, return_conditioned=True)
     loop = OfflineLoop(cfg, 1, 2, env or SimpleNamespace(spec=SimpleNamespace(has_success=False)), learner,
-                             api._batch_source(learner, data, 1), logger,
+                             build.batch_source(learner, data, 1), logger,
                              (lambda s: saved.append(_frozen(s))) if saved is not None else (lambda s: None),
                              (200.0, "source"), data.digest, dataset_best_return=data.best_return)
     if state is not None:
@@ -329,11 +329,11 @@ def test_dry_run_without_dataset_on_disk(tmp_path: Path):
 
 def test_dt_loads_episodes_not_a_replay(tmp_path: Path):
     write_dataset(tmp_path / "datasets" / "cheetah_run" / "medium", task="cheetah_run", action_dim=6)
-    data = api._load_dataset(typed(compose(TINY + [f"runtime.results_root={tmp_path}"])))
+    data = build.load_dataset(typed(compose(TINY + [f"runtime.results_root={tmp_path}"])))
     assert data.buffer is None and data.episodes is not None
     assert [len(e["actions"]) for e in data.episodes] == [12, 9, 15]
     assert data.raw_frame_bytes == (12 + 9 + 15 + 3) * 3 * 84 * 84
-    bc = api._load_dataset(typed(compose(["agent=bc", *TINY[1:11], f"runtime.results_root={tmp_path}"])))
+    bc = build.load_dataset(typed(compose(["agent=bc", *TINY[1:11], f"runtime.results_root={tmp_path}"])))
     assert bc.buffer is not None and bc.episodes is None
 
 

@@ -248,7 +248,7 @@ def test_the_checker_sees_the_import_forms_used_here():
     imports = all_imports(ROOT)
     by_source = {(i.source, i.target, i.in_function) for i in imports}
     assert ("repro_app.cli", "repro.launch.cli", False) in by_source  # from repro.launch import cli as launch_cli
-    assert ("repro.train.api", "repro.envs", True) in by_source  # function-level import in build_env
+    assert ("repro.train.build", "repro.envs", True) in by_source  # function-level import in build_env
     assert ("paper_figures.catalog", "paper_figures.f10_action_dim", False) in by_source  # from pkg import module
     assert ("repro_app.report", "analysis.claims", False) in by_source  # from module import name
     assert len({i.source for i in imports}) > 50

@@ -36,7 +36,7 @@ from repro.runs.logger import WALLCLOCK_COLUMNS
 from repro.runs.runformat import CHECKPOINT, DONE, EVAL, TRAIN
 from repro.runs.tblog import TB_DIR, read_scalars
 from repro.runs.wblog import RUN_ID, WANDB_DIR, offline_folders
-from repro.train import api
+from repro.train import api, devices
 
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group(TINY_TACO)]
 
@@ -53,7 +53,7 @@ def test_run_directory_contract(tiny_taco: Path):
     assert meta["versions"]["torch"] == metadata.version("torch") == torch.__version__
     assert meta["versions"]["python"] == platform.python_version()
     assert meta["host"] == socket.gethostname() and meta["resumes"] == []
-    assert meta["device"] == rundir.device_name(api.resolve_device("auto"))
+    assert meta["device"] == rundir.device_name(devices.resolve_device("auto"))
     head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(api.__file__).parent, capture_output=True,
                           text=True, check=False)
     if head.returncode == 0:  # a git checkout: the run names the commit it was trained from

@@ -1,8 +1,8 @@
 """`repro bench --e2e`: a short real training loop, timed per phase (docs/performance.md).
 
 The loop is the online loop's (repro/train/online_loop.py) without evaluation, logging, checkpoints and the episode
-files: the environment, agent and replay are built as a run builds them (repro/train/api.py), the seed frames are
-stepped untimed, then ``frames`` frames are timed phase by phase. The phases:
+files: the environment, agent and replay are built as a run builds them (repro/train/build.py, api.py), the seed
+frames are stepped untimed, then ``frames`` frames are timed phase by phase. The phases:
 
 * ``act``: ``agent.act`` (one observation to one action).
 * ``replay_sample``: ``buffer.sample`` of one batch.
@@ -91,7 +91,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
     from repro.data.replay import ReplayBuffer
     from repro.learners import OnlineLearner
     from repro.runs.rundir import _cpu_model
-    from repro.train.api import build_agent, build_env
+    from repro.train.build import build_agent, build_env
     from repro.train.common import episode_seed
 
     overrides = [f"agent={algo}", f"task={task}", *SPEEDUP_FLAGS[speedup]]

@@ -1,4 +1,5 @@
-"""Evaluation videos: MP4 (H.264) through the ffmpeg binary that the ``imageio-ffmpeg`` wheel ships.
+"""Evaluation videos: MP4 (H.264) through the ffmpeg binary that the ``imageio-ffmpeg`` wheel ships; and the
+final evaluation's frames (``frames.npz``, for the trajectory figure).
 
 Frames are collected in memory during one evaluation episode and written atomically (a temporary file in the
 same folder, then a rename), so a killed run never leaves a torn video under its final name.
@@ -6,6 +7,7 @@ same folder, then a rename), so a killed run never leaves a torn video under its
 
 from __future__ import annotations
 
+import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,10 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from repro.config.schema import VideoEvery
-from repro.runs.fsutil import atomic_output
+from repro.runs.fsutil import atomic_output, atomic_write
+from repro.runs.runformat import FRAMES
 from repro.runs.runformat import VIDEOS as VIDEO_DIR
 
-__all__ = ["VIDEO_DIR", "VIDEO_EVERY", "EvalVideos", "count_frames", "video_name", "write_mp4"]
+__all__ = ["VIDEO_DIR", "VIDEO_EVERY", "EvalVideos", "count_frames", "save_frames", "video_name", "write_mp4"]
 
 VIDEO_EVERY = VideoEvery.values()
 
@@ -88,3 +91,15 @@ def count_frames(path: str | os.PathLike) -> int:
             raise ValueError(f"{path}: a frame of {len(chunk)} bytes, expected {size}")
         n += 1
     return n
+
+
+def save_frames(run_dir: str | os.PathLike, frames: np.ndarray) -> None:
+    """Frames of one evaluation episode, uint8 (T, H, W, 3), as ``{run}/frames.npz``, compressed and written
+    atomically."""
+
+    def write(f) -> None:
+        buf = io.BytesIO()
+        np.savez_compressed(buf, frames=frames)
+        f.write(buf.getvalue())
+
+    atomic_write(Path(run_dir) / FRAMES, write)

@@ -63,7 +63,7 @@ def check_wandb() -> None:
 
 @dataclass(frozen=True)
 class WandbRun:
-    """Where and how a run is mirrored: runtime.wandb_* and the run's identity (repro/train/api.py builds it)."""
+    """Where and how a run is mirrored: runtime.wandb_* and the run's identity (repro/train/build.py builds it)."""
 
     mode: str  # runtime.wandb_mode: offline | online
     project: str  # runtime.wandb_project

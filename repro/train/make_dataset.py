@@ -42,8 +42,9 @@ from repro.data.record import EPISODES, SNAPSHOTS, load_snapshot, record_dir, sn
 from repro.envs import TASKS
 from repro.runs import rundir
 from repro.runs.fsutil import holder_words, try_flock
-from repro.train.api import DeviceError, build_env, resolve_device, run_action_dim
-from repro.train.online_loop import episode_seed
+from repro.train.build import build_env, run_action_dim
+from repro.train.common import episode_seed
+from repro.train.devices import DeviceError, resolve_device
 
 DEFAULTS_FILE = CONF_DIR / "datasets.yaml"
 ROLLOUT_KIND = 2  # episode_seed kind of dataset rollouts (0: training, 1: evaluation)
