@@ -16,7 +16,7 @@ import torch
 from omegaconf import DictConfig
 
 from repro.config.compose import compose, typed
-from repro.config.schema import RunConfig, is_offline
+from repro.config.schema import RunConfig
 from repro.data.episodes import EpisodeStore
 from repro.data.offline_replay import OfflineData
 from repro.data.record import Recorder
@@ -29,30 +29,19 @@ from repro.runs.fsutil import remove_torn_temporaries
 from repro.runs.logger import RunLogger
 from repro.runs.runformat import TRAIN
 from repro.runs.video import save_frames
-from repro.runs.wblog import WandbRun, check_wandb
+from repro.runs.wblog import WandbRun
 from repro.train.build import (
     batch_source,
     build_agent,
     build_env,
     eval_videos,
-    load_dataset,
-    wandb_run,
     with_resolved,
 )
 from repro.train.devices import resolve_device
 from repro.train.offline_loop import OfflineLogger, OfflineLoop
 from repro.train.online_loop import OnlineLoop
 from repro.train.progress import ProgressBar, progress_bar
-from repro.train.start import (
-    Start,
-    check_progress,
-    checkpoint_changed,
-    config_format,
-    has_rows,
-    load_state,
-    plan_start,
-    remove_empty,
-)
+from repro.train.start import Checked, check_start, config_format, has_rows, recheck_start, remove_empty
 
 T = TypeVar("T")
 T_co = TypeVar("T_co", covariant=True)
@@ -73,21 +62,9 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     run's first update (no checkpoint, no train.csv row) removes a run directory this call created."""
     rc = typed(cfg)
     path = rundir.run_dir(cfg)
-    start = plan_start(path, cfg, echo)
-    if start is None:
+    checked = check_start(rc, cfg, path, echo)
+    if checked is None:
         return path
-    device = resolve_device(rc.runtime.device, "runtime.device")
-    resolve_device(rc.replay.device, "replay.device")
-    wandb = wandb_run(rc, cfg, path) if rc.runtime.wandb else None
-    if wandb is not None:
-        check_wandb()  # WandbError (one line) without the package
-    holder = rundir.writer_lock_holder(path)  # refuse a running run before reading a large dataset for nothing
-    if holder is not None:
-        raise rundir.RunLocked(rundir.locked_message(path, holder))
-    # An offline run reads and checks its whole dataset before anything is written.
-    data = load_dataset(rc) if is_offline(rc.agent.learner) else None
-    state = load_state(path, data)
-    check_progress(path, start, state, rc.env.action_repeat)
     created = not path.exists()
     path.mkdir(parents=True, exist_ok=True)
     try:
@@ -97,16 +74,11 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
             remove_empty(path)
         raise
     with lock:
-        # Under the lock: another writer may have finished, started or changed the run since the checks above.
-        start = plan_start(path, cfg, echo)
-        if start is None:
+        checked = recheck_start(checked, rc, cfg, path, echo)
+        if checked is None:
             return path
-        if (state is None) != (not (path / rundir.CHECKPOINT).exists()) or (
-                state is not None and checkpoint_changed(path, state)):
-            state = load_state(path, data)
-        check_progress(path, start, state, rc.env.action_repeat)
         try:
-            _start(rc, cfg, path, start, device, data, state, echo, progress, wandb)
+            _start(rc, cfg, path, checked, echo, progress)
         except Exception:
             if created and not (path / rundir.CHECKPOINT).exists() and not has_rows(path / TRAIN):
                 shutil.rmtree(path, ignore_errors=True)  # failed before its first update: leave no directory
@@ -114,11 +86,11 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     return path
 
 
-def _start(rc: RunConfig, cfg: DictConfig, path: Path, start: Start, device: str, data: OfflineData | None,
-           state: dict | None, echo: Callable[[str], None], progress: bool | None,
-           wandb: WandbRun | None = None) -> None:
+def _start(rc: RunConfig, cfg: DictConfig, path: Path, checked: Checked, echo: Callable[[str], None],
+           progress: bool | None) -> None:
     """Under the writer lock: write config.yaml (today's format, the new budget) and meta.json, drop DONE of a run
     being extended, and train."""
+    start, state = checked.start, checked.state
     remove_torn_temporaries(path)
     remove_torn_temporaries(path / rundir.REPLAY)
     resuming = state is not None
@@ -128,15 +100,15 @@ def _start(rc: RunConfig, cfg: DictConfig, path: Path, start: Start, device: str
     if rc.runtime.threads:
         torch.set_num_threads(int(rc.runtime.threads))
     extension = (start.extend_from, start.budget) if start.extend_from is not None else None
-    rundir.write_meta(path, device, resumed=resuming, extension=extension, config_from=before)
+    rundir.write_meta(path, checked.device, resumed=resuming, extension=extension, config_from=before)
     if start.extend_from is not None:
         (path / rundir.DONE).unlink(missing_ok=True)
         echo(f"extending from {start.extend_from} to {start.budget} {start.unit}: {path}")
     ends = tuple(b for b in start.reached if b < start.budget)
-    if data is not None:
-        _train_offline(rc, path, data, device, state, echo, progress, ends, wandb)
+    if checked.data is not None:
+        _train_offline(rc, path, checked.data, checked.device, state, echo, progress, ends, checked.wandb)
     else:
-        _train_online(rc, path, device, state, echo, progress, ends, wandb)
+        _train_online(rc, path, checked.device, state, echo, progress, ends, checked.wandb)
 
 
 def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, echo: Callable[[str], None],

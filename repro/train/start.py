@@ -4,6 +4,7 @@ directory, a budget the checkpoint has passed, an unreadable checkpoint or one o
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -12,10 +13,13 @@ from pathlib import Path
 import yaml
 from omegaconf import DictConfig
 
-from repro.config.schema import budget_key, is_offline
+from repro.config.schema import RunConfig, budget_key, is_offline
 from repro.data.offline_replay import OfflineData
 from repro.runs import migrate, rundir
 from repro.runs.checkpoint import load_checkpoint
+from repro.runs.wblog import WandbRun, check_wandb
+from repro.train.build import load_dataset, wandb_run
+from repro.train.devices import resolve_device
 from repro.train.offline_loop import check_resume_dataset
 
 
@@ -36,6 +40,55 @@ class Start:
     unit: str
     reached: tuple[int, ...]
     extend_from: int | None = None
+
+
+@dataclass(frozen=True)
+class Checked:
+    """What the checks before the first write found: how the run starts, its device, its W&B run (None unless
+    ``runtime.wandb``), an offline run's dataset (read and checked whole) and the checkpoint (None without one)."""
+
+    start: Start
+    device: str
+    wandb: WandbRun | None
+    data: OfflineData | None
+    state: dict | None
+
+
+def check_start(rc: RunConfig, cfg: DictConfig, path: Path, echo: Callable[[str], None]) -> Checked | None:
+    """Everything that can refuse the run, before anything is written (so a refusal leaves the run directory
+    byte-identical): the config against the run directory's, the budget, the devices, W&B, another writer, the
+    dataset and a checkpoint's dataset. None (said in a line) when the run is done already."""
+    start = plan_start(path, cfg, echo)
+    if start is None:
+        return None
+    device = resolve_device(rc.runtime.device, "runtime.device")
+    resolve_device(rc.replay.device, "replay.device")
+    wandb = wandb_run(rc, cfg, path) if rc.runtime.wandb else None
+    if wandb is not None:
+        check_wandb()  # WandbError (one line) without the package
+    holder = rundir.writer_lock_holder(path)  # refuse a running run before reading a large dataset for nothing
+    if holder is not None:
+        raise rundir.RunLocked(rundir.locked_message(path, holder))
+    # An offline run reads and checks its whole dataset before anything is written.
+    data = load_dataset(rc) if is_offline(rc.agent.learner) else None
+    state = load_state(path, data)
+    check_progress(path, start, state, rc.env.action_repeat)
+    return Checked(start, device, wandb, data, state)
+
+
+def recheck_start(checked: Checked, rc: RunConfig, cfg: DictConfig, path: Path,
+                  echo: Callable[[str], None]) -> Checked | None:
+    """:func:`check_start` again under the writer lock, where another writer may have finished, started or changed
+    the run since: the plan and the checkpoint are read again (the checkpoint only when it changed)."""
+    start = plan_start(path, cfg, echo)
+    if start is None:
+        return None
+    state = checked.state
+    if (state is None) != (not (path / rundir.CHECKPOINT).exists()) or (
+            state is not None and checkpoint_changed(path, state)):
+        state = load_state(path, checked.data)
+    check_progress(path, start, state, rc.env.action_repeat)
+    return dataclasses.replace(checked, start=start, state=state)
 
 
 def plan_start(path: Path, cfg: DictConfig, echo: Callable[[str], None]) -> Start | None:
