@@ -232,6 +232,7 @@ def register(app: typer.Typer) -> None:
               device: str = typer.Option("cpu", help="cpu or cuda."),
               amp: bool = typer.Option(False, "--amp", help="Also time agent.amp=true (ratio to plain)."),
               compile_: bool = typer.Option(False, "--compile", help="Also time agent.compile=true (ratio to plain)."),
+              fast: bool = typer.Option(False, "--fast", help="Also time agent.fast=true (ratio to plain)."),
               offline: bool = typer.Option(False, "--offline", help="Instead: one update of each offline learner "
                                            "as a ratio to the DrQ-v2 update, measured side by side."),
               learner: Optional[list[str]] = typer.Option(
@@ -302,7 +303,7 @@ def register(app: typer.Typer) -> None:
             _write_report(out_dir, f"bench-offline-data-{host}.json", {**meta, **data}, typer.echo)
         if offline or offline_data:
             return
-        speedups = tuple(name for name, on in (("amp", amp), ("compile", compile_)) if on)
+        speedups = tuple(name for name, on in (("amp", amp), ("compile", compile_), ("fast", fast)) if on)
         if roofline:
             from repro.bench.roofline import run_roofline
 
