@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from repro.agent.aug import RandomShift
+from repro.agent import fast
 from repro.agent.modules import ModuleSet
 from repro.agent.networks import ActionEncoder, Actor, Critic, Encoder, default_latent_action_dim
 from repro.agent.objectives import OBJECTIVES, AuxBatch, Objective, ObjectiveContext
@@ -39,11 +39,15 @@ class Agent(ModuleSet):
         self.device = torch.device(device)
         self.action_dim = action_dim
         self.explore_steps = explore_steps
-        self.aug = RandomShift(pad=4)
+        # agent.fast: the speed-ups resolved for this device (repro/agent/fast.py); all off on the plain path
+        self.fast = fast.resolve_fast(cfg.fast, self.device)
+        self.resolved = fast.resolved(self.fast, cfg.fast)
+        self.aug = fast.shift(self.fast)
 
-        self.encoder = Encoder(obs_shape).to(self.device)
+        self.encoder = fast.prepare_encoder(Encoder(obs_shape).to(self.device), self.fast)
         # Opt-in speedups: a compiled encoder for updates, and bfloat16 autocast of the forward passes.
-        self._encode = torch.compile(self.encoder, dynamic=False) if cfg.compile else self.encoder
+        compiled = cfg.compile or self.fast.compile
+        self._encode = torch.compile(self.encoder, dynamic=False) if compiled else self.encoder
         repr_dim = self.encoder.repr_dim
         self.action_encoder: ActionEncoder | None = None
         if cfg.action_encoder:
@@ -73,13 +77,13 @@ class Agent(ModuleSet):
         # what the replay must return for these objectives (passed to ReplayBuffer.sample)
         self.sample_options = {"future_seq": any(o.needs_future_seq for o in self.objectives.values())}
 
-        lr = cfg.lr
-        self.encoder_opt = torch.optim.Adam(self.encoder.parameters(), lr=lr)
-        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr)
+        lr, adam = cfg.lr, fast.adam(self.fast)
+        self.encoder_opt = adam(self.encoder.parameters(), lr=lr)
+        self.actor_opt = adam(self.actor.parameters(), lr=lr)
         critic_params = list(self.critic.parameters())
         if self.action_encoder is not None:
             critic_params += list(self.action_encoder.parameters())
-        self.critic_opt = torch.optim.Adam(critic_params, lr=lr)
+        self.critic_opt = adam(critic_params, lr=lr)
         self.aux_opt: torch.optim.Optimizer | None = None
         if self.objectives:
             aux_params = list(self.encoder.parameters()) + list(self.objectives.parameters())
@@ -87,7 +91,7 @@ class Agent(ModuleSet):
                 aux_params += list(self.action_encoder.parameters())
             if self.shared is not None:
                 aux_params += list(self.shared.parameters())
-            self.aux_opt = torch.optim.Adam(_unique(aux_params), lr=lr)
+            self.aux_opt = adam(_unique(aux_params), lr=lr)
         self.train(True)
 
     # ----------------------------------------------------------------- modules and state
@@ -149,14 +153,16 @@ class Agent(ModuleSet):
 
     # ----------------------------------------------------------------- learning
     def _amp(self):
-        """bfloat16 autocast of forward passes when ``agent.amp`` is on (losses stay float32)."""
-        return torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=self.cfg.amp)
+        """bfloat16 autocast of forward passes when ``agent.amp`` is on, or ``agent.fast`` where bf16 is native (losses
+        stay float32)."""
+        on = self.cfg.amp or self.fast.amp
+        return torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=on)
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> dict[str, float]:
         """One DrQ-v2 update (critic, actor, target) followed by one auxiliary step."""
         metrics: dict[str, float] = {}
-        obs = self.aug(batch["obs"].float())
-        next_obs = self.aug(batch["next_obs"].float())
+        obs = self.aug(batch["obs"])
+        next_obs = self.aug(batch["next_obs"])
         with self._amp():
             h = self._encode(obs)
             with torch.no_grad():

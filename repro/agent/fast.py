@@ -19,11 +19,17 @@ The plain path (``agent.fast=false``, the default) is untouched and stays bit-id
 
 from __future__ import annotations
 
+import functools
 import platform
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import torch
+from torch import nn
+
+from repro.agent.aug import RandomShift
 
 BF16_CPU_FLAGS = ("avx512_bf16", "amx_bf16")  # x86 flags of native bf16 arithmetic (/proc/cpuinfo)
 BF16_ARM_FLAGS = ("bf16",)  # aarch64's (/proc/cpuinfo "Features")
@@ -99,3 +105,27 @@ class ShiftU8:
         out = x.permute(0, 2, 3, 1)[batch, rows[:, :, None], cols[:, None, :]]  # (n, h, w, c), still uint8
         out = out.to(self.dtype).permute(0, 3, 1, 2)  # NHWC memory viewed as NCHW
         return out if self.channels_last else out.contiguous()
+
+
+def shift(plan: FastPlan, pad: int = 4) -> RandomShift | ShiftU8:
+    """The random shift of ``plan``: :class:`ShiftU8` on the uint8 frames, or the plain path's float shift."""
+    if not plan.u8_shift:
+        return RandomShift(pad=pad)
+    return ShiftU8(pad=pad, dtype=torch.bfloat16 if plan.bf16_input else torch.float32,
+                   channels_last=plan.channels_last)
+
+
+def prepare_encoder(encoder: nn.Module, plan: FastPlan) -> nn.Module:
+    """``encoder`` with its convolution weights in NHWC memory when ``plan.channels_last`` (same values)."""
+    return encoder.to(memory_format=torch.channels_last) if plan.channels_last else encoder
+
+
+def adam(plan: FastPlan) -> Callable[..., torch.optim.Optimizer]:
+    """The Adam constructor of ``plan``: fused (one kernel per step) or the plain path's default."""
+    return functools.partial(torch.optim.Adam, fused=True) if plan.fused_adam else torch.optim.Adam
+
+
+def resolved(plan: FastPlan, enabled: bool) -> dict[str, Any]:
+    """What resolved.json records of the plan: ``{"fast": {...}}`` when ``agent.fast`` is on (a plain run's
+    resolved.json is left as it was)."""
+    return {"fast": plan.as_dict()} if enabled else {}

@@ -31,10 +31,10 @@ if TYPE_CHECKING:
     import torch
 
 
-def _batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tensor]:
+def _batch(B: int, K: int, A: int, device: str, seed: int = 0) -> dict[str, torch.Tensor]:
     import torch
 
-    g = torch.Generator().manual_seed(0)
+    g = torch.Generator().manual_seed(seed)
     u8 = lambda: torch.randint(0, 256, (B, 9, 84, 84), dtype=torch.uint8, generator=g).to(device)  # noqa: E731
     return {"obs": u8(), "next_obs": u8(), "future_obs": u8(),
             "action": (torch.rand(B, A, generator=g) * 2 - 1).to(device),

@@ -169,4 +169,4 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
 
 def _runs_bf16(agent: Any) -> bool:
     """Whether the agent's convolutions run in bfloat16 (its forward passes under bf16 autocast)."""
-    return bool(agent.cfg.amp)
+    return bool(agent.cfg.amp or agent.fast.amp)

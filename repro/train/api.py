@@ -308,7 +308,8 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
         rundir.write_resolved(path, values)
         replay_device = resolve_device(rc.replay.device)
         buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
-                              rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device)
+                              rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device,
+                              sample_device=device)
         episodes = EpisodeStore(path / "replay")
         if state is None:
             episodes.prune(set())
@@ -400,7 +401,8 @@ def _load_dataset(rc: RunConfig) -> OfflineData:
     return load_offline_data(directory, task=rc.task.name, action_dim=run_action_dim(rc),
                              frame_shape=(3, rc.env.image_size, rc.env.image_size), frame_stack=rc.env.frame_stack,
                              nstep=rc.agent.nstep, K=rc.agent.K, discount=rc.agent.discount, seed=rc.seed,
-                             device=resolve_device(rc.replay.device))
+                             device=resolve_device(rc.replay.device),
+                             sample_device=resolve_device(rc.runtime.device, "runtime.device"))
 
 
 def run_action_dim(rc: RunConfig) -> int:
