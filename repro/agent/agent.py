@@ -41,7 +41,6 @@ class Agent(ModuleSet):
         self.explore_steps = explore_steps
         # agent.fast: the speed-ups resolved for this device (repro/agent/fast.py); all off on the plain path
         self.fast = fast.resolve_fast(cfg.fast, self.device)
-        self.resolved = fast.resolved(self.fast, cfg.fast)
         self.aug = fast.shift(self.fast)
 
         self.encoder = fast.prepare_encoder(Encoder(obs_shape).to(self.device), self.fast)
@@ -93,6 +92,11 @@ class Agent(ModuleSet):
                 aux_params += list(self.shared.parameters())
             self.aux_opt = adam(_unique(aux_params), lr=lr)
         self.train(True)
+
+    @property
+    def resolved(self) -> dict[str, object]:
+        """What resolved.json records beyond the config: agent.fast's plan, when it is on."""
+        return fast.resolved(self.fast, self.cfg.fast)
 
     # ----------------------------------------------------------------- modules and state
     def modules(self) -> dict[str, nn.Module]:

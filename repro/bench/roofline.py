@@ -123,7 +123,7 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     the kernel table per path."""
     import torch
 
-    from repro.bench.cli import _batch, build_agent
+    from repro.bench.cli import _batch, alternated_times, build_agent
 
     agents = {}
     for path in ("plain", *speedups):
@@ -135,17 +135,7 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     def update(path: str) -> Any:
         return lambda: agents[path].update(batch, step=10**6)
 
-    for path in agents:
-        for _ in range(warmup):
-            update(path)()
-    times: dict[str, list[float]] = {p: [] for p in agents}
-    for _ in range(repeats):
-        for path in agents:  # alternated: background load hits every path alike
-            _sync(device)
-            t0 = time.perf_counter()
-            update(path)()
-            _sync(device)
-            times[path].append(time.perf_counter() - t0)
+    times = alternated_times(agents, batch, warmup, repeats, device)  # background load hits every path alike
     peaks = {d: peak_conv(d, device, shape=peak_shape) for d in ("float32", "bfloat16")}
     flops, per_op = count_flops(update("plain"))  # the same ops on every path (FLOPs do not depend on dtype)
     paths = {}
