@@ -77,11 +77,22 @@ def test_the_agent_applies_the_plan_and_records_it(bf16_cpu):
     assert plain.encoder.convnet[0].weight.is_contiguous()
 
 
+@pytest.fixture
+def one_thread():
+    """Tiny tensors: one thread (two spin and stall for seconds on a loaded 2-core machine)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 # Fast (bf16 forward passes and bf16 input, uint8 shift, channels_last, fused Adam) against plain, 100 updates on
-# one batch stream with the same RNG draws (repro/bench/agreement.py): each loss's mean over the updates within
-# 0.05 + 0.05 x |plain mean|. docs/performance.md ("agent.fast against plain") has what was measured.
-def test_fast_losses_track_the_plain_ones_over_100_updates(bf16_cpu):
-    report = compare("fast", "cpu", batch=4, updates=100, rel=0.05, abs_=0.05, hidden=32)
+# one batch stream with the same RNG draws (repro/bench/agreement.py), at B8 on 36-pixel frames (hidden 32): each
+# loss's mean over the updates within 0.05 + 0.05 x |plain mean|. Measured on an Intel Xeon (AMX-BF16): the worst
+# mean uses 0.05 of its allowance (the worst single update 0.6 of the same allowance); doubling the learning rate on
+# the fast side uses 1.8 (actor_loss). docs/performance.md, "agent.fast against plain", has the real size.
+def test_fast_losses_track_the_plain_ones_over_100_updates(bf16_cpu, one_thread):
+    report = compare("fast", "cpu", batch=8, updates=100, rel=0.05, abs_=0.05, hidden=32, image=36)
     assert set(report["per_loss"]) >= {"critic_loss", "actor_loss", "aux_loss", "taco_loss", "curl_loss"}
     assert report["all_within_tolerance"], report["per_loss"]
     # not trivially equal: bf16 does change the numbers (the paths are not the same code)

@@ -31,11 +31,11 @@ if TYPE_CHECKING:
     import torch
 
 
-def _batch(B: int, K: int, A: int, device: str, seed: int = 0) -> dict[str, torch.Tensor]:
+def _batch(B: int, K: int, A: int, device: str, seed: int = 0, image: int = 84) -> dict[str, torch.Tensor]:
     import torch
 
     g = torch.Generator().manual_seed(seed)
-    u8 = lambda: torch.randint(0, 256, (B, 9, 84, 84), dtype=torch.uint8, generator=g).to(device)  # noqa: E731
+    u8 = lambda: torch.randint(0, 256, (B, 9, image, image), dtype=torch.uint8, generator=g).to(device)  # noqa: E731
     return {"obs": u8(), "next_obs": u8(), "future_obs": u8(),
             "action": (torch.rand(B, A, generator=g) * 2 - 1).to(device),
             "action_seq": (torch.rand(B, K, A, generator=g) * 2 - 1).to(device),
@@ -43,9 +43,10 @@ def _batch(B: int, K: int, A: int, device: str, seed: int = 0) -> dict[str, torc
             "reward_ksum": torch.rand(B, 1, generator=g).to(device)}
 
 
-def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[str]) -> tuple[Any, Any]:
+def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[str], image: int = 84
+                ) -> tuple[Any, Any]:
     """The online agent of agent file ``algo`` at ``batch_size`` for ``task`` with the overrides ``flags``, seeded
-    0, and its typed run config."""
+    0, for stacks of 3 RGB frames of ``image`` pixels square, and its typed run config."""
     import torch
 
     from repro.agent.agent import Agent
@@ -54,7 +55,7 @@ def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[
 
     rc = typed(compose([f"agent={algo}", f"task={task}", f"agent.batch_size={batch_size}", *flags]))
     torch.manual_seed(0)
-    return Agent(rc.agent, (9, 84, 84), get_task(task).action_dim, device=device), rc
+    return Agent(rc.agent, (9, image, image), get_task(task).action_dim, device=device), rc
 
 
 def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
