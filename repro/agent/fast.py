@@ -11,8 +11,11 @@ What it turns on is decided here, from the device and the CPU's instruction sets
   would round that result to bf16 before the first convolution anyway);
 * ``channels_last``: the encoder's convolutions in NHWC, where the oneDNN / cuDNN kernels prefer it (with bf16);
 * ``fused_adam``: one fused Adam kernel per optimizer step instead of a loop over parameters;
-* ``compile``: ``torch.compile`` of the encoder (``agent.compile``'s path), on CUDA only: on the CPUs measured it
-  was slower than eager with amp (docs/performance.md).
+* ``compile``: ``torch.compile`` of the encoder (``agent.compile``'s path), on CUDA only. On an Intel Xeon with
+  AMX-BF16 it made the fast update 4-13% faster, but costs ~15 s of compiling in every process (each start and
+  resume) and was slower than eager with amp on the other CPUs measured (docs/performance.md, "agent.fast"); a run
+  can still add ``agent.compile=true``. The whole update step is not compiled yet: its ``.item()`` calls (host
+  syncs) break the graph; that waits for the sync-free update.
 
 The plain path (``agent.fast=false``, the default) is untouched and stays bit-identical to the upstream record.
 """
