@@ -27,13 +27,14 @@ import platform
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import torch
 from torch import nn
 
 from repro.agent.aug import RandomShift
 
+M = TypeVar("M", bound=nn.Module)
 BF16_CPU_FLAGS = ("avx512_bf16", "amx_bf16")  # x86 flags of native bf16 arithmetic (/proc/cpuinfo)
 BF16_ARM_FLAGS = ("bf16",)  # aarch64's (/proc/cpuinfo "Features")
 
@@ -118,9 +119,11 @@ def shift(plan: FastPlan, pad: int = 4) -> RandomShift | ShiftU8:
                    channels_last=plan.channels_last)
 
 
-def prepare_encoder(encoder: nn.Module, plan: FastPlan) -> nn.Module:
+def prepare_encoder(encoder: M, plan: FastPlan) -> M:
     """``encoder`` with its convolution weights in NHWC memory when ``plan.channels_last`` (same values)."""
-    return encoder.to(memory_format=torch.channels_last) if plan.channels_last else encoder
+    if plan.channels_last:
+        encoder.to(memory_format=torch.channels_last)  # type: ignore[call-overload]  # in place; torch's stubs lack it
+    return encoder
 
 
 def adam(plan: FastPlan) -> Callable[..., torch.optim.Optimizer]:
