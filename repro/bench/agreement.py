@@ -1,7 +1,7 @@
 """A speed-up path against the plain path: the losses of the same updates from the same weights and batches.
 
 Two agents of one agent file are built from one seed; each gets the same stream of synthetic batches
-(repro/bench/cli.py:_batch, batch ``i`` from seed ``i``) and the same RNG state before every update (the
+(repro/bench/updates.py:_batch, batch ``i`` from seed ``i``) and the same RNG state before every update (the
 augmentation and target-noise draws), so on the plain path twice the losses are equal bit for bit. The differences
 of another path (bfloat16, another kernel order) grow update by update as its weights drift; the report holds
 every update's losses on both paths and, per loss, the difference of their means over the updates against a
@@ -25,7 +25,7 @@ def losses(flags: list[str], device: str, batch: int, updates: int, hidden: int 
     (frames of ``image`` pixels square)."""
     import torch
 
-    from repro.bench.cli import _batch, build_agent
+    from repro.bench.updates import _batch, build_agent
 
     hidden_flag = [f"agent.hidden_dim={hidden}"] if hidden else []
     agent, rc = build_agent(algo, batch, "cheetah_run", device, flags + hidden_flag, image)

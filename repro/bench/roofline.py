@@ -123,7 +123,7 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     the kernel table per path."""
     import torch
 
-    from repro.bench.cli import _batch, alternated_times, build_agent
+    from repro.bench.updates import _batch, alternated_times, build_agent
 
     agents = {}
     for path in ("plain", *speedups):
