@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The GPU checks of issue 26, in one script for one GPU (sized for an H200: about 8 minutes). Writes under $OUT:
-#   bench.json          `repro bench` plain and amp at B256 and B1024 (TACO, DrQ-v2), with the --e2e entries of a
-#                       10K-frame TACO B1024 run (4000 seed frames, 6000 timed), plain and amp
+#   bench.json          `repro bench` plain, amp and fast at B256 and B1024 (TACO, DrQ-v2), with the --e2e entries of
+#                       a 10K-frame TACO B1024 run (4000 seed frames, 6000 timed), plain and fast (agent.fast)
 #   bench-compile.json  `repro bench --compile` at B256 and B1024 (last: it takes what time is left)
 #   amp_check.json      plain against amp: the losses of 5 updates from the same weights and batches
+#   fast_check.json     plain against fast (agent.fast): the same
 #   packing.json        2 and 4 runs sharing GPU 0 (`repro sweep --gpus 0 --runs-per-gpu N`): FPS from train.csv
 #   gpu_check.json      each step's status and seconds, the GPU, torch
 #   gpu_check.log       everything printed
@@ -83,10 +84,12 @@ pack_sweep() {  # pack_sweep N: write a sweep of N runs (seeds), to be run all a
   } >"$file"
 }
 
-step bench 150 "${REPRO[@]}" bench --device "$DEVICE" --amp "${BATCH[@]}" "${UPD[@]}" --results "$WORK/r"
-step e2e 260 "${REPRO[@]}" bench --e2e --device "$DEVICE" --amp "${E2E[@]}" --results "$WORK/r"
+step bench 150 "${REPRO[@]}" bench --device "$DEVICE" --amp --fast "${BATCH[@]}" "${UPD[@]}" --results "$WORK/r"
+step e2e 260 "${REPRO[@]}" bench --e2e --device "$DEVICE" --fast "${E2E[@]}" --results "$WORK/r"
 cp "$WORK"/r/bench/bench-*.json "$OUT/bench.json" 2>/dev/null
 step amp_check 60 "$PYTHON" benchmarks/amp_check.py --device "$DEVICE" "${AMP_CHECK[@]}" --out "$OUT/amp_check.json"
+step fast_check 90 "$PYTHON" benchmarks/amp_check.py --path fast --device "$DEVICE" "${AMP_CHECK[@]}" \
+  --out "$OUT/fast_check.json"
 for n in 2 4; do
   pack_sweep "$n"
   step "pack$n" $((50 + 15 * n)) "${REPRO[@]}" sweep "$WORK/pack$n.yaml" --gpus 0 --runs-per-gpu "$n" \

@@ -34,8 +34,8 @@ def test_same_run_ratios_pair_only_measured_settings():
 def test_bench_prints_same_run_ratios_and_no_constant(tmp_path):
     # one algorithm (the cheaper one) at two tiny batches keeps this fast; pairs across algorithms are
     # covered by the test above
-    args = ["bench", "--algo", "drqv2", "--batch", "2", "--batch", "4", "--repeats", "1", "--warmup", "0",
-            "--results", str(tmp_path)]
+    args = ["bench", "--algo", "drqv2", "--batch", "2", "--batch", "4", "--repeats", "2", "--warmup", "0",
+            "--fast", "--results", str(tmp_path)]
     result = CliRunner().invoke(_app(), args)
     assert result.exit_code == 0, result.output
     out = result.output
@@ -44,9 +44,15 @@ def test_bench_prints_same_run_ratios_and_no_constant(tmp_path):
     assert ratio_lines and all("measured in this run" in ln for ln in ratio_lines if " / " in ln)
     assert "upstream" not in out.lower() and "paper" not in out.lower()
     report = json.loads(next((tmp_path / "bench").glob("bench-*.json")).read_text())
-    secs = {(r["algo"], r["batch_size"]): r["update_seconds"] for r in report["results"]}
+    secs = {(r["algo"], r["batch_size"]): r["update_seconds"] for r in report["results"] if r["speedup"] == "plain"}
     assert report["ratios"] == same_run_ratios(secs)
-    assert all(r["warmup"] == 0 and r["repeats"] == 1 for r in report["results"])
+    assert all(r["warmup"] == 0 and r["repeats"] == 2 and len(r["seconds_each"]) == 2 for r in report["results"])
+    # --fast: timed beside the plain path of the same batch (alternated), as a ratio to it
+    fast = {r["batch_size"]: r for r in report["results"] if r["speedup"] == "fast"}
+    assert set(fast) == {2, 4} and all(r["alternated"] for r in report["results"])
+    for b, row in fast.items():
+        assert row["speedup_vs_plain"] == round(secs[("drqv2", b)] / row["update_seconds"], 3)
+        assert f"drqv2 batch     {b} fast: " in out and "x the plain path (measured in this run" in out
     assert not any("upstream" in key for r in report["results"] for key in r)
 
 

@@ -28,14 +28,16 @@ def test_gpu_check_quick_on_cpu_writes_every_json(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr + log[-3000:]
     summary = json.loads((out / "gpu_check.json").read_text())
     status = {s["step"]: s["status"] for s in summary["steps"]}
-    assert status == {"bench": "ok", "e2e": "ok", "amp_check": "ok", "pack2": "ok", "pack4": "ok",
-                      "compile": "skipped"}, log[-3000:]
+    assert status == {"bench": "ok", "e2e": "ok", "amp_check": "ok", "fast_check": "ok", "pack2": "ok",
+                      "pack4": "ok", "compile": "skipped"}, log[-3000:]
     bench = json.loads((out / "bench.json").read_text())
-    assert {r["speedup"] for r in bench["results"]} == {"plain", "amp"}
-    assert {e["speedup"] for e in bench["e2e"]} == {"plain", "amp"}
+    assert {r["speedup"] for r in bench["results"]} == {"plain", "amp", "fast"}
+    assert {e["speedup"] for e in bench["e2e"]} == {"plain", "fast"}
     assert all(set(e["phases"]) == set(PHASES) for e in bench["e2e"])
     amp = json.loads((out / "amp_check.json").read_text())
     assert len(amp["plain"]) == len(amp["amp"]) == 2 and amp["per_loss"]
+    fast = json.loads((out / "fast_check.json").read_text())
+    assert len(fast["plain"]) == len(fast["fast"]) == 2 and fast["per_loss"]
     packing = json.loads((out / "packing.json").read_text())["packing"]
     for n in ("2", "4"):
         assert len(packing[n]["runs"]) == int(n), packing

@@ -180,3 +180,35 @@ def test_add_episode_equals_the_online_loops_step_by_step_fill():
     a, b = stepwise.sample(64), whole.sample(64)
     for key in a:
         assert torch.equal(a[key], b[key]), key
+
+
+def _filled(**devices) -> ReplayBuffer:
+    buf = ReplayBuffer(40, (3, 4, 4), A, frame_stack=3, nstep=2, K=3, discount=0.9, seed=5, **devices)
+    fill(buf, [8, 6, 9])
+    return buf
+
+
+def test_a_cpu_run_samples_on_the_cpu_without_pinned_memory():
+    plain, explicit = _filled(), _filled(device="cpu", sample_device="cpu")
+    assert not explicit.pinned and explicit.sample_device == torch.device("cpu")
+    a, b = plain.sample(16, future_seq=True), explicit.sample(16, future_seq=True)
+    for key in a:
+        assert torch.equal(a[key], b[key]) and not b[key].is_pinned() and b[key].device.type == "cpu", key
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="needs a machine without CUDA")
+@pytest.mark.parametrize("devices", [{"device": "cuda"}, {"sample_device": "cuda"}])
+def test_cuda_asked_for_on_a_machine_without_it_is_one_clear_error(devices):
+    with pytest.raises(ValueError, match="no CUDA device") as err:
+        _filled(**devices)
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_samples_are_equal_whether_the_frames_live_on_the_cpu_or_the_gpu():
+    on_cpu, to_gpu, on_gpu = _filled(), _filled(sample_device="cuda"), _filled(device="cuda")
+    assert to_gpu.pinned and not on_gpu.pinned
+    a, b, c = (buf.sample(16, future_seq=True) for buf in (on_cpu, to_gpu, on_gpu))
+    for key in a:
+        assert b[key].device.type == c[key].device.type == "cuda", key
+        assert torch.equal(a[key], b[key].cpu()) and torch.equal(a[key], c[key].cpu()), key

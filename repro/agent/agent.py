@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import torch
 
+from repro.agent import fast
 from repro.agent.backbone import BackboneLearner
 from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics
 
@@ -21,6 +22,11 @@ class Agent(BackboneLearner):
 
     update_metrics = CRITIC_METRICS + ACTOR_METRICS
     explores = True  # uniform actions for the first explore_steps, then noisy policy samples
+
+    @property
+    def resolved(self) -> dict[str, object]:
+        """What resolved.json records beyond the config: agent.fast's plan, when it is on."""
+        return fast.resolved(self.backbone.fast, self.cfg.fast)
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         """One DrQ-v2 update, as upstream DrQ-v2 (``drqv2.py``): critic with the encoder, actor on sg(h), target

@@ -7,12 +7,14 @@ import torch.nn.functional as F
 
 
 class RandomShift:
-    """Shift every image of a batch by its own integer offset in [-pad, pad] in each axis."""
+    """Shift every image of a batch by its own integer offset in [-pad, pad] in each axis; uint8 frames are
+    converted to float32 first (a float32 batch is used as it is)."""
 
     def __init__(self, pad: int = 4):
         self.pad = pad
 
     def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        x = x.float()
         n, c, h, w = x.shape
         padded = F.pad(x, (self.pad,) * 4, mode="replicate")
         offsets = torch.randint(0, 2 * self.pad + 1, (n, 2), device=x.device)

@@ -22,8 +22,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from repro.agent import losses
-from repro.agent.aug import RandomShift
+from repro.agent import fast, losses
 from repro.agent.losses import Metrics
 from repro.agent.modules import LearnerBase, ModuleSet
 from repro.agent.networks import ActionEncoder, Actor, Critic, Encoder, default_latent_action_dim
@@ -57,7 +56,9 @@ class DrQV2Backbone:
         self.cfg = cfg
         self.device = torch.device(device)
         self.action_dim = action_dim
-        self.aug: Callable[[torch.Tensor], torch.Tensor] = RandomShift(pad=4)
+        # agent.fast: the speed-ups resolved for this device (repro/agent/fast.py); all off on the plain path
+        self.fast = fast.resolve_fast(cfg.fast, self.device)
+        self.aug: Callable[[torch.Tensor], torch.Tensor] = fast.shift(self.fast)  # takes the raw (uint8) frames
         self._build_networks(obs_shape)
         self._build_objectives()
         self._build_optimizers()
@@ -66,10 +67,10 @@ class DrQV2Backbone:
     def _build_networks(self, obs_shape: tuple[int, int, int]) -> None:
         """Encoder, action encoder (``agent.action_encoder``), actor, critic and its target (a copy)."""
         cfg = self.cfg
-        self.encoder = Encoder(obs_shape).to(self.device)
+        self.encoder = fast.prepare_encoder(Encoder(obs_shape).to(self.device), self.fast)
         # Opt-in speedup: a compiled encoder for updates (acting uses the plain one).
         self._encode: Callable[[torch.Tensor], torch.Tensor] = (
-            torch.compile(self.encoder, dynamic=False) if cfg.compile else self.encoder)
+            torch.compile(self.encoder, dynamic=False) if cfg.compile or self.fast.compile else self.encoder)
         self.repr_dim = repr_dim = self.encoder.repr_dim
         self.action_encoder: ActionEncoder | None = None
         if cfg.action_encoder:
@@ -104,13 +105,13 @@ class DrQV2Backbone:
     def _build_optimizers(self) -> None:
         """Adam for the encoder, the actor, the critic (with the action encoder) and, with objectives, one for the
         auxiliary step over the encoder, the action encoder, the shared heads and the objectives."""
-        lr = self.cfg.lr
-        self.encoder_opt = torch.optim.Adam(self.encoder.parameters(), lr=lr)
-        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr)
+        lr, adam = self.cfg.lr, fast.adam(self.fast)  # agent.fast: fused Adam
+        self.encoder_opt = adam(self.encoder.parameters(), lr=lr)
+        self.actor_opt = adam(self.actor.parameters(), lr=lr)
         critic_params = list(self.critic.parameters())
         if self.action_encoder is not None:
             critic_params += list(self.action_encoder.parameters())
-        self.critic_opt = torch.optim.Adam(critic_params, lr=lr)
+        self.critic_opt = adam(critic_params, lr=lr)
         self.aux_opt: torch.optim.Optimizer | None = None
         if self.objectives:
             aux_params = list(self.encoder.parameters()) + list(self.objectives.parameters())
@@ -118,7 +119,7 @@ class DrQV2Backbone:
                 aux_params += list(self.action_encoder.parameters())
             if self.shared is not None:
                 aux_params += list(self.shared.parameters())
-            self.aux_opt = torch.optim.Adam(_unique(aux_params), lr=lr)
+            self.aux_opt = adam(_unique(aux_params), lr=lr)
 
     # ----------------------------------------------------------------- modules and state
     def modules(self) -> dict[str, nn.Module]:
@@ -178,14 +179,16 @@ class DrQV2Backbone:
 
     # ----------------------------------------------------------------- the steps an update is made of
     def autocast(self, enabled: bool = True) -> torch.autocast:
-        """bfloat16 autocast of forward passes when ``agent.amp`` is on and ``enabled`` (losses stay float32)."""
-        return torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=enabled and self.cfg.amp)
+        """bfloat16 autocast of forward passes when ``enabled`` and ``agent.amp`` is on, or ``agent.fast`` where bf16
+        is native (losses stay float32)."""
+        on = enabled and (self.cfg.amp or self.fast.amp)
+        return torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=on)
 
     def encode_batch(self, batch: dict[str, torch.Tensor], autocast: bool = True) -> EncodedBatch:
         """(h, h', a, r, discount): the shifted frames encoded (h with the encoder's gradient, h' without) and the
         batch's action, reward and discount (gamma^n x not-done). Actions are data: no gradient flows into them."""
-        obs = self.aug(batch["obs"].float())
-        next_obs = self.aug(batch["next_obs"].float())
+        obs = self.aug(batch["obs"])  # the shift converts the uint8 frames (agent.fast: after cropping)
+        next_obs = self.aug(batch["next_obs"])
         with self.autocast(autocast):
             h = self._encode(obs)
             with torch.no_grad():

@@ -11,20 +11,30 @@ What it turns on is decided here, from the device and the CPU's instruction sets
   would round that result to bf16 before the first convolution anyway);
 * ``channels_last``: the encoder's convolutions in NHWC, where the oneDNN / cuDNN kernels prefer it (with bf16);
 * ``fused_adam``: one fused Adam kernel per optimizer step instead of a loop over parameters;
-* ``compile``: ``torch.compile`` of the encoder (``agent.compile``'s path), on CUDA only: on the CPUs measured it
-  was slower than eager with amp (docs/performance.md).
+* ``compile``: ``torch.compile`` of the encoder (``agent.compile``'s path), on CUDA only. On an Intel Xeon with
+  AMX-BF16 it made the fast update 4-13% faster, but costs ~15 s of compiling in every process (each start and
+  resume) and was slower than eager with amp on the other CPUs measured (docs/performance.md, "agent.fast"); a run
+  can still add ``agent.compile=true``. The whole update step is not compiled yet: its ``.item()`` calls (host
+  syncs) break the graph; that waits for the sync-free update.
 
 The plain path (``agent.fast=false``, the default) is untouched and stays bit-identical to the upstream record.
 """
 
 from __future__ import annotations
 
+import functools
 import platform
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any, TypeVar
 
 import torch
+from torch import nn
 
+from repro.agent.aug import RandomShift
+
+M = TypeVar("M", bound=nn.Module)
 BF16_CPU_FLAGS = ("avx512_bf16", "amx_bf16")  # x86 flags of native bf16 arithmetic (/proc/cpuinfo)
 BF16_ARM_FLAGS = ("bf16",)  # aarch64's (/proc/cpuinfo "Features")
 
@@ -99,3 +109,29 @@ class ShiftU8:
         out = x.permute(0, 2, 3, 1)[batch, rows[:, :, None], cols[:, None, :]]  # (n, h, w, c), still uint8
         out = out.to(self.dtype).permute(0, 3, 1, 2)  # NHWC memory viewed as NCHW
         return out if self.channels_last else out.contiguous()
+
+
+def shift(plan: FastPlan, pad: int = 4) -> RandomShift | ShiftU8:
+    """The random shift of ``plan``: :class:`ShiftU8` on the uint8 frames, or the plain path's float shift."""
+    if not plan.u8_shift:
+        return RandomShift(pad=pad)
+    return ShiftU8(pad=pad, dtype=torch.bfloat16 if plan.bf16_input else torch.float32,
+                   channels_last=plan.channels_last)
+
+
+def prepare_encoder(encoder: M, plan: FastPlan) -> M:
+    """``encoder`` with its convolution weights in NHWC memory when ``plan.channels_last`` (same values)."""
+    if plan.channels_last:
+        encoder.to(memory_format=torch.channels_last)  # type: ignore[call-overload]  # in place; torch's stubs lack it
+    return encoder
+
+
+def adam(plan: FastPlan) -> Callable[..., torch.optim.Optimizer]:
+    """The Adam constructor of ``plan``: fused (one kernel per step) or the plain path's default."""
+    return functools.partial(torch.optim.Adam, fused=True) if plan.fused_adam else torch.optim.Adam
+
+
+def resolved(plan: FastPlan, enabled: bool) -> dict[str, Any]:
+    """What resolved.json records of the plan: ``{"fast": {...}}`` when ``agent.fast`` is on (a plain run's
+    resolved.json is left as it was)."""
+    return {"fast": plan.as_dict()} if enabled else {}

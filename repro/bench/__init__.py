@@ -4,4 +4,4 @@ Its modules import torch (and the learners) when a benchmark runs, not when `rep
 it times are those whose learner trains offline, plugins' included (``repro.config.compose.offline_agents``)."""
 
 # The speed-up paths `repro bench` times (update and --e2e) and the config overrides that turn each on
-SPEEDUP_FLAGS = {"plain": [], "amp": ["agent.amp=true"], "compile": ["agent.compile=true"]}
+SPEEDUP_FLAGS = {"plain": [], "amp": ["agent.amp=true"], "compile": ["agent.compile=true"], "fast": ["agent.fast=true"]}

@@ -105,7 +105,8 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
         agent = build_agent(rc, spec.obs_shape, spec.action_dim, device)
         assert isinstance(agent, OnlineLearner)
         buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
-                              rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device="cpu")
+                              rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device="cpu",
+                              sample_device=device)
         renders = _time_render(env, timer)
         repeat, every = rc.env.action_repeat, rc.train.update_every_steps
         seed_steps = (rc.train.seed_frames if seed_frames is None else seed_frames) // repeat

@@ -1,8 +1,10 @@
-"""Time one update of the online agent (``repro bench`` without --offline; the roofline builds its agents here
-too): built from its agent file, seeded 0, fed one synthetic batch again and again."""
+"""One update of the online agent, timed (``repro bench``), and the pieces every update benchmark shares
+(``--roofline``, repro/bench/agreement.py): a synthetic batch, an agent built from its agent file, and timed updates
+of several paths alternated."""
 
 from __future__ import annotations
 
+import functools
 import statistics
 from typing import TYPE_CHECKING, Any
 
@@ -13,12 +15,13 @@ if TYPE_CHECKING:
     import torch
 
 
-def synthetic_batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tensor]:
-    """A batch of ``B`` random frame stacks, actions (``A`` dims, ``K`` steps) and rewards on ``device``, seeded 0."""
+def synthetic_batch(B: int, K: int, A: int, device: str, seed: int = 0, image: int = 84) -> dict[str, torch.Tensor]:
+    """A fixed batch (from ``seed``) of B uint8 frame stacks of ``image`` pixels and uniform actions, rewards and
+    action sequences, as the replay returns it, on ``device``."""
     import torch
 
-    g = torch.Generator().manual_seed(0)
-    u8 = lambda: torch.randint(0, 256, (B, 9, 84, 84), dtype=torch.uint8, generator=g).to(device)  # noqa: E731
+    g = torch.Generator().manual_seed(seed)
+    u8 = lambda: torch.randint(0, 256, (B, 9, image, image), dtype=torch.uint8, generator=g).to(device)  # noqa: E731
     return {"obs": u8(), "next_obs": u8(), "future_obs": u8(),
             "action": (torch.rand(B, A, generator=g) * 2 - 1).to(device),
             "action_seq": (torch.rand(B, K, A, generator=g) * 2 - 1).to(device),
@@ -26,9 +29,10 @@ def synthetic_batch(B: int, K: int, A: int, device: str) -> dict[str, torch.Tens
             "reward_ksum": torch.rand(B, 1, generator=g).to(device)}
 
 
-def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[str]) -> tuple[Any, Any]:
+def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[str], image: int = 84
+                ) -> tuple[Any, Any]:
     """The online agent of agent file ``algo`` at ``batch_size`` for ``task`` with the overrides ``flags``, seeded
-    0, and its typed run config."""
+    0, for stacks of 3 RGB frames of ``image`` pixels square, and its typed run config."""
     import torch
 
     from repro.agent.agent import Agent
@@ -37,23 +41,42 @@ def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[
 
     rc = typed(compose([f"agent={algo}", f"task={task}", f"agent.batch_size={batch_size}", *flags]))
     torch.manual_seed(0)
-    return Agent(rc.agent, (9, 84, 84), get_task(task).action_dim, device=device), rc
+    return Agent(rc.agent, (9, image, image), get_task(task).action_dim, device=device), rc
+
+
+def alternated_times(agents: dict[str, Any], batch: dict[str, torch.Tensor], warmup: int, repeats: int,
+                     device: str) -> dict[str, list[float]]:
+    """Seconds of each timed update per path (``agents`` by path, all on ``batch``): ``warmup`` untimed updates
+    of each, then ``repeats`` rounds of one timed update of each path in turn (on CUDA synchronized before each
+    clock reading)."""
+    for agent in agents.values():
+        for _ in range(warmup):
+            agent.update(batch, step=10**6)
+    times: dict[str, list[float]] = {path: [] for path in agents}
+    for _ in range(repeats):
+        for path in agents:
+            times[path].append(timed(functools.partial(agents[path].update, batch, step=10**6), device)[1])
+    return times
 
 
 def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
-                device: str = "cpu", speedup: str = "plain", warmup: int = 1) -> dict:
-    """Median wall-clock seconds of one full agent update, over ``repeats`` timed updates after ``warmup``
-    untimed ones (same batch every time)."""
-
-    agent, rc = build_agent(algo, batch_size, task, device, SPEEDUP_FLAGS[speedup])
-    batch = synthetic_batch(batch_size, rc.agent.K, agent.action_dim, device)
-    for _ in range(warmup):
-        agent.update(batch, step=10**6)
-    times = [timed(lambda: agent.update(batch, step=10**6), device)[1] for _ in range(repeats)]
-    seconds = statistics.median(times)
-    # one update every 2 agent steps at action repeat 2 = 4 frames per update (update-bound estimate)
-    fps = rc.train.update_every_steps * rc.env.action_repeat / seconds
-    return {"algo": algo, "batch_size": batch_size, "speedup": speedup, "update_seconds": round(seconds, 4),
-            "fps_estimate": round(fps, 3), "repeats": repeats, "warmup": warmup}
-
-
+                device: str = "cpu", speedups: tuple[str, ...] = (), warmup: int = 1) -> list[dict]:
+    """Median wall-clock seconds of one full agent update on the plain path and on each of ``speedups``, over
+    ``repeats`` timed updates after ``warmup`` untimed ones (same batch every time). The paths' agents live side
+    by side and their timed updates alternate (plain, path 1, ..., plain, path 1, ...), so background load falls
+    on every path alike. One row per path, plain first."""
+    paths = ("plain", *speedups)
+    agents = {}
+    for path in paths:
+        agents[path], rc = build_agent(algo, batch_size, task, device, SPEEDUP_FLAGS[path])
+    batch = synthetic_batch(batch_size, rc.agent.K, agents["plain"].action_dim, device)
+    times = alternated_times(agents, batch, warmup, repeats, device)
+    rows = []
+    for path in paths:
+        seconds = statistics.median(times[path])
+        # one update every 2 agent steps at action repeat 2 = 4 frames per update (update-bound estimate)
+        fps = rc.train.update_every_steps * rc.env.action_repeat / seconds
+        rows.append({"algo": algo, "batch_size": batch_size, "speedup": path, "update_seconds": round(seconds, 4),
+                     "fps_estimate": round(fps, 3), "repeats": repeats, "warmup": warmup, "alternated": True,
+                     "seconds_each": [round(t, 4) for t in times[path]]})
+    return rows

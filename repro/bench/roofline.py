@@ -109,7 +109,7 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     the kernel table per path."""
     import torch
 
-    from repro.bench.online_update import build_agent, synthetic_batch
+    from repro.bench.online_update import alternated_times, build_agent, synthetic_batch
 
     agents = {}
     for path in ("plain", *speedups):
@@ -121,13 +121,7 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     def update(path: str) -> Any:
         return lambda: agents[path].update(batch, step=10**6)
 
-    for path in agents:
-        for _ in range(warmup):
-            update(path)()
-    times: dict[str, list[float]] = {p: [] for p in agents}
-    for _ in range(repeats):
-        for path in agents:  # alternated: background load hits every path alike
-            times[path].append(timed(update(path), device)[1])
+    times = alternated_times(agents, batch, warmup, repeats, device)  # background load hits every path alike
     peaks = {d: peak_conv(d, device, shape=peak_shape) for d in ("float32", "bfloat16")}
     flops, per_op = count_flops(update("plain"))  # the same ops on every path (FLOPs do not depend on dtype)
     paths = {}
@@ -151,4 +145,4 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
 
 def _runs_bf16(agent: Any) -> bool:
     """Whether the agent's convolutions run in bfloat16 (its forward passes under bf16 autocast)."""
-    return bool(agent.cfg.amp)
+    return bool(agent.cfg.amp or agent.backbone.fast.amp)

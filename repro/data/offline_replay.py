@@ -97,13 +97,14 @@ def _unreadable_episodes(directory: Path) -> Iterator[None]:
 
 def load_offline_data(directory: str | Path, *, task: str, action_dim: int, frame_shape: tuple[int, int, int],
                       frame_stack: int, nstep: int, K: int, discount: float, seed: int,
-                      device: str | torch.device = "cpu") -> OfflineData:
+                      device: str | torch.device = "cpu",
+                      sample_device: str | torch.device | None = None) -> OfflineData:
     """Check the dataset against the run, then fill a ReplayBuffer sized to it, one episode file at a time."""
     directory = Path(directory)
     manifest, lengths = _checked_manifest(directory, task, action_dim, frame_shape)
     capacity = sum(n + 1 for n in lengths)
     buffer = ReplayBuffer(capacity, frame_shape, action_dim, frame_stack, nstep, K, discount, seed=seed,
-                          device=device)
+                          device=device, sample_device=sample_device)
     starts = np.concatenate([[0], np.cumsum([n + 1 for n in lengths])[:-1]]).astype(int)
     episodes = iter(iter_episodes(directory))
     raw = 0

@@ -3,7 +3,9 @@
 Slot ``i`` holds one frame, the action taken from it, the reward and discount that followed, the id of
 its episode and its position in that episode. A stacked observation is the frames at slots
 ``i-F+1..i``, clamped to the episode's first frame; a sample never crosses an episode boundary.
-The storage can live on any torch device (``replay.device=cuda`` on a GPU machine).
+The storage can live on any torch device (``replay.device=cuda`` on a GPU machine); a sampled batch goes to the
+run's device (``sample_device``): from storage on the CPU to a CUDA run through pinned host memory, copied
+without blocking the host.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ class EpisodeRecord:
 
 class ReplayBuffer:
     def __init__(self, capacity: int, frame_shape: tuple[int, int, int], action_dim: int, frame_stack: int,
-                 nstep: int, K: int, discount: float, seed: int, device: str | torch.device = "cpu"):
+                 nstep: int, K: int, discount: float, seed: int, device: str | torch.device = "cpu",
+                 sample_device: str | torch.device | None = None):
         self.capacity = capacity
         self.frame_shape = frame_shape
         self.action_dim = action_dim
@@ -34,6 +37,13 @@ class ReplayBuffer:
         self.nstep, self.K, self.gamma = nstep, K, discount
         self.horizon = max(nstep, K)
         self.device = torch.device(device)
+        # where sampled batches go (the run's device; default: where the frames live)
+        self.sample_device = self.device if sample_device is None else torch.device(sample_device)
+        if "cuda" in (self.device.type, self.sample_device.type) and not torch.cuda.is_available():
+            raise ValueError(f"replay on {self.device}, batches to {self.sample_device}: this machine has no CUDA "
+                             "device")
+        # pinned host memory for the copies of batches from storage on the CPU to the run's CUDA device
+        self.pinned = self.device.type == "cpu" and self.sample_device.type == "cuda"
         self.frames = torch.empty((capacity, *frame_shape), dtype=torch.uint8, device=self.device)
         self.actions = torch.zeros((capacity, action_dim), dtype=torch.float32, device=self.device)
         self.rewards = torch.zeros(capacity, dtype=torch.float32, device=self.device)
@@ -232,4 +242,13 @@ class ReplayBuffer:
         }
         if future_seq:
             batch["future_obs_seq"] = torch.stack([self._stack((idx + k) % cap) for k in range(1, self.K + 1)], 1)
-        return batch
+        return self._deliver(batch)
+
+    def _deliver(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """``batch`` on the sample device: as it is when that is the storage's, else copied (from pinned host
+        memory without blocking when the storage is on the CPU and the run on CUDA)."""
+        if self.sample_device == self.device:
+            return batch
+        if self.pinned:
+            return {k: v.pin_memory().to(self.sample_device, non_blocking=True) for k, v in batch.items()}
+        return {k: v.to(self.sample_device) for k, v in batch.items()}

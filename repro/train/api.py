@@ -123,7 +123,8 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
         rundir.write_resolved(path, values)
         replay_device = resolve_device(rc.replay.device)
         buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
-                              rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device)
+                              rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device=replay_device,
+                              sample_device=device)
         episodes = EpisodeStore(path / "replay")
         if state is None:
             episodes.prune(set())

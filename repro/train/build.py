@@ -70,7 +70,8 @@ def load_dataset(rc: RunConfig) -> OfflineData:
     return load_offline_data(directory, task=rc.task.name, action_dim=run_action_dim(rc),
                              frame_shape=(3, rc.env.image_size, rc.env.image_size), frame_stack=rc.env.frame_stack,
                              nstep=rc.agent.nstep, K=rc.agent.K, discount=rc.agent.discount, seed=rc.seed,
-                             device=resolve_device(rc.replay.device))
+                             device=resolve_device(rc.replay.device),
+                             sample_device=resolve_device(rc.runtime.device, "runtime.device"))
 
 
 def batch_source(learner: Learner, data: OfflineData, seed: int) -> BatchSource:

@@ -74,18 +74,18 @@ class AuxBatch:
         return self._cache[key]
 
     def anchor(self) -> torch.Tensor:
-        return self.memo("anchor", lambda: self.encoder(self.aug(self.batch["obs"].float())))
+        return self.memo("anchor", lambda: self.encoder(self.aug(self.batch["obs"])))
 
     def positive(self) -> torch.Tensor:
         def fn() -> torch.Tensor:
             with torch.no_grad():
-                return self.encoder(self.aug(self.batch["obs"].float()))
+                return self.encoder(self.aug(self.batch["obs"]))
         return self.memo("positive", fn)
 
     def future(self) -> torch.Tensor:
         def fn() -> torch.Tensor:
             with torch.no_grad():
-                return self.encoder(self.aug(self.batch["future_obs"].float()))
+                return self.encoder(self.aug(self.batch["future_obs"]))
         return self.memo("future", fn)
 
     def encode_actions(self, actions: torch.Tensor) -> torch.Tensor:
@@ -106,7 +106,7 @@ class AuxBatch:
 
         def fn() -> torch.Tensor:
             with torch.no_grad():
-                return self.encoder(self.aug(self.batch["future_obs_seq"][:, k - 1].float()))
+                return self.encoder(self.aug(self.batch["future_obs_seq"][:, k - 1]))
         return self.memo(f"future_{k}", fn)
 
     def action_sequence(self) -> torch.Tensor:

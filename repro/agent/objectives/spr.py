@@ -76,7 +76,7 @@ class SPRObjective(Objective):
             return self.projection(self.heads.state_proj(h))
         t = self.target
         obs = aux.batch["future_obs"] if k is None else aux.batch["future_obs_seq"][:, k - 1]
-        return t["projection"](t["state_proj"](t["encoder"](aux.aug(obs.float()))))
+        return t["projection"](t["state_proj"](t["encoder"](aux.aug(obs))))
 
     @torch.no_grad()
     def target_projection(self, aux: AuxBatch) -> torch.Tensor:
