@@ -14,8 +14,8 @@ What it turns on is decided here, from the device and the CPU's instruction sets
 * ``compile``: ``torch.compile`` of the encoder (``agent.compile``'s path), on CUDA only. On an Intel Xeon with
   AMX-BF16 it made the fast update 4-13% faster, but costs ~15 s of compiling in every process (each start and
   resume) and was slower than eager with amp on the other CPUs measured (docs/performance.md, "agent.fast"); a run
-  can still add ``agent.compile=true``. The whole update step is not compiled yet: its ``.item()`` calls (host
-  syncs) break the graph; that waits for the sync-free update.
+  can still add ``agent.compile=true``. The whole update step is not compiled yet: the update no longer syncs
+  with the host (issue 25), so it can be; not built or measured.
 
 The plain path (``agent.fast=false``, the default) is untouched and stays bit-identical to the upstream record.
 """
