@@ -12,7 +12,7 @@ docs/extending.md walks through one of each.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, is_dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import TypeVar
@@ -70,7 +70,8 @@ def check_spec(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
         raise PluginError(f"{where}: factory must be 'module:attribute' (got {spec.factory!r}).")
     if spec.conf is not None and not (Path(spec.conf) / "agent").is_dir():
         raise PluginError(f"{where}: conf folder {spec.conf} has no agent/ folder.")
-    if isinstance(spec, LearnerSpec) and spec.section is not None and not hasattr(spec.section, "__dataclass_fields__"):
+    if isinstance(spec, LearnerSpec) and spec.section is not None and not (
+            isinstance(spec.section, type) and is_dataclass(spec.section)):
         raise PluginError(f"{where}: section must be a dataclass (got {spec.section!r}).")
 
 
