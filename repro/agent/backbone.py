@@ -15,7 +15,9 @@ learners encode and compute the critic loss without it (``autocast=False``), as 
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import replace
 from typing import ClassVar, cast
 
 import numpy as np
@@ -52,12 +54,15 @@ class DrQV2Backbone:
     """DrQ-v2's networks, optimizers and update steps, with an optional action encoder and auxiliary objectives."""
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
-                 device: torch.device | str = "cpu"):
+                 device: torch.device | str = "cpu", graphs: bool = False):
         self.cfg = cfg
         self.device = torch.device(device)
         self.action_dim = action_dim
-        # agent.fast: the speed-ups resolved for this device (repro/agent/fast.py); all off on the plain path
-        self.fast = fast.resolve_fast(cfg.fast, self.device)
+        # agent.fast: the speed-ups resolved for this device (repro/agent/fast.py); all off on the plain path.
+        # ``graphs``: whether the owner records its update in a CUDA graph where the plan allows (the online agent)
+        plan = fast.resolve_fast(cfg.fast, self.device)
+        self.fast = plan if graphs else replace(plan, graphs=False)
+        self._std: torch.Tensor | None = None  # fixed_stddev's tensor, read in place of the schedule
         self.aug: Callable[[torch.Tensor], torch.Tensor] = fast.shift(self.fast)  # takes the raw (uint8) frames
         self._build_networks(obs_shape)
         self._build_objectives()
@@ -161,8 +166,20 @@ class DrQV2Backbone:
             return self.action_encoder.encode_sequence(actions)
         return actions.flatten(1)
 
-    def stddev(self, step: int) -> float:
-        return self.cfg.stddev_schedule(step)
+    def stddev(self, step: int) -> float | torch.Tensor:
+        """The exploration noise's stddev at agent step ``step`` (``agent.stddev_schedule``), or the tensor of
+        :meth:`fixed_stddev` while one is set."""
+        return self.cfg.stddev_schedule(step) if self._std is None else self._std
+
+    @contextmanager
+    def fixed_stddev(self, std: torch.Tensor) -> Iterator[None]:
+        """Within the block, every stddev the update steps read is ``std`` (a 0-d tensor, whatever the step): how a
+        CUDA graph of the update reads the schedule's value of each replay (repro/agent/graphs.py)."""
+        self._std = std
+        try:
+            yield
+        finally:
+            self._std = None
 
     @torch.no_grad()
     def act(self, obs: np.ndarray, step: int, eval_mode: bool, explore_steps: int = 0) -> np.ndarray:
@@ -182,7 +199,9 @@ class DrQV2Backbone:
         """bfloat16 autocast of forward passes when ``enabled`` and ``agent.amp`` is on, or ``agent.fast`` where bf16
         is native (losses stay float32)."""
         on = enabled and (self.cfg.amp or self.fast.amp)
-        return torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=on)
+        # a CUDA graph must not keep autocast's cast weights from its recording (graphs.py): no cache then
+        return torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=on,
+                              cache_enabled=not self.fast.graphs)
 
     def encode_batch(self, batch: dict[str, torch.Tensor], autocast: bool = True) -> EncodedBatch:
         """(h, h', a, r, discount): the shifted frames encoded (h with the encoder's gradient, h' without) and the
@@ -263,12 +282,13 @@ class BackboneLearner(LearnerBase, ModuleSet):
     untrained = ("critic_target",)  # the target critic follows by soft updates: not counted
     update_metrics: ClassVar[tuple[str, ...]]  # the train.csv columns of update(), before the auxiliary step's
     explores: ClassVar[bool] = False  # whether acting explores (online): offline learners ignore explore_steps
+    graphed: ClassVar[bool] = False  # whether update() is recorded in a CUDA graph where agent.fast allows it
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
         self.cfg = cfg
         self.explore_steps = explore_steps if self.explores else 0  # agent steps of uniform random actions
-        self.backbone = DrQV2Backbone(cfg, obs_shape, action_dim, device)
+        self.backbone = DrQV2Backbone(cfg, obs_shape, action_dim, device, graphs=self.graphed)
         self.sample_options = self.backbone.sample_options  # what the replay returns for the objectives
 
     def modules(self) -> dict[str, nn.Module]:
@@ -297,7 +317,7 @@ class BackboneLearner(LearnerBase, ModuleSet):
         return self.backbone.action_encoder
 
     def stddev(self, step: int) -> float:
-        return self.backbone.stddev(step)
+        return self.cfg.stddev_schedule(step)
 
     def act(self, obs: np.ndarray, step: int, eval_mode: bool) -> np.ndarray:
         return self.backbone.act(obs, step, eval_mode, self.explore_steps)

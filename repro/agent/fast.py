@@ -14,8 +14,10 @@ What it turns on is decided here, from the device and the CPU's instruction sets
 * ``compile``: ``torch.compile`` of the encoder (``agent.compile``'s path), on CUDA only. On an Intel Xeon with
   AMX-BF16 it made the fast update 4-13% faster, but costs ~15 s of compiling in every process (each start and
   resume) and was slower than eager with amp on the other CPUs measured (docs/performance.md, "agent.fast"); a run
-  can still add ``agent.compile=true``. The whole update step is not compiled yet: the update no longer syncs
-  with the host (issue 25), so it can be; not built or measured.
+  can still add ``agent.compile=true``;
+* ``graphs``: the whole online update recorded once in a CUDA graph and replayed (``repro/agent/graphs.py``), on
+  CUDA only, with capturable Adam. Possible because the update makes no host sync (issue 25). Offline learners
+  (whose updates branch on the step, as TD3+BC's delayed actor) do not use it.
 
 The plain path (``agent.fast=false``, the default) is untouched and stays bit-identical to the upstream record.
 """
@@ -49,6 +51,7 @@ class FastPlan:
     channels_last: bool = False
     fused_adam: bool = False
     compile: bool = False
+    graphs: bool = False
 
     def as_dict(self) -> dict[str, bool]:
         return asdict(self)
@@ -85,8 +88,9 @@ def resolve_fast(enabled: bool, device: torch.device, flags: set[str] | None = N
     if not enabled:
         return FastPlan()
     bf16 = native_bf16(device, flags)
-    return FastPlan(amp=bf16, u8_shift=True, bf16_input=bf16, channels_last=bf16, fused_adam=True,
-                    compile=device.type == "cuda")
+    cuda = device.type == "cuda"
+    return FastPlan(amp=bf16, u8_shift=True, bf16_input=bf16, channels_last=bf16, fused_adam=True, compile=cuda,
+                    graphs=cuda)
 
 
 class ShiftU8:
@@ -127,8 +131,11 @@ def prepare_encoder(encoder: M, plan: FastPlan) -> M:
 
 
 def adam(plan: FastPlan) -> Callable[..., torch.optim.Optimizer]:
-    """The Adam constructor of ``plan``: fused (one kernel per step) or the plain path's default."""
-    return functools.partial(torch.optim.Adam, fused=True) if plan.fused_adam else torch.optim.Adam
+    """The Adam constructor of ``plan``: fused (one kernel per step) or the plain path's default; capturable (its
+    step count on the device) when the update is recorded in a CUDA graph."""
+    if not (plan.fused_adam or plan.graphs):
+        return torch.optim.Adam
+    return functools.partial(torch.optim.Adam, fused=plan.fused_adam, capturable=plan.graphs)
 
 
 def resolved(plan: FastPlan, enabled: bool) -> dict[str, Any]:

@@ -89,7 +89,7 @@ class Actor(nn.Module):
         self.policy = mlp(feature_dim, hidden_dim, action_dim)
         self.apply(orthogonal_init)
 
-    def forward(self, h: torch.Tensor, std: float) -> TruncatedNormal:
+    def forward(self, h: torch.Tensor, std: float | torch.Tensor) -> TruncatedNormal:
         mu = torch.tanh(self.policy(self.trunk(h)))
         return TruncatedNormal(mu, torch.ones_like(mu) * std)
 
