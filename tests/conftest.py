@@ -2,7 +2,8 @@
 made once per test session (pytest-xdist: the tests that use one are kept on one worker by their
 ``xdist_group`` mark, so no run is trained twice).
 
-* ``tiny_taco``: the tiny TACO cheetah_run run (seed 3, 400 frames), plain.
+* ``tiny_taco``: the tiny TACO cheetah_run run (seed 3, 400 frames), plain. Its loop is watched as it trains
+  (``tiny_taco_loop_events``: each update's return, each env step and each wait for the device, in order).
 * ``tiny_taco_watched``: the same run recorded, with TensorBoard and videos (runtime keys): its logs must equal
   ``tiny_taco``'s (determinism, and neither recording nor watching changes a logged number).
 * ``main_job``: `repro reproduce` (the README's main job: tiny online grid, its offline leg, the report) and its
@@ -33,7 +34,7 @@ os.environ.update(WANDB_MODE="offline", WANDB_SILENT="true", WANDB_ERROR_REPORTI
 import pytest  # noqa: E402
 import torch  # noqa: E402
 
-from helpers import MAIN_JOB, RECORD, TINY, WATCH  # noqa: E402
+from helpers import MAIN_JOB, RECORD, TINY, WATCH, watch_loop, watch_syncs  # noqa: E402
 
 torch.set_num_threads(1)
 
@@ -42,11 +43,23 @@ def _quiet(_: str) -> None:
     pass
 
 
+_TINY_TACO_LOOP: list[str] = []  # tiny_taco's loop events (helpers.watch_loop, helpers.watch_syncs)
+
+
 @pytest.fixture(scope="session")
 def tiny_taco(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from repro.train import api
 
-    return api.train([*TINY, f"runtime.results_root={tmp_path_factory.mktemp('tiny_taco')}"], echo=_quiet)
+    with pytest.MonkeyPatch.context() as mp:
+        watch_syncs(mp, _TINY_TACO_LOOP)
+        watch_loop(mp, _TINY_TACO_LOOP)
+        return api.train([*TINY, f"runtime.results_root={tmp_path_factory.mktemp('tiny_taco')}"], echo=_quiet)
+
+
+@pytest.fixture(scope="session")
+def tiny_taco_loop_events(tiny_taco: Path) -> list[str]:
+    """What ``tiny_taco``'s loop did, in order: ``"update returned"``, ``"env.step"`` and ``"sync ..."`` events."""
+    return list(_TINY_TACO_LOOP)
 
 
 @pytest.fixture(scope="session")

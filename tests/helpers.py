@@ -16,10 +16,12 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import pytest
 import torch
 import typer
 import yaml
 
+import repro
 from repro.data.record import load_snapshot
 from repro.launch.cli import register as register_launch
 from repro.runs.logger import WALLCLOCK_COLUMNS
@@ -30,6 +32,9 @@ from repro.runs.wblog import read_offline_run
 # The tiny online run several modules share (conftest's session fixtures train it once).
 TINY = ["profile=tiny", "task=cheetah_run", "seed=3", "runtime.threads=1"]
 REL = Path("default/taco/base/cheetah_run/seed_3")  # its run directory under a results root
+# The tensor methods that wait for a CUDA device's queued work (``torch.cuda.synchronize`` too: watch_syncs)
+SYNCS = ("item", "tolist", "cpu", "numpy", "__float__", "__int__", "__bool__")
+REPRO_DIR = str(Path(repro.__file__).parent)
 # Its recorded, watched twin: recording, TensorBoard, W&B and videos are runtime keys (not identity, not logs).
 WATCH = ["runtime.tensorboard=true", "runtime.wandb=true", "train.save_video=true", "train.video_size=64"]
 RECORD = ["runtime.record=true"]
@@ -42,6 +47,50 @@ def deterministic(csv: Path) -> pd.DataFrame:
     """A run's CSV without its wall-clock columns (the part two runs of one seed must share)."""
     df = pd.read_csv(csv)
     return df.drop(columns=[c for c in WALLCLOCK_COLUMNS if c in df.columns])
+
+
+def watch_syncs(mp: pytest.MonkeyPatch, events: list[str]) -> None:
+    """Through ``mp``: append ``"sync NAME at FILE:LINE"`` to ``events`` at every call from the tree's code (not
+    torch's own internals) of a tensor method that waits for the device (:data:`SYNCS`), and at every
+    ``torch.cuda.synchronize``; the calls still run (the CPU never waits)."""
+    for name in SYNCS:
+        real = getattr(torch.Tensor, name)
+
+        def watched(self: torch.Tensor, *args: Any, _real: Any = real, _name: str = name, **kwargs: Any) -> Any:
+            caller = sys._getframe(1)
+            if caller.f_code.co_filename.startswith(REPRO_DIR):
+                events.append(f"sync {_name} at {caller.f_code.co_filename}:{caller.f_lineno}")
+            return _real(self, *args, **kwargs)
+
+        mp.setattr(torch.Tensor, name, watched)
+    mp.setattr(torch.cuda, "synchronize", lambda *a, **k: events.append("sync torch.cuda.synchronize"))
+
+
+def watch_loop(mp: pytest.MonkeyPatch, events: list[str]) -> None:
+    """Through ``mp``: every online loop appends ``"update returned"`` to ``events`` when its ``agent.update``
+    returns and ``"env.step"`` when it calls ``env.step`` (beside :func:`watch_syncs`' events)."""
+    from repro.train.online_loop import OnlineLoop
+
+    step_once = OnlineLoop._act_update_step
+
+    def instrumented(loop: OnlineLoop, episode: Any) -> None:
+        if not getattr(loop, "_watched", False):  # wrap this loop's agent.update and env.step once
+            update, env_step = loop.agent.update, loop.env.step
+
+            def update_then_mark(*args: Any, **kwargs: Any) -> Any:
+                out = update(*args, **kwargs)
+                events.append("update returned")
+                return out
+
+            def mark_then_step(*args: Any, **kwargs: Any) -> Any:
+                events.append("env.step")
+                return env_step(*args, **kwargs)
+
+            loop.agent.update, loop.env.step = update_then_mark, mark_then_step  # type: ignore[method-assign]
+            loop._watched = True  # type: ignore[attr-defined]
+        step_once(loop, episode)
+
+    mp.setattr(OnlineLoop, "_act_update_step", instrumented)
 
 
 def rows(csv: Path) -> int:

@@ -6,21 +6,17 @@ from __future__ import annotations
 
 import math
 import struct
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
-import repro
+from helpers import watch_syncs
 from repro.config.compose import compose, typed
 from repro.learners import SequenceLearner, build_learner
 from repro.train.common import MetricMeans
 
 OBS, A = (9, 32, 32), 6
-REPRO = str(Path(repro.__file__).parent)
-SYNCS = ("item", "tolist", "cpu", "numpy", "__float__", "__int__", "__bool__")  # each waits for the device
 
 
 def _batch(K: int, B: int = 4) -> dict[str, torch.Tensor]:
@@ -52,16 +48,7 @@ def test_update_returns_detached_scalars_without_a_host_sync_from_the_tree(overr
     batch = (learner.make_sampler(_episodes(), seed=0).sample(4) if isinstance(learner, SequenceLearner)
              else _batch(rc.agent.K))
     calls: list[str] = []
-    for name in SYNCS:
-        real = getattr(torch.Tensor, name)
-
-        def watched(self, *args, _real=real, _name=name, **kwargs):
-            caller = sys._getframe(1).f_code.co_filename
-            if caller.startswith(REPRO):  # torch's own internals (Adam's CPU step count) are not the tree's
-                calls.append(f"{_name} at {caller}:{sys._getframe(1).f_lineno}")
-            return _real(self, *args, **kwargs)
-
-        monkeypatch.setattr(torch.Tensor, name, watched)
+    watch_syncs(monkeypatch, calls)  # torch's own internals (Adam's CPU step count) are not the tree's
     metrics = learner.update(batch, 0)
     monkeypatch.undo()
     assert not calls
