@@ -42,16 +42,22 @@ def test_e2e_json_has_every_phase_summing_to_the_wall_clock(tmp_path):
         total = sum(e["phases"].values())
         assert (1 - SUM_TOLERANCE) * e["seconds"] <= total <= e["seconds"] + 1e-3, (total, e["seconds"])
         assert e["fps"] == pytest.approx(e["frames"] / e["seconds"], rel=1e-3)
-    # a second run replaces the entry of the same algo, batch, profile and path, keeps the others and `results`
+    assert all(e["phase_sync"] for e in entries)
+    # a second run, timed as it trains (--overlap: phases not synchronized), keeps the entries timed phase by phase
+    # and `results`; it replaces only an entry of the same algo, batch, profile, path and timing
     report["results"] = [{"algo": "drqv2", "batch_size": 8, "speedup": "plain", "update_seconds": 0.5}]
-    path.write_text(json.dumps(report))
-    result = CliRunner().invoke(_app(), args[:4] + args[5:])  # without --amp
+    stale = {**entries[0], "phase_sync": False, "seconds": 99.0}  # an earlier --overlap entry: replaced
+    path.write_text(json.dumps({**report, "e2e": [*entries, stale]}))
+    short = ["bench", "--e2e", "--algo", "drqv2", "--frames", "20", "--seed-frames", "20", "--results", str(tmp_path)]
+    result = CliRunner().invoke(_app(), [*short, "--overlap"])  # without --amp, and shorter
     assert result.exit_code == 0, result.output
     again = json.loads(path.read_text())
-    assert [e["speedup"] for e in again["e2e"]] == ["amp", "plain"] and again["results"] == report["results"]
-    bench = parse_bench(again, path, "cpu")
-    plain, amp = bench.e2e[("drqv2", 8, "plain")], bench.e2e[("drqv2", 8, "amp")]
-    assert plain == again["e2e"][1] and amp == entries[1]
+    assert [(e["speedup"], e["phase_sync"]) for e in again["e2e"]] == [("plain", True), ("amp", True),
+                                                                      ("plain", False)]
+    assert again["results"] == report["results"] and again["e2e"][:2] == entries and again["e2e"][2]["seconds"] != 99.0
+    assert "as it trains" in result.output and set(again["e2e"][2]["phases"]) == set(PHASES)
+    bench = parse_bench(again, path, "cpu")  # `repro plan` takes the loop as it trains where there is one
+    assert bench.e2e[("drqv2", 8, "plain")] == again["e2e"][2] and bench.e2e[("drqv2", 8, "amp")] == entries[1]
 
 
 @pytest.mark.parametrize("args, needle", [(["--frames", "0"], "--frames must be >= 1"),

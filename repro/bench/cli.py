@@ -125,26 +125,30 @@ def _read_existing(path: Path) -> dict:
 
 
 def e2e_key(entry: dict) -> tuple:
-    return entry["algo"], entry["batch_size"], entry.get("profile"), entry.get("speedup", "plain")
+    return (entry["algo"], entry["batch_size"], entry.get("profile"), entry.get("speedup", "plain"),
+            entry.get("phase_sync", True))
 
 
 def run_e2e_bench(configs: list[tuple[str, Optional[int]]], device: str, out_dir: Path, frames: int,
                   speedups: tuple[str, ...] = (), warmup: int = 1, task: str = "cheetah_run",
-                  seed_frames: Optional[int] = None, echo=print, meta: Optional[dict] = None) -> list[dict]:
+                  seed_frames: Optional[int] = None, echo=print, meta: Optional[dict] = None,
+                  overlap: bool = False) -> list[dict]:
     """Time each (algo, batch; None: the tiny profile) on every path with :func:`repro.bench.e2e.run_e2e` and
-    put the entries under ``e2e`` of the bench file (an entry of the same algo, batch, profile and path replaced,
-    the update results kept)."""
+    put the entries under ``e2e`` of the bench file (an entry of the same algo, batch, profile, path and phase
+    timing replaced, the update results kept). ``overlap``: each timed as it trains instead (``phase_sync`` false)."""
     from repro.bench.e2e import PHASES, run_e2e
 
     entries = []
     for speedup in ("plain", *speedups):
         for algo, bs in configs:
-            e = run_e2e(algo, bs, device, speedup, frames=frames, task=task, warmup=warmup, seed_frames=seed_frames)
+            e = run_e2e(algo, bs, device, speedup, frames=frames, task=task, warmup=warmup, seed_frames=seed_frames,
+                        phase_sync=not overlap)
             entries.append(e)
             what = f"profile {e['profile']} B{e['batch_size']}" if e["profile"] else f"B{e['batch_size']}"
             shares = ", ".join(f"{k} {e['phases'][k]:.2f}s" for k in PHASES)
-            echo(f"{algo:>6} {what} {speedup}: {e['frames']} frames in {e['seconds']:.2f} s, {e['fps']:.1f} fps "
-                 f"({shares}; {e['updates']} updates, evaluation excluded)")
+            timing = ", as it trains (phases not synchronized)" if overlap else ""
+            echo(f"{algo:>6} {what} {speedup}{timing}: {e['frames']} frames in {e['seconds']:.2f} s, "
+                 f"{e['fps']:.1f} fps ({shares}; {e['updates']} updates, evaluation excluded)")
     path = bench_path(out_dir, device)
     report = _read_existing(path) or {"results": []}
     report.update(meta or {})
@@ -195,6 +199,9 @@ def register(app: typer.Typer) -> None:
               seed_frames: Optional[int] = typer.Option(
                   None, "--seed-frames", help="With --e2e: untimed frames first (default: the config's)."),
               task: str = typer.Option("cheetah_run", "--task", help="With --e2e: the task."),
+              overlap: bool = typer.Option(False, "--overlap", help="With --e2e: time each path as it trains instead, "
+                                           "the phases not synchronized with the device (against the synchronized "
+                                           "entry: what the env step's overlap with the queued update gains)."),
               roofline: bool = typer.Option(False, "--roofline", help="Instead: the update's FLOPs (torch's FLOP "
                                             "counter) over its time against this process's measured fp32 and bf16 "
                                             "convolution peak, and the kernels that keep it from the peak (default "
@@ -226,6 +233,8 @@ def register(app: typer.Typer) -> None:
             fail("--transitions and --sample-batches must be >= 1, --episode-length >= 3")
         if frames < 1 or (seed_frames is not None and seed_frames < 0):
             fail("--frames must be >= 1 and --seed-frames >= 0")
+        if overlap and not e2e:
+            fail("--overlap times the --e2e loop: add --e2e")
         if e2e and (offline or offline_data):
             fail("--e2e times the online loop: drop --offline / --offline-data")
         if roofline and (offline or offline_data or e2e):
@@ -258,7 +267,7 @@ def register(app: typer.Typer) -> None:
         if e2e:
             sizes: list[Optional[int]] = list(batch) if batch else [None]
             run_e2e_bench([(a, b) for a in (algo or ["taco", "drqv2"]) for b in sizes], device, out_dir, frames,
-                          speedups, warmup, task, seed_frames, echo=typer.echo, meta=meta)
+                          speedups, warmup, task, seed_frames, echo=typer.echo, meta=meta, overlap=overlap)
             return
         configs = [(a, b) for a in (algo or ["taco", "drqv2"]) for b in (batch or [256, 1024])]
         run_bench(configs, repeats, device, out_dir, echo=typer.echo, speedups=speedups, warmup=warmup)

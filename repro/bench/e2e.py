@@ -14,6 +14,11 @@ frames are stepped untimed, then ``frames`` frames are timed phase by phase. The
 On CUDA the device is synchronized before each clock reading (here only: training never waits), so a phase owns
 the device work it queued. The phases are timed one by one and the loop's wall clock separately; their sum falls
 short of the wall clock only by the loop's own overhead (tests/test_bench.py bounds it).
+
+``phase_sync=False`` (``--e2e --overlap``) times the loop as it trains: the phases' clocks no longer wait for the device
+(an update's phase is then the time to queue it, and its kernels run on while the environment steps and renders),
+only the wall clock's two readings do. Its FPS against the synchronized entry's is what the overlap of the
+environment with the queued update gains (nothing on the CPU, where every kernel runs before its call returns).
 """
 
 from __future__ import annotations
@@ -80,10 +85,12 @@ def _time_render(env: Any, timer: PhaseTimer) -> list[float]:
 
 
 def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plain", frames: int = 100,
-            task: str = "cheetah_run", warmup: int = 1, seed_frames: int | None = None) -> dict[str, Any]:
+            task: str = "cheetah_run", warmup: int = 1, seed_frames: int | None = None,
+            phase_sync: bool = True) -> dict[str, Any]:
     """Build a run of ``algo`` on ``task`` (the tiny profile when ``batch_size`` is None, else the agent's own
     settings at that batch), step its seed frames untimed, run ``warmup`` untimed updates, then time ``frames``
-    frames of training. Returns the e2e entry (docs/plan.md, "The bench JSON `repro plan` reads")."""
+    frames of training (``phase_sync``: see the module docstring). Returns the e2e entry (docs/plan.md, "The bench
+    JSON `repro plan` reads")."""
     import numpy as np
     import torch
 
@@ -98,7 +105,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
     overrides += [f"profile={TINY}"] if batch_size is None else [f"agent.batch_size={batch_size}"]
     rc = typed(compose(overrides))
     cuda = device.startswith("cuda")
-    timer = PhaseTimer(device)
+    timer = PhaseTimer(device if phase_sync else "cpu")  # "cpu": the phases' clocks do not wait for the device
     env = build_env(rc, rc.seed)
     try:
         spec = env.spec
@@ -124,7 +131,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
                     agent.update(buffer.sample(rc.agent.batch_size, **agent.sample_options), step)
                 timer.on = True
                 renders.clear()
-                wall0 = timer.clock()
+                wall0 = now(device)
             with timer.phase("act"):
                 action = agent.act(ts.observation, step, eval_mode=False)
             if step >= seed_steps and step % every == 0:
@@ -145,7 +152,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
                     ts = env.reset(seed=episode_seed(rc.seed, 0, episode))
                 with timer.phase("other"):
                     buffer.start_episode(ts.observation[-3:])
-        wall = timer.clock() - wall0
+        wall = now(device) - wall0
     finally:
         env.close()
     seconds = dict(timer.seconds)
@@ -154,7 +161,8 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
     timed_frames = timed_steps * repeat
     entry: dict[str, Any] = {
         "algo": algo, "batch_size": rc.agent.batch_size, "profile": TINY if batch_size is None else None,
-        "speedup": speedup, "device": device, "task": task, "frames": timed_frames, "seed_frames": seed_steps * repeat,
+        "speedup": speedup, "phase_sync": phase_sync, "device": device, "task": task, "frames": timed_frames,
+        "seed_frames": seed_steps * repeat,
         "updates": updates, "warmup": warmup, "seconds": round(wall, 4),
         "phases": {k: round(v, 4) for k, v in seconds.items()}, "fps": round(timed_frames / wall, 3),
         "cpu": f"{_cpu_model()} ({torch.get_num_threads()} threads)"}
