@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The GPU checks of issue 26, in one script for one GPU (sized for an H200: about 8 minutes). Writes under $OUT:
 #   bench.json          `repro bench` plain, amp and fast at B256 and B1024 (TACO, DrQ-v2), with the --e2e entries of
-#                       a 10K-frame TACO B1024 run (4000 seed frames, 6000 timed), plain and fast (agent.fast)
+#                       a 10K-frame TACO B1024 run (4000 seed frames, 6000 timed), plain and fast (agent.fast), each
+#                       timed phase by phase and as it trains (--overlap: the env step overlapping the queued update)
+#   graphs.xml          tests/test_graphs.py on the GPU (JUnit): the CUDA-graph update (agent.fast) against eager
 #   bench-compile.json  `repro bench --compile` at B256 and B1024 (last: it takes what time is left)
 #   amp_check.json      plain against amp: the losses of 5 updates from the same weights and batches
 #   fast_check.json     plain against fast (agent.fast): the same
@@ -86,10 +88,16 @@ pack_sweep() {  # pack_sweep N: write a sweep of N runs (seeds), to be run all a
 
 step bench 150 "${REPRO[@]}" bench --device "$DEVICE" --amp --fast "${BATCH[@]}" "${UPD[@]}" --results "$WORK/r"
 step e2e 260 "${REPRO[@]}" bench --e2e --device "$DEVICE" --fast "${E2E[@]}" --results "$WORK/r"
+step e2e_overlap 200 "${REPRO[@]}" bench --e2e --overlap --device "$DEVICE" --fast "${E2E[@]}" --results "$WORK/r"
 cp "$WORK"/r/bench/bench-*.json "$OUT/bench.json" 2>/dev/null
 step amp_check 60 "$PYTHON" benchmarks/amp_check.py --device "$DEVICE" "${AMP_CHECK[@]}" --out "$OUT/amp_check.json"
 step fast_check 90 "$PYTHON" benchmarks/amp_check.py --path fast --device "$DEVICE" "${AMP_CHECK[@]}" \
   --out "$OUT/fast_check.json"
+if [ "$DEVICE" = cpu ]; then
+  echo '{"step": "graphs", "status": "skipped", "why": "CUDA graphs need a CUDA device"}' >>"$STEPS"
+else
+  step graphs 120 "$PYTHON" -m pytest -q -p no:cacheprovider tests/test_graphs.py -k cuda --junitxml "$OUT/graphs.xml"
+fi
 for n in 2 4; do
   pack_sweep "$n"
   step "pack$n" $((50 + 15 * n)) "${REPRO[@]}" sweep "$WORK/pack$n.yaml" --gpus 0 --runs-per-gpu "$n" \

@@ -16,8 +16,8 @@ What it turns on is decided here, from the device and the CPU's instruction sets
   resume) and was slower than eager with amp on the other CPUs measured (docs/performance.md, "agent.fast"); a run
   can still add ``agent.compile=true``;
 * ``graphs``: the whole online update recorded once in a CUDA graph and replayed (``repro/agent/graphs.py``), on
-  CUDA only, with capturable Adam. Possible because the update makes no host sync (issue 25). Offline learners
-  (whose updates branch on the step, as TD3+BC's delayed actor) do not use it.
+  CUDA only, with capturable Adam. Possible because the update makes no host sync (issue 25). Only the online
+  agent uses it (``BackboneLearner.graphed``): the offline learners on the backbone are not wired to it.
 
 The plain path (``agent.fast=false``, the default) is untouched and stays bit-identical to the upstream record.
 """
