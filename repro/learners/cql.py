@@ -80,7 +80,7 @@ class CQL(BackboneLearner):
                                             log_prob_policy=log_p, log_prob_next_policy=log_np,
                                             include_data_in_logsumexp=include_data)
 
-    def _policy_samples(self, h: torch.Tensor, std: float, n: int,
+    def _policy_samples(self, h: torch.Tensor, std: float | torch.Tensor, n: int,
                         clip: float | None) -> tuple[torch.Tensor, torch.Tensor]:
         """(B, N, A) samples of pi(.|h) and their (B, N) log-probabilities (summed over action dimensions)."""
         dist = self.backbone.actor(h, std)
