@@ -57,7 +57,8 @@ def test_bench_prints_same_run_ratios_and_no_constant(tmp_path):
 
 
 @pytest.mark.parametrize("args, needle", [(["--batch", "0"], "--batch must be >= 1"),
-                                          (["--algo", "sac"], "unknown algo 'sac'")])
+                                          (["--algo", "tacoo"], "unknown online agent 'tacoo'. Did you mean: taco"),
+                                          (["--algo", "td3bc"], "unknown online agent 'td3bc'")])
 def test_bench_bad_input_is_one_line(tmp_path, args, needle):
     result = CliRunner().invoke(_app(), ["bench", *args, "--results", str(tmp_path)])
     assert result.exit_code == 2

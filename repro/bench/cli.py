@@ -170,7 +170,9 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def bench(batch: Optional[list[int]] = typer.Option(
                   None, "--batch", help="Batch sizes (default 256 1024; --offline and --offline-data: 256)."),
-              algo: Optional[list[str]] = typer.Option(None, "--algo", help="taco and/or drqv2 (default both)."),
+              algo: Optional[list[str]] = typer.Option(
+                  None, "--algo", help="Online agent files (default taco and drqv2; any agent whose learner trains "
+                  "online, a plugin's too)."),
               repeats: int = typer.Option(2, "--repeats", "--iters", min=1,
                                           help="Timed updates per setting (median reported)."),
               warmup: int = typer.Option(1, min=0, help="Untimed warm-up updates before the timed ones."),
@@ -214,13 +216,14 @@ def register(app: typer.Typer) -> None:
 
         from repro.bench.data import run_data_bench
         from repro.bench.offline_update import run_offline_bench
-        from repro.config.compose import offline_agents
+        from repro.config.compose import close_matches, offline_agents, online_agents
 
         if device.startswith("cuda") and not torch.cuda.is_available():
             fail("--device cuda but no CUDA device is available")
+        online = online_agents() if algo else ()
         for a in algo or []:
-            if a not in ("taco", "drqv2"):
-                fail(f"unknown algo '{a}' (taco, drqv2)")
+            if a not in online:
+                fail(f"unknown online agent '{a}'.{close_matches(a, online)}")
         if any(b < 1 for b in batch or []):
             fail("--batch must be >= 1")
         agents = offline_agents() if offline and learner else ()

@@ -35,13 +35,16 @@ def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[
     0, for stacks of 3 RGB frames of ``image`` pixels square, and its typed run config."""
     import torch
 
-    from repro.agent.agent import Agent
     from repro.config.compose import compose, typed
     from repro.envs import get_task
+    from repro.learners import OnlineLearner, build_learner
 
     rc = typed(compose([f"agent={algo}", f"task={task}", f"agent.batch_size={batch_size}", *flags]))
     torch.manual_seed(0)
-    return Agent(rc.agent, (9, image, image), get_task(task).action_dim, device=device), rc
+    agent = build_learner(rc.agent, (9, image, image), get_task(task).action_dim, device)
+    if not isinstance(agent, OnlineLearner):
+        raise ValueError(f"agent {algo} does not train online")
+    return agent, rc
 
 
 def alternated_times(agents: dict[str, Any], batch: dict[str, torch.Tensor], warmup: int, repeats: int,

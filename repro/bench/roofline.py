@@ -144,5 +144,7 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
 
 
 def _runs_bf16(agent: Any) -> bool:
-    """Whether the agent's convolutions run in bfloat16 (its forward passes under bf16 autocast)."""
-    return bool(agent.cfg.amp or agent.backbone.fast.amp)
+    """Whether the agent's convolutions run in bfloat16 (its forward passes under bf16 autocast: ``agent.amp``, or
+    the ``agent.fast`` plan it records)."""
+    plan = agent.resolved.get("fast") or {}
+    return bool(agent.cfg.amp or plan.get("amp", False))

@@ -74,10 +74,20 @@ def agent_learner(agent: str) -> str:
 def offline_agents() -> tuple[str, ...]:
     """The agent files whose learner trains offline (`repro bench --offline`'s list), in the learners' registration
     order, each learner's agents by name."""
+    return _agents_of(offline=True)
+
+
+def online_agents() -> tuple[str, ...]:
+    """The agent files whose learner trains in an environment (`repro bench --algo`'s choices), ordered as
+    :func:`offline_agents`."""
+    return _agents_of(offline=False)
+
+
+def _agents_of(offline: bool) -> tuple[str, ...]:
     order = {name: i for i, name in enumerate(learner_names())}
     learners = {agent: agent_learner(agent) for agent in group_options("agent")}
-    offline = [a for a, learner in learners.items() if learner in order and is_offline(learner)]
-    return tuple(sorted(offline, key=lambda a: (order[learners[a]], a)))
+    chosen = [a for a, learner in learners.items() if learner in order and is_offline(learner) == offline]
+    return tuple(sorted(chosen, key=lambda a: (order[learners[a]], a)))
 
 
 def config_groups() -> dict[str, list[str]]:
