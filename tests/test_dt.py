@@ -100,7 +100,7 @@ def test_warmup_and_gradient_clip():
     batch = sampler.sample(6)
     learner.optimizer.zero_grad(set_to_none=True)
     pred = learner.model(*(torch.as_tensor(batch[k]) for k in ("frames", "actions", "rtg", "timesteps", "mask")))
-    action_loss(pred, torch.as_tensor(batch["actions"]), torch.as_tensor(batch["mask"])).backward()
+    action_loss(pred, torch.as_tensor(batch["actions"]), torch.as_tensor(batch["keep"])).backward()
     raw = torch.norm(torch.stack([p.grad.norm() for p in params if p.grad is not None]))
     learner.optimizer.zero_grad(set_to_none=True)
     metrics = learner.update(batch, 6)

@@ -1,6 +1,7 @@
 """The learner contract's metrics (issue 25): every learner's ``update`` returns its train.csv columns as detached 0-d
-tensors without a host sync from the tree's code, and the loops' mean of them (``MetricMeans``) is the same bits as
-the former Python-float arithmetic, through a checkpoint too."""
+tensors without a host sync from the tree's code (neither a Tensor method that reads a value on the host nor an
+operator whose result's size depends on the data, such as indexing with a boolean mask), and the loops' mean of
+them (``MetricMeans``) is the same bits as the former Python-float arithmetic, through a checkpoint too."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from torch.utils._python_dispatch import TorchDispatchMode
 
 import repro
 from repro.config.compose import compose, typed
@@ -21,6 +23,37 @@ from repro.train.common import MetricMeans
 OBS, A = (9, 32, 32), 6
 REPRO = str(Path(repro.__file__).parent)
 SYNCS = ("item", "tolist", "cpu", "numpy", "__float__", "__int__", "__bool__")  # each waits for the device
+TORCH = Path(torch.__file__).parent
+# torch's dispatch plumbing between a caller and the operator (not a caller itself)
+PLUMBING = tuple(str(TORCH / p) for p in ("_dynamo", "_compile.py", "_ops.py", "_tensor.py", "overrides.py",
+                                         "utils/_python_dispatch.py"))
+# operators that read a value on the host, or size their result by the data (the host waits for the count)
+DATA_SIZED = {"_local_scalar_dense", "nonzero", "masked_select", "unique", "_unique", "_unique2", "unique_dim",
+              "unique_consecutive", "is_nonzero", "equal"}
+
+
+class DataSizedOps(TorchDispatchMode):
+    """Records the host-syncing operators (``DATA_SIZED``, indexing with a boolean mask, ``repeat_interleave``
+    by a tensor of counts) that the tree's code calls: an operator that torch's own code calls (an optimizer's
+    CPU step count, autograd's backward) is torch's."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls: list[str] = []
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        name = func._schema.name.split("::")[-1]
+        bool_index = (name in ("index", "index_put", "index_put_") and len(args) > 1
+                      and any(isinstance(i, torch.Tensor) and i.dtype == torch.bool for i in args[1]))
+        by_counts = name == "repeat_interleave" and func._overloadname == "Tensor"
+        if name in DATA_SIZED or bool_index or by_counts:
+            frame = sys._getframe(1)
+            while frame is not None and (frame.f_code.co_filename == __file__
+                                         or frame.f_code.co_filename.startswith(PLUMBING)):
+                frame = frame.f_back
+            if frame is not None and frame.f_code.co_filename.startswith(REPRO):
+                self.calls.append(f"{func} at {frame.f_code.co_filename}:{frame.f_lineno}")
+        return func(*args, **(kwargs or {}))
 
 
 def _batch(K: int, B: int = 4) -> dict[str, torch.Tensor]:
@@ -62,9 +95,10 @@ def test_update_returns_detached_scalars_without_a_host_sync_from_the_tree(overr
             return _real(self, *args, **kwargs)
 
         monkeypatch.setattr(torch.Tensor, name, watched)
-    metrics = learner.update(batch, 0)
+    with DataSizedOps() as ops:
+        metrics = learner.update(batch, 0)
     monkeypatch.undo()
-    assert not calls
+    assert not calls and not ops.calls, calls + ops.calls
     assert sorted(metrics) == sorted(learner.metric_names())
     assert all(isinstance(v, torch.Tensor) and v.dim() == 0 and not v.requires_grad for v in metrics.values())
 

@@ -205,6 +205,12 @@ def left_pad(arrays: Mapping[str, np.ndarray], context: int,
     return out
 
 
+def kept_steps(mask: np.ndarray) -> np.ndarray:
+    """The flat indices (into the B*K steps, ascending, int64) of the True entries of a (B, K) ``mask``: the
+    steps ``losses.dt.action_loss`` averages over (known on the host when the batch is built)."""
+    return np.flatnonzero(mask).astype(np.int64)
+
+
 class SequenceSampler:
     """Random windows of ``context`` steps from episodes, never crossing an episode boundary.
 
@@ -214,7 +220,8 @@ class SequenceSampler:
     the episode's end; shorter windows are left-padded (as kzl/decision-transformer's get_batch: frames, returns
     and timesteps with 0, actions with ``action_pad``, -10 there; the padded steps are masked out).
     ``sample`` returns numpy arrays: ``frames`` (B, K, 3*frame_stack, H, W) uint8, ``actions`` (B, K, A)
-    float32, ``rtg`` (B, K, 1) float32 (scaled), ``timesteps`` (B, K) int64, ``mask`` (B, K) bool, plus
+    float32, ``rtg`` (B, K, 1) float32 (scaled), ``timesteps`` (B, K) int64, ``mask`` (B, K) bool, ``keep``
+    the mask's flat indices (``kept_steps``: the loss gathers with them, without a host sync), plus
     ``episode`` and ``start`` (B,) int64 naming where each window came from. With ``max_timestep`` (the
     model's), an episode too long for the timestep embedding is a one-line ValueError here.
     """
@@ -264,6 +271,7 @@ class SequenceSampler:
         starts = flat - self.offsets[episodes]
         windows = [self.window(int(e), int(s)) for e, s in zip(episodes, starts)]
         batch = {key: np.stack([w[key] for w in windows]) for key in windows[0]}
+        batch["keep"] = kept_steps(batch["mask"])
         batch["episode"], batch["start"] = episodes.astype(np.int64), starts.astype(np.int64)
         return batch
 
