@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import math
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -30,7 +31,7 @@ from repro.config.compose import (
     run_keys,
     typed,
 )
-from repro.config.plugins import LearnerSpec, PluginError, discover, load_factory
+from repro.config.plugins import LearnerSpec, PluginError, check_spec, discover, load_factory
 from repro.config.schema import is_offline, learner_names, objective_names, unread_keys
 from repro.learners import build_learner
 from repro.runs import rundir
@@ -94,6 +95,42 @@ def test_a_misspelled_registered_name_is_one_line_and_exit_2(tmp_path, override:
     out = CliRunner().invoke(app, ["train", "agent=toy_inv", override, f"runtime.results_root={tmp_path}"])
     assert out.exit_code == 2 and message in out.output and len(out.output.strip().splitlines()) == 1, out.output
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("agent, override, message", [
+    ("toy_rwbc", "agent.toy_rwbc.temperature=0", "agent.toy_rwbc.temperature must be > 0.0 (got 0.0)."),
+    ("toy_rwbc", "agent.toy_rwbc.max_weight=0.5", "agent.toy_rwbc.max_weight must be >= 1.0 (got 0.5)."),
+    ("toy_inv", "agent.objective_params.toy_inv.hidden_dim=0",
+     "agent.objective_params.toy_inv.hidden_dim must be >= 1 (got 0)."),
+])
+def test_a_plugin_setting_out_of_its_registered_range_is_one_line_and_exit_2(tmp_path, agent: str, override: str,
+                                                                             message: str):
+    from repro_app.cli import app
+
+    dataset = ["offline.dataset=medium"] if agent == "toy_rwbc" else []
+    tiny = [*TINY, "train.frames=40", "train.eval_episodes=0", "train.save_frames=false"]  # were it to train
+    out = CliRunner().invoke(app, ["train", f"agent={agent}", *dataset, *tiny, override,
+                                   f"runtime.results_root={tmp_path}"])
+    assert out.exit_code == 2 and message in out.output and len(out.output.strip().splitlines()) == 1, out.output
+    assert not list(tmp_path.iterdir())
+    # the bounds themselves are allowed (a range is not off by one), and null is not checked
+    edge = {"toy_rwbc": ["agent.toy_rwbc.temperature=1e-9", "agent.toy_rwbc.max_weight=1"],
+            "toy_inv": ["agent.objective_params.toy_inv.hidden_dim=1"]}[agent]
+    compose([f"agent={agent}", *dataset, *edge])
+    compose(["agent=toy_inv", "agent.objective_params.toy_inv.hidden_dim=null"])
+
+
+@pytest.mark.parametrize("ranges, message", [
+    ({"temperatur": (0.0, False)}, "ranges names 'temperatur', which is not a field of its section."),
+    ({"temperature": 0.0}, "ranges['temperature'] must be (low, inclusive)"),
+    ({"temperature": (0.0, "no")}, "ranges['temperature'] must be (low, inclusive)"),
+])
+def test_unusable_ranges_are_a_one_line_registration_error(ranges, message: str):
+    from taco_repro_toy import RWBCConfig
+
+    spec = LearnerSpec("toy_x", offline=True, label="X", section=RWBCConfig, factory="m:a", ranges=ranges)
+    with pytest.raises(PluginError, match=re.escape(message)):
+        check_spec(spec, "toy_x")
 
 
 def test_a_broken_registration_is_one_line(monkeypatch):

@@ -23,7 +23,10 @@ class RWBCConfig:
     max_weight: float  # cap of a weight after normalising the batch's weights to mean 1
 
 
+# ranges: checked with taco-repro's own (one line, exit 2, before a run writes anything): temperature > 0 (it
+# divides), max_weight >= 1 (the weights' mean is 1); the objective's hidden_dim >= 1 when set (null is not checked)
 LEARNER = LearnerSpec(name="toy_rwbc", offline=True, label="RWBC", section=RWBCConfig,
-                      factory="taco_repro_toy.learner:RWBC", conf=CONF)
+                      factory="taco_repro_toy.learner:RWBC", conf=CONF,
+                      ranges={"temperature": (0.0, False), "max_weight": (1.0, True)})
 OBJECTIVE = ObjectiveSpec(name="toy_inv", label="InvDyn", factory="taco_repro_toy.objective:InverseDynamics",
-                          conf=CONF)
+                          conf=CONF, ranges={"hidden_dim": (1, True)})
