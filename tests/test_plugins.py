@@ -165,9 +165,10 @@ def test_the_toy_learner_weights_bc_by_return_and_returns_detached_scalars():
 
 
 @pytest.mark.slow
-def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_path):
+def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_path, monkeypatch):
     """The offline learner through `repro sweep` and `repro status`, the objective through `repro train`'s API;
-    the analysis table of their run directories shows each one's registered label."""
+    the analysis table of their run directories, `repro report` and `repro plot` show each one's registered
+    label."""
     root = tmp_path / "runs"
     write_dataset(root / "datasets" / "cheetah_run" / "medium", task="cheetah_run", action_dim=6,
                   frame_shape=(3, 32, 32), best_return=200.0)
@@ -192,6 +193,37 @@ def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_pa
         assert len(values) and all(math.isfinite(float(v)) for v in values), (run, column)
     table = to_markdown(final_scores(load_results(root))[["method", "task", "seed", "score"]])
     assert "| RWBC " in table and "| InvDyn " in table, table
+    _report_and_plot_name_the_labels(root, tmp_path, monkeypatch)
+
+
+def _report_and_plot_name_the_labels(root: Path, tmp_path: Path, monkeypatch) -> None:
+    """`repro report` end to end on the plugin runs (read as the paper's online and offline experiments, at their
+    own tiny budget): Table 1 has the objective's row and Table 3 the learner's, by their labels, each from its
+    one run; `repro plot` draws both runs' curves under those labels."""
+    import paper_figures.quick_plot
+    import repro_app.report
+    from repro_app.cli import app
+
+    runner = CliRunner()
+    monkeypatch.setattr(repro_app.report, "REPORT_SIMS", 20)  # the power section's draws: its numbers are not read
+    out = runner.invoke(app, ["report", "-r", str(root), "-o", str(tmp_path / "report"), "--frames", "40",
+                              "-x", "main=toy", "-x", "offline=toy", "--reps", "50", "--tsne-n", "5",
+                              "--no-render-envs", "--no-published"])
+    assert out.exit_code == 0 and "Loaded 2 runs (2 done)" in out.output, out.output
+    t1 = pd.read_csv(tmp_path / "report" / "T1.csv").set_index(["task", "method"])
+    t3 = pd.read_csv(tmp_path / "report" / "T3.csv").set_index(["task", "dataset", "method"])
+    assert t1.loc[("cheetah_run", "InvDyn"), "n"] == 1 and t3.loc[("cheetah_run", "medium", "RWBC"), "n"] == 1
+    report = (tmp_path / "report" / "REPORT.md").read_text()
+    t1_md, t3_md = (report.split(f"## {t}:")[1].split("\n## ")[0] for t in ("T1", "T3"))
+    assert "| InvDyn |" in t1_md and "| RWBC |" in t3_md
+    drawn: list[str] = []
+    real = paper_figures.quick_plot.plot_curves
+    monkeypatch.setattr(paper_figures.quick_plot, "plot_curves",
+                        lambda curves, *a, **kw: drawn.extend(curves["label"]) or real(curves, *a, **kw))
+    out = runner.invoke(app, ["plot", str(root), "--by", "method", "-o", str(tmp_path / "curves.png"), "--reps", "20",
+                              "--no-published"])
+    assert out.exit_code == 0 and "2 run(s), 1 task(s)" in out.output and (tmp_path / "curves.png").stat().st_size
+    assert set(drawn) == {"RWBC", "InvDyn"}
 
 
 def test_the_paper_s_offline_sweeps_list_every_packaged_offline_agent_file_and_no_plugin_s():
