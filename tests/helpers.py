@@ -4,13 +4,14 @@ live beside it in analysis_fixtures.py, offline_fixtures.py and seam_reference.p
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import os
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,9 @@ import pandas as pd
 import torch
 import typer
 import yaml
+from torch.utils._python_dispatch import TorchDispatchMode
 
+import repro
 from repro.data.record import load_snapshot
 from repro.launch.cli import register as register_launch
 from repro.runs.logger import WALLCLOCK_COLUMNS
@@ -206,3 +209,62 @@ def bench_app() -> typer.Typer:
         pass
 
     return app
+
+
+# ------------------------------------------------------------------ host syncs of an update (issue 25)
+REPRO = str(Path(repro.__file__).parent)
+SYNCS = ("item", "tolist", "cpu", "numpy", "__float__", "__int__", "__bool__")  # each waits for the device
+TORCH = Path(torch.__file__).parent
+# torch's dispatch plumbing between a caller and the operator (not a caller itself)
+PLUMBING = tuple(str(TORCH / p) for p in ("_dynamo", "_compile.py", "_ops.py", "_tensor.py", "overrides.py",
+                                         "utils/_python_dispatch.py"))
+# operators that read a value on the host, or size their result by the data (the host waits for the count)
+DATA_SIZED = {"_local_scalar_dense", "nonzero", "masked_select", "unique", "_unique", "_unique2", "unique_dim",
+              "unique_consecutive", "is_nonzero", "equal"}
+
+
+class DataSizedOps(TorchDispatchMode):
+    """Records the host-syncing operators (``DATA_SIZED``, indexing with a boolean mask, ``repeat_interleave``
+    by a tensor of counts) that code under ``roots`` calls: an operator that torch's own code calls (an optimizer's
+    CPU step count, autograd's backward) is torch's."""
+
+    def __init__(self, roots: tuple[str, ...], calls: list[str]) -> None:
+        super().__init__()
+        self.roots, self.calls = roots, calls
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        name = func._schema.name.split("::")[-1]
+        bool_index = (name in ("index", "index_put", "index_put_") and len(args) > 1
+                      and any(isinstance(i, torch.Tensor) and i.dtype == torch.bool for i in args[1]))
+        by_counts = name == "repeat_interleave" and func._overloadname == "Tensor"
+        if name in DATA_SIZED or bool_index or by_counts:
+            frame = sys._getframe(1)
+            while frame is not None and (frame.f_code.co_filename == __file__
+                                         or frame.f_code.co_filename.startswith(PLUMBING)):
+                frame = frame.f_back
+            if frame is not None and frame.f_code.co_filename.startswith(self.roots):
+                self.calls.append(f"{func} at {frame.f_code.co_filename}:{frame.f_lineno}")
+        return func(*args, **(kwargs or {}))
+
+
+@contextlib.contextmanager
+def host_syncs(monkeypatch: Any, roots: tuple[str, ...] = (REPRO,)) -> Iterator[list[str]]:
+    """The host syncs that code under ``roots`` makes inside the block: the Tensor methods of ``SYNCS`` and the
+    operators of :class:`DataSizedOps`, each as 'what at file:line' (tests/test_learner_contract.py, and
+    tests/test_plugins.py for its plugin's code too)."""
+    calls: list[str] = []
+    for name in SYNCS:
+        real = getattr(torch.Tensor, name)
+
+        def watched(self, *args, _real=real, _name=name, **kwargs):
+            caller = sys._getframe(1).f_code.co_filename
+            if caller.startswith(roots):  # torch's own internals (Adam's CPU step count) are not the tree's
+                calls.append(f"{_name} at {caller}:{sys._getframe(1).f_lineno}")
+            return _real(self, *args, **kwargs)
+
+        monkeypatch.setattr(torch.Tensor, name, watched)
+    try:
+        with DataSizedOps(roots, calls):
+            yield calls
+    finally:
+        monkeypatch.undo()

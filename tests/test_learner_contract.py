@@ -7,55 +7,17 @@ from __future__ import annotations
 
 import math
 import struct
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from torch.utils._python_dispatch import TorchDispatchMode
 
-import repro
+from helpers import host_syncs
 from repro.config.compose import compose, typed
 from repro.learners import SequenceLearner, build_learner
 from repro.train.common import MetricMeans
 
 OBS, A = (9, 32, 32), 6
-REPRO = str(Path(repro.__file__).parent)
-SYNCS = ("item", "tolist", "cpu", "numpy", "__float__", "__int__", "__bool__")  # each waits for the device
-TORCH = Path(torch.__file__).parent
-# torch's dispatch plumbing between a caller and the operator (not a caller itself)
-PLUMBING = tuple(str(TORCH / p) for p in ("_dynamo", "_compile.py", "_ops.py", "_tensor.py", "overrides.py",
-                                         "utils/_python_dispatch.py"))
-# operators that read a value on the host, or size their result by the data (the host waits for the count)
-DATA_SIZED = {"_local_scalar_dense", "nonzero", "masked_select", "unique", "_unique", "_unique2", "unique_dim",
-              "unique_consecutive", "is_nonzero", "equal"}
-
-
-class DataSizedOps(TorchDispatchMode):
-    """Records the host-syncing operators (``DATA_SIZED``, indexing with a boolean mask, ``repeat_interleave``
-    by a tensor of counts) that the tree's code calls: an operator that torch's own code calls (an optimizer's
-    CPU step count, autograd's backward) is torch's."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.calls: list[str] = []
-
-    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
-        name = func._schema.name.split("::")[-1]
-        bool_index = (name in ("index", "index_put", "index_put_") and len(args) > 1
-                      and any(isinstance(i, torch.Tensor) and i.dtype == torch.bool for i in args[1]))
-        by_counts = name == "repeat_interleave" and func._overloadname == "Tensor"
-        if name in DATA_SIZED or bool_index or by_counts:
-            frame = sys._getframe(1)
-            while frame is not None and (frame.f_code.co_filename == __file__
-                                         or frame.f_code.co_filename.startswith(PLUMBING)):
-                frame = frame.f_back
-            if frame is not None and frame.f_code.co_filename.startswith(REPRO):
-                self.calls.append(f"{func} at {frame.f_code.co_filename}:{frame.f_lineno}")
-        return func(*args, **(kwargs or {}))
-
-
 def _batch(K: int, B: int = 4) -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(0)
     frames = lambda *lead: torch.randint(0, 256, (*lead, *OBS), generator=g, dtype=torch.uint8)  # noqa: E731
@@ -84,21 +46,9 @@ def test_update_returns_detached_scalars_without_a_host_sync_from_the_tree(overr
     learner = build_learner(rc.agent, OBS, A, "cpu")
     batch = (learner.make_sampler(_episodes(), seed=0).sample(4) if isinstance(learner, SequenceLearner)
              else _batch(rc.agent.K))
-    calls: list[str] = []
-    for name in SYNCS:
-        real = getattr(torch.Tensor, name)
-
-        def watched(self, *args, _real=real, _name=name, **kwargs):
-            caller = sys._getframe(1).f_code.co_filename
-            if caller.startswith(REPRO):  # torch's own internals (Adam's CPU step count) are not the tree's
-                calls.append(f"{_name} at {caller}:{sys._getframe(1).f_lineno}")
-            return _real(self, *args, **kwargs)
-
-        monkeypatch.setattr(torch.Tensor, name, watched)
-    with DataSizedOps() as ops:
+    with host_syncs(monkeypatch) as calls:
         metrics = learner.update(batch, 0)
-    monkeypatch.undo()
-    assert not calls and not ops.calls, calls + ops.calls
+    assert not calls, calls
     assert sorted(metrics) == sorted(learner.metric_names())
     assert all(isinstance(v, torch.Tensor) and v.dim() == 0 and not v.requires_grad for v in metrics.values())
 

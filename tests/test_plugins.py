@@ -20,7 +20,7 @@ from analysis.identity import algo_labels, method_label
 from analysis.load import load_results
 from analysis.scores import final_scores
 from analysis.tables import to_markdown
-from helpers import launch_app
+from helpers import REPRO, host_syncs, launch_app
 from offline_fixtures import write_dataset
 from repro.config.compose import (
     ConfigError,
@@ -167,9 +167,10 @@ def test_the_toy_learner_weights_bc_by_return_and_returns_detached_scalars():
     assert float(metrics["rwbc_max_weight"]) == pytest.approx(float((w / w.mean()).max()))
 
 
-def test_the_toy_online_learner_takes_its_critic_steps_then_one_actor_step():
+def test_the_toy_online_learner_takes_its_critic_steps_then_one_actor_step(monkeypatch):
     """toy_utd's update: critic_steps steps of the critic (and the encoder) for one of the actor, DrQ-v2's metric
-    columns as detached 0-d tensors; with critic_steps 1 it is the built-in DrQ-v2 update, bit for bit."""
+    columns as detached 0-d tensors without a host sync; with critic_steps 1 it is the built-in DrQ-v2 update,
+    bit for bit."""
     batch = _batch()
     learners = {}
     for agent, over in (("toy_utd", ["agent.toy_utd.critic_steps=3"]), ("toy_utd", ["agent.toy_utd.critic_steps=1"]),
@@ -178,8 +179,13 @@ def test_the_toy_online_learner_takes_its_critic_steps_then_one_actor_step():
         learner = build_learner(typed(compose([f"agent={agent}", *TINY, *over])).agent, (9, 32, 32), 6, "cpu")
         learners[agent + "".join(over)[-1:]] = (learner, learner.update(batch, 0))
     utd, metrics = learners["toy_utd3"]
+    import taco_repro_toy
+
+    with host_syncs(monkeypatch, (REPRO, str(Path(taco_repro_toy.__file__).parent))) as syncs:
+        utd.update(batch, 1)  # the tree's backbone and the plugin's own code
+    assert not syncs, syncs
     steps = {k: int(opt.state_dict()["state"][0]["step"]) for k, opt in utd.optimizers().items()}
-    assert steps == {"encoder": 3, "critic": 3, "actor": 1}
+    assert steps == {"encoder": 6, "critic": 6, "actor": 2}  # two updates
     assert sorted(metrics) == sorted(utd.metric_names())
     assert all(isinstance(v, torch.Tensor) and v.dim() == 0 and not v.requires_grad for v in metrics.values())
     (one, m1), (drqv2, m2) = learners["toy_utd1"], learners["drqv2"]
