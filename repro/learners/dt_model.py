@@ -330,6 +330,13 @@ def make_optimizer(model: nn.Module, *, lr: float, weight_decay: float, warmup_s
     return optimizer, torch.optim.lr_scheduler.LambdaLR(optimizer, LinearWarmup(warmup_steps))
 
 
-def batch_to_tensors(batch: Mapping[str, np.ndarray], device: torch.device | None = None) -> dict[str, torch.Tensor]:
-    """A sampler batch as tensors on ``device`` (frames stay uint8 until the model casts them)."""
-    return {key: torch.as_tensor(value, device=device) for key, value in batch.items()}
+def batch_to_tensors(batch: Mapping[str, Any], device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
+    """A sampler batch as tensors on ``device`` (frames stay uint8 until the model casts them). To a CUDA device
+    host arrays go through pinned memory without blocking, as the replay's batches do (a copy from pageable
+    memory would wait for the device's queued work: a host sync in every update)."""
+    tensors = {key: torch.as_tensor(value) for key, value in batch.items()}
+    target = torch.device(device) if device is not None else None
+    if target is None or target.type != "cuda":
+        return {key: t.to(target) if target is not None else t for key, t in tensors.items()}
+    return {key: (t.pin_memory().to(target, non_blocking=True) if t.device.type == "cpu" else t.to(target))
+            for key, t in tensors.items()}
