@@ -22,12 +22,13 @@ UNREGISTERED_LABELS: dict[str, str] = {
 
 @functools.cache
 def algo_labels() -> dict[str, str]:
-    """Normalised ``agent.name`` -> the paper's label: an offline learner's from its registration (its plain agent
-    file is named after it), an objective's (the online agent named after it: ``spr`` -> SPR), and
-    :data:`UNREGISTERED_LABELS`. Plugins' learners and objectives included."""
+    """Normalised ``agent.name`` -> the paper's label: a learner's from its registration (its plain agent file is
+    named after it; the built-in online learner's agent files are named after their objectives instead), an
+    objective's (the online agent named after it: ``spr`` -> SPR), and :data:`UNREGISTERED_LABELS`. Plugins'
+    learners and objectives included."""
     labels = dict(UNREGISTERED_LABELS)
     labels.update({algo_key(s.name): s.label for s in objective_specs().values() if s.label is not None})
-    labels.update({algo_key(s.name): s.label for s in learner_specs().values() if s.offline})
+    labels.update({algo_key(s.name): s.label for s in learner_specs().values()})
     return labels
 
 

@@ -4,13 +4,14 @@ live beside it in analysis_fixtures.py, offline_fixtures.py and seam_reference.p
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import os
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,7 @@ import pytest
 import torch
 import typer
 import yaml
+from torch.utils._python_dispatch import TorchDispatchMode
 
 import repro
 from repro.data.record import load_snapshot
@@ -32,9 +34,6 @@ from repro.runs.wblog import read_offline_run
 # The tiny online run several modules share (conftest's session fixtures train it once).
 TINY = ["profile=tiny", "task=cheetah_run", "seed=3", "runtime.threads=1"]
 REL = Path("default/taco/base/cheetah_run/seed_3")  # its run directory under a results root
-# The tensor methods that wait for a CUDA device's queued work (``torch.cuda.synchronize`` too: watch_syncs)
-SYNCS = ("item", "tolist", "cpu", "numpy", "__float__", "__int__", "__bool__")
-REPRO_DIR = str(Path(repro.__file__).parent)
 # Its recorded, watched twin: recording, TensorBoard, W&B and videos are runtime keys (not identity, not logs).
 WATCH = ["runtime.tensorboard=true", "runtime.wandb=true", "train.save_video=true", "train.video_size=64"]
 RECORD = ["runtime.record=true"]
@@ -47,50 +46,6 @@ def deterministic(csv: Path) -> pd.DataFrame:
     """A run's CSV without its wall-clock columns (the part two runs of one seed must share)."""
     df = pd.read_csv(csv)
     return df.drop(columns=[c for c in WALLCLOCK_COLUMNS if c in df.columns])
-
-
-def watch_syncs(mp: pytest.MonkeyPatch, events: list[str]) -> None:
-    """Through ``mp``: append ``"sync NAME at FILE:LINE"`` to ``events`` at every call from the tree's code (not
-    torch's own internals) of a tensor method that waits for the device (:data:`SYNCS`), and at every
-    ``torch.cuda.synchronize``; the calls still run (the CPU never waits)."""
-    for name in SYNCS:
-        real = getattr(torch.Tensor, name)
-
-        def watched(self: torch.Tensor, *args: Any, _real: Any = real, _name: str = name, **kwargs: Any) -> Any:
-            caller = sys._getframe(1)
-            if caller.f_code.co_filename.startswith(REPRO_DIR):
-                events.append(f"sync {_name} at {caller.f_code.co_filename}:{caller.f_lineno}")
-            return _real(self, *args, **kwargs)
-
-        mp.setattr(torch.Tensor, name, watched)
-    mp.setattr(torch.cuda, "synchronize", lambda *a, **k: events.append("sync torch.cuda.synchronize"))
-
-
-def watch_loop(mp: pytest.MonkeyPatch, events: list[str]) -> None:
-    """Through ``mp``: every online loop appends ``"update returned"`` to ``events`` when its ``agent.update``
-    returns and ``"env.step"`` when it calls ``env.step`` (beside :func:`watch_syncs`' events)."""
-    from repro.train.online_loop import OnlineLoop
-
-    step_once = OnlineLoop._act_update_step
-
-    def instrumented(loop: OnlineLoop, episode: Any) -> None:
-        if not getattr(loop, "_watched", False):  # wrap this loop's agent.update and env.step once
-            update, env_step = loop.agent.update, loop.env.step
-
-            def update_then_mark(*args: Any, **kwargs: Any) -> Any:
-                out = update(*args, **kwargs)
-                events.append("update returned")
-                return out
-
-            def mark_then_step(*args: Any, **kwargs: Any) -> Any:
-                events.append("env.step")
-                return env_step(*args, **kwargs)
-
-            loop.agent.update, loop.env.step = update_then_mark, mark_then_step  # type: ignore[method-assign]
-            loop._watched = True  # type: ignore[attr-defined]
-        step_once(loop, episode)
-
-    mp.setattr(OnlineLoop, "_act_update_step", instrumented)
 
 
 def rows(csv: Path) -> int:
@@ -255,3 +210,97 @@ def bench_app() -> typer.Typer:
         pass
 
     return app
+
+
+# ------------------------------------------------------------------ host syncs of an update (issue 25)
+REPRO = str(Path(repro.__file__).parent)
+SYNCS = ("item", "tolist", "cpu", "numpy", "__float__", "__int__", "__bool__")  # each waits for the device
+TORCH = Path(torch.__file__).parent
+# torch's dispatch plumbing between a caller and the operator (not a caller itself)
+PLUMBING = tuple(str(TORCH / p) for p in ("_dynamo", "_compile.py", "_ops.py", "_tensor.py", "overrides.py",
+                                         "utils/_python_dispatch.py"))
+# operators that read a value on the host, or size their result by the data (the host waits for the count)
+DATA_SIZED = {"_local_scalar_dense", "nonzero", "masked_select", "unique", "_unique", "_unique2", "unique_dim",
+              "unique_consecutive", "is_nonzero", "equal"}
+
+
+class DataSizedOps(TorchDispatchMode):
+    """Records the host-syncing operators (``DATA_SIZED``, indexing with a boolean mask, ``repeat_interleave``
+    by a tensor of counts) that code under ``roots`` calls: an operator that torch's own code calls (an optimizer's
+    CPU step count, autograd's backward) is torch's."""
+
+    def __init__(self, roots: tuple[str, ...], calls: list[str]) -> None:
+        super().__init__()
+        self.roots, self.calls = roots, calls
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        name = func._schema.name.split("::")[-1]
+        bool_index = (name in ("index", "index_put", "index_put_") and len(args) > 1
+                      and any(isinstance(i, torch.Tensor) and i.dtype == torch.bool for i in args[1]))
+        by_counts = name == "repeat_interleave" and func._overloadname == "Tensor"
+        if name in DATA_SIZED or bool_index or by_counts:
+            frame = sys._getframe(1)
+            while frame is not None and (frame.f_code.co_filename == __file__
+                                         or frame.f_code.co_filename.startswith(PLUMBING)):
+                frame = frame.f_back
+            if frame is not None and frame.f_code.co_filename.startswith(self.roots):
+                self.calls.append(f"{func} at {frame.f_code.co_filename}:{frame.f_lineno}")
+        return func(*args, **(kwargs or {}))
+
+
+def watch_syncs(mp: pytest.MonkeyPatch, events: list[str], roots: tuple[str, ...] = (REPRO,)) -> None:
+    """Through ``mp``: append ``"sync NAME at FILE:LINE"`` to ``events`` at every call from code under ``roots``
+    (not torch's own internals: an optimizer's CPU step count) of a Tensor method of ``SYNCS``, and at every
+    ``torch.cuda.synchronize``; the calls still run (the CPU never waits)."""
+    for name in SYNCS:
+        real = getattr(torch.Tensor, name)
+
+        def watched(self: torch.Tensor, *args: Any, _real: Any = real, _name: str = name, **kwargs: Any) -> Any:
+            caller = sys._getframe(1)
+            if caller.f_code.co_filename.startswith(roots):
+                events.append(f"sync {_name} at {caller.f_code.co_filename}:{caller.f_lineno}")
+            return _real(self, *args, **kwargs)
+
+        mp.setattr(torch.Tensor, name, watched)
+    mp.setattr(torch.cuda, "synchronize", lambda *a, **k: events.append("sync torch.cuda.synchronize"))
+
+
+@contextlib.contextmanager
+def host_syncs(monkeypatch: Any, roots: tuple[str, ...] = (REPRO,)) -> Iterator[list[str]]:
+    """The host syncs that code under ``roots`` makes inside the block: the Tensor methods of ``SYNCS``
+    (:func:`watch_syncs`) and the operators of :class:`DataSizedOps`, each as 'what at file:line'
+    (tests/test_learner_contract.py, and tests/test_plugins.py for its plugin's code too)."""
+    calls: list[str] = []
+    watch_syncs(monkeypatch, calls, roots)
+    try:
+        with DataSizedOps(roots, calls):
+            yield calls
+    finally:
+        monkeypatch.undo()
+
+
+def watch_loop(mp: pytest.MonkeyPatch, events: list[str]) -> None:
+    """Through ``mp``: every online loop appends ``"update returned"`` to ``events`` when its ``agent.update``
+    returns and ``"env.step"`` when it calls ``env.step`` (beside :func:`watch_syncs`' events)."""
+    from repro.train.online_loop import OnlineLoop
+
+    step_once = OnlineLoop._act_update_step
+
+    def instrumented(loop: OnlineLoop, episode: Any) -> None:
+        if not getattr(loop, "_watched", False):  # wrap this loop's agent.update and env.step once
+            update, env_step = loop.agent.update, loop.env.step
+
+            def update_then_mark(*args: Any, **kwargs: Any) -> Any:
+                out = update(*args, **kwargs)
+                events.append("update returned")
+                return out
+
+            def mark_then_step(*args: Any, **kwargs: Any) -> Any:
+                events.append("env.step")
+                return env_step(*args, **kwargs)
+
+            loop.agent.update, loop.env.step = update_then_mark, mark_then_step  # type: ignore[method-assign]
+            loop._watched = True  # type: ignore[attr-defined]
+        step_once(loop, episode)
+
+    mp.setattr(OnlineLoop, "_act_update_step", instrumented)

@@ -100,7 +100,7 @@ def test_warmup_and_gradient_clip():
     batch = sampler.sample(6)
     learner.optimizer.zero_grad(set_to_none=True)
     pred = learner.model(*(torch.as_tensor(batch[k]) for k in ("frames", "actions", "rtg", "timesteps", "mask")))
-    action_loss(pred, torch.as_tensor(batch["actions"]), torch.as_tensor(batch["mask"])).backward()
+    action_loss(pred, torch.as_tensor(batch["actions"]), torch.as_tensor(batch["keep"])).backward()
     raw = torch.norm(torch.stack([p.grad.norm() for p in params if p.grad is not None]))
     learner.optimizer.zero_grad(set_to_none=True)
     metrics = learner.update(batch, 6)
@@ -365,3 +365,25 @@ def test_dt_end_to_end_run_logs_both_targets(tmp_path: Path):
     ckpt = torch.load(run / "checkpoint.pt", weights_only=True)
     assert ckpt["offline"]["update"] == 4 and set(ckpt["agent"]) == {"model"}
     assert ckpt["learner"]["sampler"]["rng"] == ckpt["replay_rng"]
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_the_update_on_cuda_makes_no_host_sync_and_matches_the_cpu_update():
+    """The whole DT update on a GPU under torch's sync debug mode: neither the loss (gathered by the sampler's
+    ``keep``, not indexed by the boolean mask) nor the batch's copies (pinned, non-blocking) wait for the device."""
+    sampler_batch = _dt().make_sampler(_episodes(), seed=0).sample(6)
+    assert SMALL["agent.dt.dropout"] == 0.0  # the same function on both devices (their RNGs differ)
+    rc = typed(compose(["agent=dt", "profile=tiny", "task=hopper_hop"] + [f"{k}={v}" for k, v in SMALL.items()]))
+    results = {}
+    for device in ("cpu", "cuda"):
+        torch.manual_seed(0)
+        learner = build_learner(rc.agent, OBS, A_DIM, device)
+        learner.update(sampler_batch, 0)  # the first update: lazy CUDA initialisation may synchronize
+        torch.cuda.synchronize()
+        torch.cuda.set_sync_debug_mode("error" if device == "cuda" else "default")
+        try:
+            metrics = learner.update(sampler_batch, 1)
+        finally:
+            torch.cuda.set_sync_debug_mode("default")
+        results[device] = {k: float(v) for k, v in metrics.items()}
+    assert results["cuda"] == pytest.approx(results["cpu"], rel=1e-2, abs=1e-4)  # cuDNN may use TF32

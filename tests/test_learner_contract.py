@@ -1,6 +1,7 @@
 """The learner contract's metrics (issue 25): every learner's ``update`` returns its train.csv columns as detached 0-d
-tensors without a host sync from the tree's code, and the loops' mean of them (``MetricMeans``) is the same bits as
-the former Python-float arithmetic, through a checkpoint too."""
+tensors without a host sync from the tree's code (neither a Tensor method that reads a value on the host nor an
+operator whose result's size depends on the data, such as indexing with a boolean mask), and the loops' mean of
+them (``MetricMeans``) is the same bits as the former Python-float arithmetic, through a checkpoint too."""
 
 from __future__ import annotations
 
@@ -11,14 +12,12 @@ import numpy as np
 import pytest
 import torch
 
-from helpers import watch_syncs
+from helpers import host_syncs
 from repro.config.compose import compose, typed
 from repro.learners import SequenceLearner, build_learner
 from repro.train.common import MetricMeans
 
 OBS, A = (9, 32, 32), 6
-
-
 def _batch(K: int, B: int = 4) -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(0)
     frames = lambda *lead: torch.randint(0, 256, (*lead, *OBS), generator=g, dtype=torch.uint8)  # noqa: E731
@@ -47,11 +46,9 @@ def test_update_returns_detached_scalars_without_a_host_sync_from_the_tree(overr
     learner = build_learner(rc.agent, OBS, A, "cpu")
     batch = (learner.make_sampler(_episodes(), seed=0).sample(4) if isinstance(learner, SequenceLearner)
              else _batch(rc.agent.K))
-    calls: list[str] = []
-    watch_syncs(monkeypatch, calls)  # torch's own internals (Adam's CPU step count) are not the tree's
-    metrics = learner.update(batch, 0)
-    monkeypatch.undo()
-    assert not calls
+    with host_syncs(monkeypatch) as calls:
+        metrics = learner.update(batch, 0)
+    assert not calls, calls
     assert sorted(metrics) == sorted(learner.metric_names())
     assert all(isinstance(v, torch.Tensor) and v.dim() == 0 and not v.requires_grad for v in metrics.values())
 

@@ -362,7 +362,7 @@ def test_dt_training_mode_has_no_nan_with_padding():
     model.train()
     x["mask"][:, :4] = False
     pred = model(x["frames"], x["actions"], x["rtg"], x["timesteps"], x["mask"])
-    loss = dt.action_loss(pred, x["actions"], x["mask"])
+    loss = dt.action_loss(pred, x["actions"], torch.as_tensor(dt_model.kept_steps(x["mask"].numpy())))
     loss.backward()
     assert torch.isfinite(pred).all() and all(torch.isfinite(p.grad).all() for p in model.parameters()
                                               if p.grad is not None)
@@ -371,12 +371,31 @@ def test_dt_training_mode_has_no_nan_with_padding():
 def test_dt_action_loss_known_answer_and_mask():
     pred = leaf([[[0.1, 0.2], [0.5, -0.5], [1.0, 0.0]]])
     target = leaf([[[9.0, 9.0], [0.0, 0.0], [0.5, 0.5]]])
-    mask = torch.tensor([[False, True, True]])
-    loss = dt.action_loss(pred, target, mask)
+    keep = torch.as_tensor(dt_model.kept_steps(np.array([[False, True, True]])))
+    assert keep.tolist() == [1, 2] and keep.dtype == torch.int64
+    loss = dt.action_loss(pred, target, keep)
     ref = ((0.5 ** 2 + 0.5 ** 2) + (0.5 ** 2 + 0.5 ** 2)) / 4
     assert loss.item() == pytest.approx(ref, rel=1e-12)
     loss.backward()
     assert pred.grad[0, 0].tolist() == [0.0, 0.0] and target.grad is None
+    with pytest.raises(ValueError, match="int64 step indices"):
+        dt.action_loss(pred, target, torch.tensor([[False, True, True]]))  # the boolean mask is not the index
+
+
+def test_dt_action_loss_by_index_is_the_boolean_mask_loss_bit_for_bit():
+    """Gathering the kept steps by their flat indices picks what indexing with the mask picks, in its order:
+    the loss and every gradient are the same bits (float32, as the learner trains)."""
+    rng = np.random.default_rng(4)
+    mask = rng.random((6, 5)) < 0.6
+    mask[:, -1] = True  # a window always ends on a real step
+    pred = torch.tensor(rng.normal(size=(6, 5, 3)), dtype=torch.float32, requires_grad=True)
+    target = torch.tensor(rng.normal(size=(6, 5, 3)), dtype=torch.float32)
+    by_mask = (pred[torch.as_tensor(mask)] - target[torch.as_tensor(mask)]).pow(2).mean()
+    (grad_mask,) = torch.autograd.grad(by_mask, pred)
+    by_index = dt.action_loss(pred, target, torch.as_tensor(dt_model.kept_steps(mask)))
+    (grad_index,) = torch.autograd.grad(by_index, pred)
+    assert by_index.view(torch.int32).item() == by_mask.view(torch.int32).item()
+    assert torch.equal(grad_index.view(torch.int32), grad_mask.view(torch.int32))
 
 
 def test_returns_to_go():
@@ -422,6 +441,9 @@ def test_sequence_sampler_windows_never_cross_and_pad_left():
                 assert batch["frames"][i, k, 3 * f, 0, 1] == max(t - (fs - 1 - f), 0)
             rtg = sum(10.0 * e + u for u in range(t, lengths[e])) / 1000
             assert batch["rtg"][i, k, 0] == pytest.approx(rtg, rel=1e-6)
+    # the loss's step indices: the real steps of the flattened (B*K) windows, ascending
+    steps = [(i, k) for i in range(400) for k in range(K) if batch["mask"][i, k]]
+    assert batch["keep"].dtype == np.int64 and batch["keep"].tolist() == [i * K + k for i, k in steps]
     assert starts_seen == {(e, s) for e, n in enumerate(lengths) for s in range(n)}  # every start reachable
 
 

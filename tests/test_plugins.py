@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import math
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -19,7 +20,7 @@ from analysis.identity import algo_labels, method_label
 from analysis.load import load_results
 from analysis.scores import final_scores
 from analysis.tables import to_markdown
-from helpers import launch_app
+from helpers import REPRO, host_syncs, launch_app
 from offline_fixtures import write_dataset
 from repro.config.compose import (
     ConfigError,
@@ -30,7 +31,7 @@ from repro.config.compose import (
     run_keys,
     typed,
 )
-from repro.config.plugins import LearnerSpec, PluginError, discover, load_factory
+from repro.config.plugins import LearnerSpec, PluginError, check_spec, discover, load_factory
 from repro.config.schema import is_offline, learner_names, objective_names, unread_keys
 from repro.learners import build_learner
 from repro.runs import rundir
@@ -49,24 +50,27 @@ OFFLINE = ["offline.dataset=medium", "offline.updates=4", "offline.eval_every_up
 
 
 def test_the_example_registers_through_its_entry_points_only():
-    groups = {ep.group: ep.name for ep in TOY.entry_points}
-    assert groups == {"taco_repro.learners": "toy_rwbc", "taco_repro.objectives": "toy_inv"}
+    groups = {(ep.group, ep.name) for ep in TOY.entry_points}
+    assert groups == {("taco_repro.learners", "toy_rwbc"), ("taco_repro.learners", "toy_utd"),
+                      ("taco_repro.objectives", "toy_inv")}
     assert "toy_rwbc" in learner_names() and is_offline("toy_rwbc") and "toy_inv" in objective_names()
-    assert {"toy_rwbc", "toy_inv"} <= set(config_groups()["agent"])  # its conf folder is on the search path
+    assert "toy_utd" in learner_names() and not is_offline("toy_utd")
+    assert {"toy_rwbc", "toy_utd", "toy_inv"} <= set(config_groups()["agent"])  # its conf folder is on the search path
     # the bench list: the built-in offline agent files in the paper's order, then the plugin's
     assert offline_agents() == ("bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "dt", "toy_rwbc")
     labels = algo_labels()
-    assert (labels["toyrwbc"], labels["toyinv"]) == ("RWBC", "InvDyn")
+    assert (labels["toyrwbc"], labels["toyutd"], labels["toyinv"]) == ("RWBC", "DrQ-v2-UTD", "InvDyn")
     assert method_label("toy_rwbc", ("taco",)) == "RWBC+TACO"  # an offline learner with TACO, as CQL+TACO
     root = Path(__file__).resolve().parent
-    assert not [p for p in (root.parent / "repro").rglob("*.py") if "toy_rwbc" in p.read_text()]
+    assert not [p for p in (root.parent / "repro").rglob("*.py") if "toy_rwbc" in p.read_text() or "toy_utd" in
+                p.read_text()]
 
 
 def test_the_light_agent_file_reading_agrees_with_hydra():
     """offline_agents reads each agent file's learner from YAML (inherited files followed); Hydra composes it."""
     for agent in config_groups()["agent"]:
         learner = agent_learner(agent)
-        if agent in ("taco", "drqv2", "spr", "td3bc_taco", "cql_taco", "toy_inv", "toy_rwbc"):  # each path once
+        if agent in ("taco", "drqv2", "spr", "td3bc_taco", "cql_taco", "toy_inv", "toy_rwbc", "toy_utd"):  # each once
             over = ["offline.dataset=medium"] if is_offline(learner) else []
             assert str(compose([f"agent={agent}", *over]).agent.learner) == learner, agent
 
@@ -85,7 +89,7 @@ def test_a_plugin_learner_s_section_is_typed_and_held_by_its_runs_only():
 
 @pytest.mark.parametrize("override, message", [
     ("agent.learner=toy_rwbcc",
-     "agent.learner=toy_rwbcc is not one of actor_critic, bc, td3bc, cql, iql, dt, toy_rwbc."),
+     "agent.learner=toy_rwbcc is not one of actor_critic, bc, td3bc, cql, iql, dt, toy_rwbc, toy_utd."),
     ("+agent.objectives.toy_invv=1", "unknown objective 'toy_invv'. Did you mean: toy_inv?"),
 ])
 def test_a_misspelled_registered_name_is_one_line_and_exit_2(tmp_path, override: str, message: str):
@@ -94,6 +98,42 @@ def test_a_misspelled_registered_name_is_one_line_and_exit_2(tmp_path, override:
     out = CliRunner().invoke(app, ["train", "agent=toy_inv", override, f"runtime.results_root={tmp_path}"])
     assert out.exit_code == 2 and message in out.output and len(out.output.strip().splitlines()) == 1, out.output
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("agent, override, message", [
+    ("toy_rwbc", "agent.toy_rwbc.temperature=0", "agent.toy_rwbc.temperature must be > 0.0 (got 0.0)."),
+    ("toy_rwbc", "agent.toy_rwbc.max_weight=0.5", "agent.toy_rwbc.max_weight must be >= 1.0 (got 0.5)."),
+    ("toy_inv", "agent.objective_params.toy_inv.hidden_dim=0",
+     "agent.objective_params.toy_inv.hidden_dim must be >= 1 (got 0)."),
+])
+def test_a_plugin_setting_out_of_its_registered_range_is_one_line_and_exit_2(tmp_path, agent: str, override: str,
+                                                                             message: str):
+    from repro_app.cli import app
+
+    dataset = ["offline.dataset=medium"] if agent == "toy_rwbc" else []
+    tiny = [*TINY, "train.frames=40", "train.eval_episodes=0", "train.save_frames=false"]  # were it to train
+    out = CliRunner().invoke(app, ["train", f"agent={agent}", *dataset, *tiny, override,
+                                   f"runtime.results_root={tmp_path}"])
+    assert out.exit_code == 2 and message in out.output and len(out.output.strip().splitlines()) == 1, out.output
+    assert not list(tmp_path.iterdir())
+    # the bounds themselves are allowed (a range is not off by one), and null is not checked
+    edge = {"toy_rwbc": ["agent.toy_rwbc.temperature=1e-9", "agent.toy_rwbc.max_weight=1"],
+            "toy_inv": ["agent.objective_params.toy_inv.hidden_dim=1"]}[agent]
+    compose([f"agent={agent}", *dataset, *edge])
+    compose(["agent=toy_inv", "agent.objective_params.toy_inv.hidden_dim=null"])
+
+
+@pytest.mark.parametrize("ranges, message", [
+    ({"temperatur": (0.0, False)}, "ranges names 'temperatur', which is not a field of its section."),
+    ({"temperature": 0.0}, "ranges['temperature'] must be (low, inclusive)"),
+    ({"temperature": (0.0, "no")}, "ranges['temperature'] must be (low, inclusive)"),
+])
+def test_unusable_ranges_are_a_one_line_registration_error(ranges, message: str):
+    from taco_repro_toy import RWBCConfig
+
+    spec = LearnerSpec("toy_x", offline=True, label="X", section=RWBCConfig, factory="m:a", ranges=ranges)
+    with pytest.raises(PluginError, match=re.escape(message)):
+        check_spec(spec, "toy_x")
 
 
 def test_a_broken_registration_is_one_line(monkeypatch):
@@ -127,10 +167,47 @@ def test_the_toy_learner_weights_bc_by_return_and_returns_detached_scalars():
     assert float(metrics["rwbc_max_weight"]) == pytest.approx(float((w / w.mean()).max()))
 
 
+def test_the_toy_online_learner_takes_its_critic_steps_then_one_actor_step(monkeypatch):
+    """toy_utd's update: critic_steps steps of the critic (and the encoder) for one of the actor, DrQ-v2's metric
+    columns as detached 0-d tensors without a host sync; with critic_steps 1 it is the built-in DrQ-v2 update,
+    bit for bit."""
+    batch = _batch()
+    learners = {}
+    for agent, over in (("toy_utd", ["agent.toy_utd.critic_steps=3"]), ("toy_utd", ["agent.toy_utd.critic_steps=1"]),
+                        ("drqv2", [])):
+        torch.manual_seed(0)
+        learner = build_learner(typed(compose([f"agent={agent}", *TINY, *over])).agent, (9, 32, 32), 6, "cpu")
+        learners[agent + "".join(over)[-1:]] = (learner, learner.update(batch, 0))
+    utd, metrics = learners["toy_utd3"]
+    import taco_repro_toy
+
+    with host_syncs(monkeypatch, (REPRO, str(Path(taco_repro_toy.__file__).parent))) as syncs:
+        utd.update(batch, 1)  # the tree's backbone and the plugin's own code
+    assert not syncs, syncs
+    steps = {k: int(opt.state_dict()["state"][0]["step"]) for k, opt in utd.optimizers().items()}
+    assert steps == {"encoder": 6, "critic": 6, "actor": 2}  # two updates
+    assert sorted(metrics) == sorted(utd.metric_names())
+    assert all(isinstance(v, torch.Tensor) and v.dim() == 0 and not v.requires_grad for v in metrics.values())
+    (one, m1), (drqv2, m2) = learners["toy_utd1"], learners["drqv2"]
+    assert {k: v.item() for k, v in m1.items()} == {k: v.item() for k, v in m2.items()}
+    assert all(torch.equal(a, b) for a, b in zip(one.backbone.critic.state_dict().values(),
+                                                 drqv2.backbone.critic.state_dict().values()))
+
+
+def _batch(B: int = 4, K: int = 3) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(0)
+    frames = lambda *lead: torch.randint(0, 256, (*lead, 9, 32, 32), generator=g, dtype=torch.uint8)  # noqa: E731
+    return {"obs": frames(B), "next_obs": frames(B), "future_obs": frames(B), "future_obs_seq": frames(B, K),
+            "action": torch.rand(B, 6, generator=g) * 2 - 1, "action_seq": torch.rand(B, K, 6, generator=g) * 2 - 1,
+            "reward": torch.rand(B, 1, generator=g), "discount": torch.full((B, 1), 0.97)}
+
+
 @pytest.mark.slow
-def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_path):
-    """The offline learner through `repro sweep` and `repro status`, the objective through `repro train`'s API;
-    the analysis table of their run directories shows each one's registered label."""
+def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_path, monkeypatch):
+    """The offline learner through `repro sweep` and `repro status`, the objective through `repro train`'s API,
+    the online learner through `repro train`;
+    the analysis table of their run directories, `repro report` and `repro plot` show each one's registered
+    label."""
     root = tmp_path / "runs"
     write_dataset(root / "datasets" / "cheetah_run" / "medium", task="cheetah_run", action_dim=6,
                   frame_shape=(3, 32, 32), best_return=200.0)
@@ -145,16 +222,57 @@ def test_each_toy_method_trains_tiny_is_a_sweep_s_run_and_shows_its_label(tmp_pa
     assert out.exit_code == 0, out.output
     status = runner.invoke(app, ["status", "toy", "--results-root", str(root)])
     assert status.exit_code == 0 and "1 done" in status.output, status.output
-    online = api.train([*TINY, "agent=toy_inv", f"runtime.results_root={root}", "experiment=toy", "train.frames=40",
-                        "train.seed_frames=20", "train.explore_steps=10", "train.eval_every_frames=40",
-                        "train.eval_episodes=1", "train.save_frames=false"], echo=lambda s: None)
+    online = [*TINY, f"runtime.results_root={root}", "experiment=toy", "train.frames=40", "train.seed_frames=20",
+              "train.explore_steps=10", "train.eval_every_frames=40", "train.eval_episodes=1",
+              "train.save_frames=false"]
+    objective = api.train([*online, "agent=toy_inv"], echo=lambda s: None)
+    from repro_app.cli import app as cli  # the online learner through `repro train`
+
+    out = runner.invoke(cli, ["train", "agent=toy_utd", *online, "--no-progress"])
+    assert out.exit_code == 0, out.output
     runs = {yaml.safe_load(p.read_text())["agent"]["name"]: p.parent for p in root.rglob(rundir.CONFIG)}
-    assert set(runs) == {"toy_rwbc", "toy_inv"} and runs["toy_inv"] == online
-    for run, column in ((runs["toy_rwbc"], "rwbc_loss"), (runs["toy_inv"], "toy_inv_loss")):
-        values = pd.read_csv(run / "train.csv")[column].dropna()  # online: no update before train.seed_frames
-        assert len(values) and all(math.isfinite(float(v)) for v in values), (run, column)
+    assert set(runs) == {"toy_rwbc", "toy_inv", "toy_utd"} and runs["toy_inv"] == objective
+    for run, columns in ((runs["toy_rwbc"], ["rwbc_loss"]), (runs["toy_inv"], ["toy_inv_loss"]),
+                         (runs["toy_utd"], ["critic_loss", "critic_target_q", "actor_loss", "actor_ent"])):
+        train = pd.read_csv(run / "train.csv")
+        for column in columns:
+            values = train[column].dropna()  # online: no update before train.seed_frames
+            assert len(values) and all(math.isfinite(float(v)) for v in values), (run, column)
+    assert yaml.safe_load((runs["toy_utd"] / rundir.CONFIG).read_text())["agent"]["toy_utd"] == {"critic_steps": 2}
     table = to_markdown(final_scores(load_results(root))[["method", "task", "seed", "score"]])
-    assert "| RWBC " in table and "| InvDyn " in table, table
+    assert "| RWBC " in table and "| InvDyn " in table and "| DrQ-v2-UTD " in table, table
+    _report_and_plot_name_the_labels(root, tmp_path, monkeypatch)
+
+
+def _report_and_plot_name_the_labels(root: Path, tmp_path: Path, monkeypatch) -> None:
+    """`repro report` end to end on the plugin runs (read as the paper's online and offline experiments, at their
+    own tiny budget): Table 1 has the objective's and the online learner's rows and Table 3 the offline learner's,
+    by their labels, each from its one run; `repro plot` draws the three runs' curves under those labels."""
+    import paper_figures.quick_plot
+    import repro_app.report
+    from repro_app.cli import app
+
+    runner = CliRunner()
+    monkeypatch.setattr(repro_app.report, "REPORT_SIMS", 20)  # the power section's draws: its numbers are not read
+    out = runner.invoke(app, ["report", "-r", str(root), "-o", str(tmp_path / "report"), "--frames", "40",
+                              "-x", "main=toy", "-x", "offline=toy", "--reps", "50", "--tsne-n", "5",
+                              "--no-render-envs", "--no-published"])
+    assert out.exit_code == 0 and "Loaded 3 runs (3 done)" in out.output, out.output
+    t1 = pd.read_csv(tmp_path / "report" / "T1.csv").set_index(["task", "method"])
+    t3 = pd.read_csv(tmp_path / "report" / "T3.csv").set_index(["task", "dataset", "method"])
+    assert t1.loc[("cheetah_run", "InvDyn"), "n"] == t1.loc[("cheetah_run", "DrQ-v2-UTD"), "n"] == 1
+    assert t3.loc[("cheetah_run", "medium", "RWBC"), "n"] == 1
+    report = (tmp_path / "report" / "REPORT.md").read_text()
+    t1_md, t3_md = (report.split(f"## {t}:")[1].split("\n## ")[0] for t in ("T1", "T3"))
+    assert "| InvDyn |" in t1_md and "| DrQ-v2-UTD |" in t1_md and "| RWBC |" in t3_md
+    drawn: list[str] = []
+    real = paper_figures.quick_plot.plot_curves
+    monkeypatch.setattr(paper_figures.quick_plot, "plot_curves",
+                        lambda curves, *a, **kw: drawn.extend(curves["label"]) or real(curves, *a, **kw))
+    out = runner.invoke(app, ["plot", str(root), "--by", "method", "-o", str(tmp_path / "curves.png"), "--reps", "20",
+                              "--no-published"])
+    assert out.exit_code == 0 and "3 run(s), 1 task(s)" in out.output and (tmp_path / "curves.png").stat().st_size
+    assert set(drawn) == {"RWBC", "InvDyn", "DrQ-v2-UTD"}
 
 
 def test_the_paper_s_offline_sweeps_list_every_packaged_offline_agent_file_and_no_plugin_s():

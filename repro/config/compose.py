@@ -24,6 +24,7 @@ from repro.config.schema import (
     learner_names,
     objective_names,
     plugin_conf_dirs,
+    plugin_ranges,
     plugin_section,
     unread_keys,
 )
@@ -262,8 +263,10 @@ RANGES: dict[str, tuple[float, bool]] = {
 
 
 def _check_ranges(cfg: DictConfig) -> None:
-    """One line for a value out of its range (:data:`RANGES`), before anything is built or written."""
-    for key, (low, inclusive) in RANGES.items():
+    """One line for a value out of its range (:data:`RANGES`, and the ranges registered with the run's plugin learner
+    and objectives), before anything is built or written."""
+    ranges = {**RANGES, **plugin_ranges(str(cfg.agent.learner), [str(k) for k in cfg.agent.objectives])}
+    for key, (low, inclusive) in ranges.items():
         value = OmegaConf.select(cfg, key)
         if value is None:
             continue

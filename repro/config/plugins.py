@@ -12,7 +12,8 @@ docs/extending.md walks through one of each.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, is_dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, is_dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import TypeVar
@@ -20,6 +21,7 @@ from typing import TypeVar
 LEARNER_GROUP = "taco_repro.learners"
 OBJECTIVE_GROUP = "taco_repro.objectives"
 NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
+Ranges = Mapping[str, tuple[float, bool]]  # setting -> (lowest allowed, whether the lowest itself is allowed)
 
 
 class PluginError(ValueError):
@@ -37,6 +39,9 @@ class LearnerSpec:
     class (or a callable with its signature, ``repro.learners.registry.LearnerFactory``) as ``"module:attribute"``;
     None only for the built-in learners, whose classes ``repro/learners/registry.py`` imports. ``conf``: a folder
     holding ``agent/<agent>.yaml`` files that use it (added to Hydra's search path, so ``agent=<agent>`` composes).
+    ``ranges``: the lowest value of numeric fields of ``section``, ``{field: (low, inclusive)}``, in the form of
+    ``repro.config.compose.RANGES`` and checked with it (one line, exit 2, before a run writes anything); a null
+    value is not checked.
     """
 
     name: str
@@ -45,18 +50,22 @@ class LearnerSpec:
     section: type | None = None
     factory: str | None = None
     conf: str | Path | None = None
+    ranges: Ranges = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class ObjectiveSpec:
     """An auxiliary objective: ``name`` is its key in ``agent.objectives``; ``label`` the method label of an online
     agent named after it (``taco`` -> ``TACO``; None: no agent of its own); ``factory``, ``conf``: as
-    :class:`LearnerSpec` (the class is an ``repro.agent.objectives.base.Objective``)."""
+    :class:`LearnerSpec` (the class is an ``repro.agent.objectives.base.Objective``); ``ranges``: as
+    :class:`LearnerSpec`'s, of its settings ``agent.objective_params.<name>.<setting>``, checked in the runs
+    whose ``agent.objectives`` names it."""
 
     name: str
     label: str | None = None
     factory: str | None = None
     conf: str | Path | None = None
+    ranges: Ranges = field(default_factory=dict)
 
 
 Spec = TypeVar("Spec", LearnerSpec, ObjectiveSpec)
@@ -73,6 +82,24 @@ def check_spec(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
     if isinstance(spec, LearnerSpec) and spec.section is not None and not (
             isinstance(spec.section, type) and is_dataclass(spec.section)):
         raise PluginError(f"{where}: section must be a dataclass (got {spec.section!r}).")
+    check_ranges(spec, where)
+
+
+def check_ranges(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
+    """PluginError (one line) for ``ranges`` that cannot be checked: not ``{name: (number, bool)}``, or (a
+    learner's) naming no field of its section."""
+    if not isinstance(spec.ranges, Mapping):
+        raise PluginError(f"{where}: ranges must be a mapping setting -> (low, inclusive) (got {spec.ranges!r}).")
+    known = None
+    if isinstance(spec, LearnerSpec):
+        known = {f.name for f in fields(spec.section)} if spec.section is not None else set()
+    for key, bound in spec.ranges.items():
+        if known is not None and key not in known:
+            raise PluginError(f"{where}: ranges names '{key}', which is not a field of its section.")
+        if not (isinstance(bound, tuple) and len(bound) == 2 and isinstance(bound[0], (int, float))
+                and not isinstance(bound[0], bool) and isinstance(bound[1], bool)):
+            raise PluginError(f"{where}: ranges['{key}'] must be (low, inclusive), e.g. (0.0, False) for > 0 "
+                              f"(got {bound!r}).")
 
 
 def discover(group: str, kind: type[Spec]) -> tuple[Spec, ...]:

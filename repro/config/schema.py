@@ -502,6 +502,22 @@ def plugin_section(learner: str) -> type | None:
     return spec.section
 
 
+def plugin_ranges(learner: str, objectives: Iterable[str]) -> dict[str, tuple[float, bool]]:
+    """The registered ranges of a run's plugin settings (``LearnerSpec.ranges``, ``ObjectiveSpec.ranges``) by their
+    dotted keys, in the form of ``repro.config.compose.RANGES``: ``agent.<learner>.<field>`` and
+    ``agent.objective_params.<objective>.<setting>``. Unregistered names give none (their own check names them)."""
+    out: dict[str, tuple[float, bool]] = {}
+    spec = learner_specs().get(str(learner))
+    if spec is not None:
+        out.update({f"agent.{spec.name}.{key}": bound for key, bound in spec.ranges.items()})
+    for name in objectives:
+        objective = objective_specs().get(str(name))
+        if objective is not None:
+            out.update({f"agent.objective_params.{objective.name}.{key}": bound
+                        for key, bound in objective.ranges.items()})
+    return out
+
+
 S = TypeVar("S")
 
 

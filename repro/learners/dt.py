@@ -103,11 +103,11 @@ class DT(LearnerBase):
         return self.sampler
 
     def update(self, batch: Mapping[str, Any], step: int) -> Metrics:
-        """One AdamW step on a sampler batch (numpy arrays or tensors); ``step`` is unused (the warm-up
-        schedule counts its own steps and is checkpointed)."""
+        """One AdamW step on a sampler batch (numpy arrays or tensors, with the sampler's ``keep``); ``step`` is
+        unused (the warm-up schedule counts its own steps and is checkpointed)."""
         b = batch_to_tensors(batch, self.device)
         pred = self.model(b["frames"], b["actions"], b["rtg"], b["timesteps"], b["mask"])
-        loss = action_loss(pred, b["actions"], b["mask"])
+        loss = action_loss(pred, b["actions"], b["keep"])
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.dt.grad_clip)

@@ -205,6 +205,12 @@ def left_pad(arrays: Mapping[str, np.ndarray], context: int,
     return out
 
 
+def kept_steps(mask: np.ndarray) -> np.ndarray:
+    """The flat indices (into the B*K steps, ascending, int64) of the True entries of a (B, K) ``mask``: the
+    steps ``losses.dt.action_loss`` averages over (known on the host when the batch is built)."""
+    return np.flatnonzero(mask).astype(np.int64)
+
+
 class SequenceSampler:
     """Random windows of ``context`` steps from episodes, never crossing an episode boundary.
 
@@ -214,7 +220,8 @@ class SequenceSampler:
     the episode's end; shorter windows are left-padded (as kzl/decision-transformer's get_batch: frames, returns
     and timesteps with 0, actions with ``action_pad``, -10 there; the padded steps are masked out).
     ``sample`` returns numpy arrays: ``frames`` (B, K, 3*frame_stack, H, W) uint8, ``actions`` (B, K, A)
-    float32, ``rtg`` (B, K, 1) float32 (scaled), ``timesteps`` (B, K) int64, ``mask`` (B, K) bool, plus
+    float32, ``rtg`` (B, K, 1) float32 (scaled), ``timesteps`` (B, K) int64, ``mask`` (B, K) bool, ``keep``
+    the mask's flat indices (``kept_steps``: the loss gathers with them, without a host sync), plus
     ``episode`` and ``start`` (B,) int64 naming where each window came from. With ``max_timestep`` (the
     model's), an episode too long for the timestep embedding is a one-line ValueError here.
     """
@@ -264,6 +271,7 @@ class SequenceSampler:
         starts = flat - self.offsets[episodes]
         windows = [self.window(int(e), int(s)) for e, s in zip(episodes, starts)]
         batch = {key: np.stack([w[key] for w in windows]) for key in windows[0]}
+        batch["keep"] = kept_steps(batch["mask"])
         batch["episode"], batch["start"] = episodes.astype(np.int64), starts.astype(np.int64)
         return batch
 
@@ -322,6 +330,13 @@ def make_optimizer(model: nn.Module, *, lr: float, weight_decay: float, warmup_s
     return optimizer, torch.optim.lr_scheduler.LambdaLR(optimizer, LinearWarmup(warmup_steps))
 
 
-def batch_to_tensors(batch: Mapping[str, np.ndarray], device: torch.device | None = None) -> dict[str, torch.Tensor]:
-    """A sampler batch as tensors on ``device`` (frames stay uint8 until the model casts them)."""
-    return {key: torch.as_tensor(value, device=device) for key, value in batch.items()}
+def batch_to_tensors(batch: Mapping[str, Any], device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
+    """A sampler batch as tensors on ``device`` (frames stay uint8 until the model casts them). To a CUDA device
+    host arrays go through pinned memory without blocking, as the replay's batches do (a copy from pageable
+    memory would wait for the device's queued work: a host sync in every update)."""
+    tensors = {key: torch.as_tensor(value) for key, value in batch.items()}
+    target = torch.device(device) if device is not None else None
+    if target is None or target.type != "cuda":
+        return {key: t.to(target) if target is not None else t for key, t in tensors.items()}
+    return {key: (t.pin_memory().to(target, non_blocking=True) if t.device.type == "cpu" else t.to(target))
+            for key, t in tensors.items()}
