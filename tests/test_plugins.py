@@ -20,7 +20,7 @@ from analysis.identity import algo_labels, method_label
 from analysis.load import load_results
 from analysis.scores import final_scores
 from analysis.tables import to_markdown
-from helpers import REPRO, host_syncs, launch_app
+from helpers import REPRO, bench_app, host_syncs, launch_app
 from offline_fixtures import write_dataset
 from repro.config.compose import (
     ConfigError,
@@ -28,6 +28,7 @@ from repro.config.compose import (
     compose,
     config_groups,
     offline_agents,
+    online_agents,
     run_keys,
     typed,
 )
@@ -58,12 +59,25 @@ def test_the_example_registers_through_its_entry_points_only():
     assert {"toy_rwbc", "toy_utd", "toy_inv"} <= set(config_groups()["agent"])  # its conf folder is on the search path
     # the bench list: the built-in offline agent files in the paper's order, then the plugin's
     assert offline_agents() == ("bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "dt", "toy_rwbc")
+    assert {"taco", "drqv2", "toy_inv", "toy_utd"} <= set(online_agents())  # `repro bench --algo`'s choices
+    assert not set(online_agents()) & set(offline_agents())
     labels = algo_labels()
     assert (labels["toyrwbc"], labels["toyutd"], labels["toyinv"]) == ("RWBC", "DrQ-v2-UTD", "InvDyn")
     assert method_label("toy_rwbc", ("taco",)) == "RWBC+TACO"  # an offline learner with TACO, as CQL+TACO
     root = Path(__file__).resolve().parent
     assert not [p for p in (root.parent / "repro").rglob("*.py") if "toy_rwbc" in p.read_text() or "toy_utd" in
                 p.read_text()]
+
+
+def test_the_update_bench_times_the_online_plugin_learner(tmp_path):
+    """`repro bench --algo toy_utd`: the plugin's online learner is built through the registry and timed."""
+    args = ["bench", "--algo", "toy_utd", "--batch", "2", "--repeats", "1", "--warmup", "0", "--results",
+            str(tmp_path)]
+    result = CliRunner().invoke(bench_app(), args)
+    assert result.exit_code == 0, result.output
+    assert "toy_utd batch     2: " in result.output and "s/update" in result.output
+    report = yaml.safe_load(next((tmp_path / "bench").glob("bench-*-cpu.json")).read_text())
+    assert [(r["algo"], r["batch_size"]) for r in report["results"]] == [("toy_utd", 2)]
 
 
 def test_the_light_agent_file_reading_agrees_with_hydra():
