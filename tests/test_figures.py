@@ -13,6 +13,7 @@ import typer
 from typer.testing import CliRunner
 
 import paper_figures
+import repro_app.report
 from analysis.claims import NO_DATA, SUPPORTED
 from analysis.context import Context
 from analysis.load import load_results
@@ -43,7 +44,10 @@ def full_report(tmp_path_factory):
     root = full_coverage_root(tmp_path_factory.mktemp("results"))
     ctx = Context(results=load_results(root), out_dir=tmp_path_factory.mktemp("report"), budget=FRAMES, reps=REPS,
                   curve_reps=CURVE_REPS, tsne_n=30, tsne_iter=250, render_envs=False, indicative=True)
-    md, html = build_report(ctx)
+    with pytest.MonkeyPatch.context() as mp:
+        # the power section's draws (default 500, ~14 s here): its numbers are tests/test_plan.py's, not read here
+        mp.setattr(repro_app.report, "REPORT_SIMS", 20)
+        md, html = build_report(ctx)
     return ctx, md, html
 
 
