@@ -284,23 +284,21 @@ def watch_loop(mp: pytest.MonkeyPatch, events: list[str]) -> None:
     returns and ``"env.step"`` when it calls ``env.step`` (beside :func:`watch_syncs`' events)."""
     from repro.train.online_loop import OnlineLoop
 
-    step_once = OnlineLoop._act_update_step
+    init = OnlineLoop.__init__
 
-    def instrumented(loop: OnlineLoop, episode: Any) -> None:
-        if not getattr(loop, "_watched", False):  # wrap this loop's agent.update and env.step once
-            update, env_step = loop.agent.update, loop.env.step
+    def watched_init(loop: OnlineLoop, *args: Any, **kwargs: Any) -> None:
+        init(loop, *args, **kwargs)
+        update, env_step = loop.agent.update, loop.env.step
 
-            def update_then_mark(*args: Any, **kwargs: Any) -> Any:
-                out = update(*args, **kwargs)
-                events.append("update returned")
-                return out
+        def update_then_mark(*a: Any, **k: Any) -> Any:
+            out = update(*a, **k)
+            events.append("update returned")
+            return out
 
-            def mark_then_step(*args: Any, **kwargs: Any) -> Any:
-                events.append("env.step")
-                return env_step(*args, **kwargs)
+        def mark_then_step(*a: Any, **k: Any) -> Any:
+            events.append("env.step")
+            return env_step(*a, **k)
 
-            loop.agent.update, loop.env.step = update_then_mark, mark_then_step  # type: ignore[method-assign]
-            loop._watched = True  # type: ignore[attr-defined]
-        step_once(loop, episode)
+        loop.agent.update, loop.env.step = update_then_mark, mark_then_step  # type: ignore[method-assign]
 
-    mp.setattr(OnlineLoop, "_act_update_step", instrumented)
+    mp.setattr(OnlineLoop, "__init__", watched_init)
