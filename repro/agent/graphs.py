@@ -48,6 +48,8 @@ class GraphedUpdate:
         self.graph: torch.cuda.CUDAGraph | None = None
         self.outputs: Metrics = {}
         self.failed: str | None = None  # why the graph could not be recorded (the updates then stay eager)
+        # the warm-up updates' stream, made once (PyTorch's recipe: warm up on a side stream before recording)
+        self._side = torch.cuda.Stream(self.device) if self.capture else None
 
     @property
     def replaying(self) -> bool:
@@ -86,10 +88,10 @@ class GraphedUpdate:
         self.std.fill_(std)
 
     def _eager(self) -> Metrics:
-        if not self.capture:
+        side = self._side
+        if side is None:
             return self.body(self.inputs, self.std)
         main = torch.cuda.current_stream(self.device)
-        side = torch.cuda.Stream(self.device)
         side.wait_stream(main)
         with torch.cuda.stream(side):
             out = self.body(self.inputs, self.std)
