@@ -14,7 +14,7 @@ from repro.data.cli import dataset_app
 from repro.launch import cli as launch_cli
 from repro.runs.console import console, fail
 from repro.train import make_dataset_cli as make_cli
-from repro_app import analysis_cli, plan_cli, reproduce, watch_cli
+from repro_app import analysis_cli, plan_cli, reproduce, verify_cli, watch_cli
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -96,7 +96,7 @@ def tasks():
     console(min_width=120).print(table)
 
 
-for _commands in (launch_cli, analysis_cli, plan_cli, bench, reproduce, watch_cli):
+for _commands in (launch_cli, analysis_cli, plan_cli, bench, reproduce, verify_cli, watch_cli):
     _commands.register(app)
 make_cli.register(dataset_app)  # `repro dataset make` (training layer: it rolls out policies)
 app.add_typer(dataset_app, name="dataset")

@@ -7,7 +7,7 @@ import html
 import importlib.metadata
 import platform
 import subprocess
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import pandas as pd
@@ -19,8 +19,10 @@ from analysis.context import Context
 from analysis.io import atomic_write_text
 from analysis.power import REPORT_MAX_SEEDS, REPORT_SIMS, next_runs_paragraph, power_rows, write_power
 from analysis.tables import TableOutput, to_markdown
+from analysis.verify import VerdictRow, judge, verdict_frame, verdict_notes, write_verdicts
 from paper_figures.catalog import ordered_ids, resolve
 from paper_figures.render import render_artifacts
+from paper_figures.verify_plot import plot_verify
 
 PACKAGES = ("numpy", "pandas", "scipy", "rliable", "arch", "scikit-learn", "matplotlib", "seaborn", "torch",
             "taco-repro")
@@ -68,9 +70,9 @@ def _section(title: str, body: str) -> str:
 
 def build_markdown(ctx: Context, artifacts, verdicts, findings,
                    calibration: tuple[list[CalibrationRow], list[str]] | None = None,
-                   power: tuple[TableOutput, str] | None = None) -> str:
+                   power: tuple[TableOutput, str] | None = None, verify: Sequence[VerdictRow] = ()) -> str:
     """REPORT.md: the header, the claims, the claims' power and what to run next, the audit, the calibration,
-    every artifact and the provenance."""
+    `repro verify`'s verdicts (when verify runs exist), every artifact and the provenance."""
     lines = _header(ctx, verdicts, findings)
     lines.append(_claims_section(ctx, verdicts))
     if power is not None:
@@ -83,6 +85,8 @@ def build_markdown(ctx: Context, artifacts, verdicts, findings,
     lines += _audit_sections(findings)
     if calibration is not None:
         lines.append(_calibration_section(ctx, *calibration))
+    if verify:
+        lines.append(_verify_section(verify))
     lines += [_artifact_section(art) for art in artifacts]
     lines.append(_provenance_section(ctx))
     return "\n".join(lines) + "\n"
@@ -152,6 +156,14 @@ def _calibration_section(ctx: Context, rows: list[CalibrationRow], notes: list[s
                     cal + "\nFiles: [csv](calibration.csv), [md](calibration.md), [tex](calibration.tex)")
 
 
+def _verify_section(rows: Sequence[VerdictRow]) -> str:
+    body = to_markdown(verdict_frame(rows)[["task", "method", "variant", "seeds", "verdict", "false_alarm", "note"]])
+    body += "".join(f"\n_{n}_\n" for n in verdict_notes())
+    return _section("repro verify: does this installation learn as the DrQ-v2 authors' code did?",
+                    body + "\n![verify](verify.png)  \n[PDF](verify.pdf); tables: [verify.md](verify.md), "
+                    "[verify_frames.md](verify_frames.md)")
+
+
 def _artifact_section(art) -> str:
     """One table or figure: caption, images with their PDF, tables with their files, and its other notes."""
     body = [f"_{art.caption}_", ""] if art.figures else []
@@ -199,11 +211,15 @@ def build_report(ctx: Context, progress: Callable[[str], None] | None = None) ->
     write_audit(ctx.out_dir, findings)
     rows, notes = calibrate(ctx.results, ctx.published, ctx.reps, ctx.seed)
     write_calibration(ctx.out_dir, rows, notes, ctx.reps, ctx.seed)
+    verify_rows = judge(ctx.results) if not ctx.results.empty else []
+    if verify_rows:
+        write_verdicts(ctx.out_dir, verify_rows)
+        plot_verify(ctx.results, verify_rows, ctx.out_dir)
     conditioned = not ctx.no_runs
     prow = power_rows(ctx, REPORT_SIMS, REPORT_MAX_SEEDS, verdicts, conditioned, bootstrap_claims=False)
     power_table, _ = write_power(ctx.out_dir, prow, REPORT_SIMS, ctx.seed, REPORT_MAX_SEEDS, conditioned=conditioned)
     md = build_markdown(ctx, artifacts, verdicts, findings, (rows, notes),
-                        (power_table, next_runs_paragraph(prow, REPORT_MAX_SEEDS)))
+                        (power_table, next_runs_paragraph(prow, REPORT_MAX_SEEDS)), verify_rows)
     md_path = atomic_write_text(ctx.out_dir / "REPORT.md", md)
     html_path = atomic_write_text(ctx.out_dir / "REPORT.html", markdown_to_html(md))
     return md_path, html_path

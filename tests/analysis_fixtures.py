@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import functools
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -110,6 +111,7 @@ def write_run(
     path: Path | None = None,
     resolved: bool = True,
     resolved_values: dict[str, Any] | None = None,
+    curve: Sequence[float] | None = None,
 ) -> Path:
     """Write one run directory and return it. Arguments left None keep the composed config's value; the
     config goes through the training schema, and resolved.json through the code training uses
@@ -120,7 +122,8 @@ def write_run(
     instead: ``updates`` and ``eval_every_updates`` are its offline.updates and offline.eval_every_updates, its
     evaluation return ramps from 0 to ``final`` over the updates, normalised by ``reference`` (default: the
     return repro.data.reference falls back to, the paper's TACO return of the task), and ``done`` writes
-    DONE as the offline trainer does; ``cql_alpha`` None leaves CQL's alpha to the config (Table 6)."""
+    DONE as the offline trainer does; ``cql_alpha`` None leaves CQL's alpha to the config (Table 6).
+    ``curve``: an online run's evaluation returns at frames 0, eval_every, ... (instead of the ramp to ``final``)."""
     cfg = run_config(
         algo, task, seed, root, experiment=experiment, variant=variant, **{
             "agent.K": K, "agent.batch_size": batch_size, "agent.latent_action_dim": latent_action_dim,
@@ -149,7 +152,7 @@ def write_run(
     repeat = int(cfg.env.action_repeat)
     lines = [header_line(runformat.EVAL_COLUMNS)]
     for i, frame in enumerate(range(0, frames + 1, eval_every)):
-        value = final * frame / frames
+        value = final * frame / frames if curve is None else float(curve[i])
         lines.append(format_row(runformat.EVAL_COLUMNS, {
             "frame": frame, "step": frame // repeat, "episode": i,
             # Meta-world: ``final`` is a success fraction and the return is arbitrary

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 from typing import TYPE_CHECKING, Optional
@@ -170,29 +171,60 @@ def sweep_cmd(
     ),
 ) -> None:
     """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
-    if warm_start and launcher == Launcher.slurm:
-        fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
-    packing = _gpu_packing(gpus, runs_per_gpu, launcher, max_parallel, warm_start)
+    options = LaunchOptions(launcher, max_parallel, force, cluster_config, warm_start, gpus, runs_per_gpu)
+    task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
     try:
-        spec = specs.load(name)
-        task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
-        sel = Selection(tasks=task_list, seeds=seeds, frames=frames, sets=_with_results_root(sets, results_root))
-        planned = specs.plan(specs.expand(spec, sel))
-        root = specs.results_root_of(planned)
-        if dry_run:
-            print_plan(planned, spec, root, force, specs.excluded(spec, sel))
-            return
-        if any(p.state == "mismatch" for p in planned) and not force:
-            raise SweepError(_mismatch_error(planned, root))
-        _check_wandb(planned)
-        report = _launch(spec, planned, root, launcher, max_parallel, force, cluster_config, warm_start, packing)
+        sel = Selection(tasks=task_list, seeds=seeds, frames=frames, sets=with_results_root(sets, results_root))
     except SweepError as exc:
         fail(str(exc))
-    _print_report(report, launcher, spec.name)
+    report = launch_sweep(name, sel, options, dry_run)
+    if report is None:
+        return
     if report.interrupted:
         raise typer.Exit(130)
     if report.failed or report.mismatch:
         raise typer.Exit(1)
+
+
+@dataclass(frozen=True)
+class LaunchOptions:
+    """How a sweep's runs are launched (`repro sweep`'s launcher options; `repro verify` takes the same)."""
+
+    launcher: Launcher = Launcher.local
+    max_parallel: Optional[int] = None
+    force: bool = False
+    cluster_config: Optional[Path] = None
+    warm_start: bool = False
+    gpus: Optional[str] = None
+    runs_per_gpu: Optional[int] = None
+
+
+def launch_sweep(name: str, sel: Selection, options: LaunchOptions, dry_run: bool = False,
+                 agents: Sequence[str] | None = None) -> LaunchReport | None:
+    """Expand sweep ``name`` with ``sel`` (only the runs of ``agents``, when given), then print the plan
+    (``dry_run``: returns None) or launch it and print the launch's report. Bad input: one line, exit 2."""
+    if options.warm_start and options.launcher == Launcher.slurm:
+        fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
+    packing = _gpu_packing(options.gpus, options.runs_per_gpu, options.launcher, options.max_parallel,
+                           options.warm_start)
+    try:
+        spec = specs.load(name)
+        planned = specs.plan(specs.expand(spec, sel))
+        if agents is not None:
+            planned = [p for p in planned if p.run.agent in agents]
+        root = specs.results_root_of(planned)
+        if dry_run:
+            print_plan(planned, spec, root, options.force, specs.excluded(spec, sel))
+            return None
+        if any(p.state == "mismatch" for p in planned) and not options.force:
+            raise SweepError(_mismatch_error(planned, root))
+        _check_wandb(planned)
+        report = _launch(spec, planned, root, options.launcher, options.max_parallel, options.force,
+                         options.cluster_config, options.warm_start, packing)
+    except SweepError as exc:
+        fail(str(exc))
+    _print_report(report, options.launcher, spec.name)
+    return report
 
 
 def _gpu_packing(gpus: Optional[str], runs_per_gpu: Optional[int], launcher: Launcher, max_parallel: Optional[int],
@@ -272,7 +304,7 @@ def status_cmd(
     watch = every if watch_ else None
 
     try:
-        root = (results_root or _default_results_root()).expanduser().absolute()
+        root = (results_root or default_results_root()).expanduser().absolute()
         if results_root is not None and not root.is_dir():
             raise SweepError(f"results root {root} does not exist or is not a directory")
         names = _launched_names(name, root)
@@ -308,7 +340,7 @@ def _launched_names(name: Optional[str], root: Path) -> list[str]:
     return []
 
 
-def _with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) -> tuple[str, ...]:
+def with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) -> tuple[str, ...]:
     """The --set overrides, plus ``runtime.results_root`` when --results is given (not both)."""
     out = tuple(sets or ())
     if results_root is None:
@@ -318,7 +350,7 @@ def _with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) 
     return (*out, f"runtime.results_root={specs.hydra_quote(str(results_root.expanduser()))}")
 
 
-def _default_results_root() -> Path:
+def default_results_root() -> Path:
     from repro.config.compose import ConfigError, compose_base
 
     try:

@@ -1,0 +1,337 @@
+"""`repro verify`'s judgement: does this installation learn as the DrQ-v2 authors' code did?
+
+The runs are those of experiment ``verify`` (``sweeps/verify.yaml``) under a results root; the reference is the DrQ-v2
+authors' published per-seed curves (:mod:`analysis.calibration` reads them). One verdict per task, method and
+variant (docs/verification.md says the same in prose):
+
+* **DrQ-v2: within the published band.** At every published evaluation frame ``f`` (after 0) that every seed of the
+  cell reaches, the cell's statistic is the mean over its seeds of the evaluation return at ``f``. The published band
+  at ``f`` is ``[min_f - k·sd_f, max_f + k·sd_f]``: the lowest and highest published seed at ``f``, widened by
+  :data:`BAND_SD` (``k``) times the published seeds' standard deviation there. Verdict: ``learns as published`` when
+  the statistic is inside the band at every judged frame, ``below the published band`` when it is under it at one
+  (``above ...`` when over it at one and under it at none). The verdict needs every seed at the task's verdict frame
+  (:data:`RULES`: 60K frames on cartpole_balance, where every published seed is 963-995); before that, or with fewer
+  than ``min_seeds`` seeds: ``not enough data``, never a verdict.
+* **False-alarm rate** of that rule for a correct pipeline, from the published seeds themselves: every set of ``n``
+  published seeds (``n`` = the cell's seeds) is judged as if it were the user's runs, against the band made from the
+  other published seeds at the same frames; the rate is the share of those sets the rule calls outside the band.
+* **Any other method (TACO): learned.** At the last published frame ``f`` its seeds all reach (at least the task's
+  TACO frame, :data:`RULES`), the mean over its seeds must be at least ``R + LEARNED_SHARE·(P_f - R)``: ``R`` the
+  task's random-policy return (uniform actions, :func:`repro.envs.dmc.random_policy_returns`), ``P_f`` the
+  published DrQ-v2 mean at ``f``. Its curve is drawn beside DrQ-v2's and its frames are shown against the band
+  (for information: TACO at a batch of 256 is not DrQ-v2).
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from analysis.calibration import SOURCE_TEXT, packaged_published, values_at
+from analysis.claim_budget import frames_text
+from analysis.load import Results
+from analysis.tables import TableOutput, fmt_num, write_table
+from repro.envs.dmc import random_policy_returns
+from repro.envs.registry import get_task
+
+EXPERIMENT = "verify"  # sweeps/verify.yaml's experiment
+BASELINE = "DrQ-v2"  # the method judged against the published band
+BAND_SD = 1.0  # k: the band is the published seeds' range widened by k standard deviations at each frame
+LEARNED_SHARE = 0.5  # TACO "learned": at least half-way from the random policy's return to the published mean
+RANDOM_EPISODES = 10  # episodes of the random-policy reference
+MIN_SEEDS = 1  # the band is a per-seed band: one seed is judged (the false-alarm rate says what that is worth)
+
+LEARNS, BELOW, ABOVE = "learns as published", "below the published band", "above the published band"
+LEARNED, NOT_LEARNED = "learned", "not learned"
+NOT_ENOUGH = "not enough data"
+INSIDE, UNDER, OVER = "inside", "below", "above"
+
+
+@dataclass(frozen=True)
+class TaskRule:
+    """What the check needs on one task: every DrQ-v2 seed at ``verdict_frame``; TACO at ``learned_frame``."""
+
+    task: str
+    verdict_frame: int
+    learned_frame: int
+
+
+RULES: dict[str, TaskRule] = {r.task: r for r in (
+    # every published seed is 963-995 at 60K frames; a pipeline that does not learn stays far under the band at
+    # 40K and 60K (docs/verification.md)
+    TaskRule("cartpole_balance", 60_000, 40_000),
+)}
+
+
+@dataclass
+class FrameRow:
+    """One judged frame of one cell."""
+
+    task: str
+    method: str
+    variant: str
+    frame: int
+    n: int
+    mean: float
+    low: float  # lowest seed
+    high: float  # highest seed
+    published_n: int
+    published_mean: float
+    published_min: float
+    published_max: float
+    band_low: float
+    band_high: float
+    position: str  # inside | below | above
+
+
+@dataclass
+class VerdictRow:
+    """The verdict of one cell (task, method, variant)."""
+
+    task: str
+    method: str
+    variant: str
+    seeds: int
+    reached: float  # the last frame every seed reached
+    verdict: str
+    rule: str
+    false_alarm: float = math.nan
+    threshold: float = math.nan  # learned: the return to reach
+    random_return: float = math.nan
+    note: str = ""
+    frames: list[FrameRow] = field(default_factory=list, repr=False)
+
+    @property
+    def judged(self) -> bool:
+        return self.verdict != NOT_ENOUGH
+
+
+def band(values: np.ndarray, k: float = BAND_SD) -> tuple[float, float]:
+    """The published band of one frame: the seeds' range widened by ``k`` standard deviations (ddof 1)."""
+    sd = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+    return float(np.min(values)) - k * sd, float(np.max(values)) + k * sd
+
+
+def position(value: float, low: float, high: float) -> str:
+    return UNDER if value < low else OVER if value > high else INSIDE
+
+
+def false_alarm_rate(published: np.ndarray, n: int, k: float = BAND_SD) -> float:
+    """The rule's false-alarm rate for ``n`` seeds of a correct pipeline: ``published`` is (seeds, frames) at the
+    judged frames; every set of ``n`` published seeds is judged against the band of the others. NaN when fewer than
+    ``n + 2`` published seeds (a band needs two seeds)."""
+    seeds = published.shape[0]
+    if published.ndim != 2 or seeds < n + 2 or n < 1:
+        return math.nan
+    outside = total = 0
+    for chosen in itertools.combinations(range(seeds), n):
+        rest = published[[i for i in range(seeds) if i not in chosen]]
+        mean = published[list(chosen)].mean(axis=0)
+        bands = [band(rest[:, j], k) for j in range(published.shape[1])]
+        outside += any(position(float(m), lo, hi) != INSIDE for m, (lo, hi) in zip(mean, bands))
+        total += 1
+    return outside / total
+
+
+@functools.cache
+def random_return(task: str, episodes: int = RANDOM_EPISODES) -> float:
+    """The mean return of the uniform random policy on ``task`` (action repeat 2, seeds 0..episodes-1)."""
+    return float(np.mean(random_policy_returns(get_task(task), episodes)))
+
+
+def published_frames(task: str, upto: float) -> list[int]:
+    """The published evaluation frames of ``task`` in (0, upto]."""
+    ev = packaged_published().eval
+    frames = ev.loc[ev["task"] == task, "frame"].dropna().unique()
+    return sorted(int(f) for f in frames if 0 < f <= upto)
+
+
+def published_matrix(task: str, frames: Sequence[int], published: Results | None = None) -> np.ndarray:
+    """The published seeds' returns at ``frames``: (seeds, frames), seeds in the file's order."""
+    published = packaged_published() if published is None else published
+    cols = [values_at(published, f, task).sort_values("seed")["value"].to_numpy(dtype=float) for f in frames]
+    return np.stack(cols, axis=1) if cols else np.empty((0, 0))
+
+
+def verify_cells(results: Results) -> pd.DataFrame:
+    """The runs of experiment ``verify`` on a task with a rule: one row per run."""
+    runs = results.runs
+    if runs.empty:
+        return runs
+    keep = (runs["experiment"] == EXPERIMENT) & runs["task"].isin(list(RULES)) & runs["dataset"].isna()
+    return runs[keep]
+
+
+def judge(results: Results, min_seeds: int = MIN_SEEDS, published: Results | None = None,
+          random_returns: dict[str, float] | None = None) -> list[VerdictRow]:
+    """One :class:`VerdictRow` per task, method and variant of the ``verify`` runs under ``results``.
+
+    ``random_returns`` (task -> return) replaces the simulated random-policy reference (tests)."""
+    published = packaged_published() if published is None else published
+    runs = verify_cells(results)
+    rows: list[VerdictRow] = []
+    if runs.empty:
+        return rows
+    for (task, method, variant), cell in runs.groupby(["task", "method", "variant"], sort=True):
+        rule = RULES[task]
+        ids = cell["run_id"]
+        cell_results = Results(results.root, cell, results.eval[results.eval["run_id"].isin(ids)])
+        last = pd.to_numeric(cell["last_frame"], errors="coerce")
+        reached = float(last.min()) if last.notna().all() and len(last) else 0.0
+        frames = published_frames(task, reached)
+        frame_rows = _frame_rows(cell_results, published, task, str(method), str(variant), frames)
+        base = dict(task=task, method=str(method), variant=str(variant), seeds=len(cell), reached=reached,
+                    frames=frame_rows)
+        if method == BASELINE:
+            rows.append(_baseline_verdict(base, rule, published, frames, frame_rows, min_seeds))
+        else:
+            given = (random_returns or {}).get(task)
+            rows.append(_learned_verdict(base, rule, frame_rows, min_seeds,
+                                         lambda t=task, g=given: random_return(t) if g is None else g))
+    return rows
+
+
+def _frame_rows(cell: Results, published: Results, task: str, method: str, variant: str,
+                frames: Sequence[int]) -> list[FrameRow]:
+    out = []
+    for f in frames:
+        vals = values_at(cell, f)["value"].to_numpy(dtype=float)
+        pub = values_at(published, f, task)["value"].to_numpy(dtype=float)
+        if not len(vals) or len(pub) < 2:
+            continue
+        lo, hi = band(pub)
+        mean = float(vals.mean())
+        out.append(FrameRow(task, method, variant, int(f), len(vals), mean, float(vals.min()), float(vals.max()),
+                            len(pub), float(pub.mean()), float(pub.min()), float(pub.max()), lo, hi,
+                            position(mean, lo, hi)))
+    return out
+
+
+def _short(base: dict, rule: TaskRule, need: int, min_seeds: int, what: str) -> str | None:
+    """Why the cell is not enough data, or None."""
+    if base["seeds"] < min_seeds:
+        return f"{base['seeds']} seed(s); the check needs at least {min_seeds}"
+    if base["reached"] < need:
+        return (f"every seed must reach {frames_text(need)} ({what}); they reach "
+                f"{frames_text(base['reached'])}")
+    return None
+
+
+def _baseline_verdict(base: dict, rule: TaskRule, published: Results, frames: Sequence[int],
+                      frame_rows: Sequence[FrameRow], min_seeds: int) -> VerdictRow:
+    text = (f"mean over seeds inside the published band (seeds' range ± {BAND_SD:g} sd) at every published frame "
+            "reached")
+    why = _short(base, rule, rule.verdict_frame, min_seeds, "the verdict frame")
+    judged = [int(f) for f in frames]
+    rate = false_alarm_rate(published_matrix(base["task"], judged, published), base["seeds"]) if judged else math.nan
+    if why is not None:
+        return VerdictRow(**base, verdict=NOT_ENOUGH, rule=text, false_alarm=rate, note=why)
+    places = {r.position for r in frame_rows}
+    verdict = BELOW if UNDER in places else ABOVE if OVER in places else LEARNS
+    off = [f"{frames_text(r.frame)}: {fmt_num(r.mean)} vs band [{fmt_num(r.band_low)}, {fmt_num(r.band_high)}]"
+           for r in frame_rows if r.position != INSIDE]
+    return VerdictRow(**base, verdict=verdict, rule=text, false_alarm=rate, note="; ".join(off))
+
+
+def _learned_verdict(base: dict, rule: TaskRule, frame_rows: Sequence[FrameRow], min_seeds: int,
+                     random_of: Callable[[], float]) -> VerdictRow:
+    """``random_of``: the task's random-policy return, simulated only when a verdict needs it."""
+    text = (f"mean over seeds at the last published frame reached >= random + {LEARNED_SHARE:g} x (published DrQ-v2 "
+            "mean - random)")
+    why = _short(base, rule, rule.learned_frame, min_seeds, "the learned frame")
+    if why is not None or not frame_rows:
+        return VerdictRow(**base, verdict=NOT_ENOUGH, rule=text, note=why or "no published frame reached")
+    rand = random_of()
+    last = frame_rows[-1]
+    threshold = rand + LEARNED_SHARE * (last.published_mean - rand)
+    verdict = LEARNED if last.mean >= threshold else NOT_LEARNED
+    note = (f"{fmt_num(last.mean)} at {frames_text(last.frame)} (seeds {fmt_num(last.low)}-{fmt_num(last.high)}); "
+            f"threshold {fmt_num(threshold)} = random {fmt_num(rand)} + {LEARNED_SHARE:g} x (published "
+            f"{fmt_num(last.published_mean)} - random)")
+    return VerdictRow(**base, verdict=verdict, rule=text, threshold=threshold, random_return=rand, note=note)
+
+
+# ---------------------------------------------------------------------------------------------------- tables
+VERDICT_COLUMNS = ["task", "method", "variant", "seeds", "reached", "verdict", "false_alarm", "threshold",
+                   "random_return", "rule", "note"]
+FRAME_COLUMNS = list(FrameRow.__dataclass_fields__)
+
+
+def verdict_frame(rows: Sequence[VerdictRow]) -> pd.DataFrame:
+    return pd.DataFrame([{k: getattr(r, k) for k in VERDICT_COLUMNS} for r in rows], columns=VERDICT_COLUMNS)
+
+
+def frames_frame(rows: Sequence[VerdictRow]) -> pd.DataFrame:
+    return pd.DataFrame([fr.__dict__ for r in rows for fr in r.frames], columns=FRAME_COLUMNS)
+
+
+def _rate_text(rate: float) -> str:
+    return "—" if math.isnan(rate) else f"{100 * rate:.0f}%"
+
+
+def _ranges(rule: TaskRule) -> str:
+    """The published seeds' range at each published frame up to the verdict frame."""
+    frames = published_frames(rule.task, rule.verdict_frame)
+    pub = published_matrix(rule.task, frames)
+    return ", ".join(f"{fmt_num(pub[:, j].min())}-{fmt_num(pub[:, j].max())} at {frames_text(f)}"
+                     for j, f in enumerate(frames))
+
+
+def verdict_notes() -> list[str]:
+    rules = " ".join(f"{r.task}: DrQ-v2 judged once every seed reaches {frames_text(r.verdict_frame)}, TACO "
+                     f"from {frames_text(r.learned_frame)} (published seeds: {_ranges(r)})." for r in RULES.values())
+    return [
+        f"Published: {SOURCE_TEXT}.",
+        f"DrQ-v2: at every published evaluation frame after 0 that every seed reaches, the mean over seeds must lie in "
+        f"the published band: the published seeds' range widened by {BAND_SD:g} standard deviation of those seeds at "
+        "that frame. False alarm: the share of sets of as many published seeds (a correct pipeline) that the same "
+        "rule, with the band of the other published seeds, calls outside the band at the same frames.",
+        f"Other methods (TACO): 'learned' when the mean over seeds at the last published frame they all reach is at "
+        f"least the random policy's return plus {LEARNED_SHARE:g} of the way to the published DrQ-v2 mean there. "
+        f"Random policy: uniform actions, {RANDOM_EPISODES} episodes, action repeat 2.",
+        "'not enough data' (never a verdict) when a seed has not reached the frame the verdict needs. " + rules,
+    ]
+
+
+def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutput, TableOutput]:
+    """``verify.csv/.md/.tex`` (one verdict per cell) and ``verify_frames.csv/.md/.tex`` (each judged frame)."""
+    raw = verdict_frame(rows)
+    display = pd.DataFrame({
+        "Task": raw["task"], "Method": raw["method"], "Variant": raw["variant"], "Seeds": raw["seeds"],
+        "Frames reached": [frames_text(f) for f in raw["reached"]], "Verdict": raw["verdict"],
+        "False alarm": [_rate_text(v) for v in raw["false_alarm"]], "Note": raw["note"]})
+    counts = {v: int((raw["verdict"] == v).sum()) for v in (LEARNS, BELOW, ABOVE, LEARNED, NOT_LEARNED, NOT_ENOUGH)}
+    caption = ("repro verify: the verify runs against the DrQ-v2 authors' published curves (" +
+               (", ".join(f"{n} {v}" for v, n in counts.items() if n) or "no verify runs") + ").")
+    verdicts = write_table(out_dir, "verify", raw, caption, display, verdict_notes())
+    fr = frames_frame(rows)
+    fr_display = pd.DataFrame({
+        "Task": fr["task"], "Method": fr["method"], "Variant": fr["variant"],
+        "Frames": [frames_text(f) for f in fr["frame"]],
+        "Runs: mean (seeds' range)": [f"{fmt_num(m)} ({fmt_num(lo)}-{fmt_num(hi)}, n={n})"
+                                      for m, lo, hi, n in zip(fr["mean"], fr["low"], fr["high"], fr["n"])],
+        "Published: mean (range)": [f"{fmt_num(m)} ({fmt_num(lo)}-{fmt_num(hi)}, n={n})" for m, lo, hi, n in
+                                    zip(fr["published_mean"], fr["published_min"], fr["published_max"],
+                                        fr["published_n"])],
+        "Band": [f"[{fmt_num(lo)}, {fmt_num(hi)}]" for lo, hi in zip(fr["band_low"], fr["band_high"])],
+        "Position": fr["position"]})
+    frames_table = write_table(out_dir, "verify_frames", fr, "repro verify: each judged frame against the published "
+                               f"band (the seeds' range ± {BAND_SD:g} sd).", fr_display, verdict_notes()[:2])
+    return verdicts, frames_table
+
+
+def verdict_lines(rows: Sequence[VerdictRow]) -> list[str]:
+    """One line per cell for the terminal."""
+    out = []
+    for r in rows:
+        extra = f"; false alarm {_rate_text(r.false_alarm)}" if r.method == BASELINE and r.judged else ""
+        out.append(f"{r.task} {r.method} ({r.variant}, {r.seeds} seed(s), {frames_text(r.reached)}): "
+                   f"{r.verdict}{extra}" + (f" — {r.note}" if r.note else ""))
+    return out

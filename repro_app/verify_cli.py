@@ -1,0 +1,188 @@
+"""``repro verify``: launch the ``verify`` sweep through the ordinary launchers, then judge its runs against the DrQ-v2
+authors' published curves (analysis/verify.py) and write the verdicts and the figure. docs/verification.md."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from repro.launch.cli import (
+    RESULTS_FLAGS,
+    Launcher,
+    LaunchOptions,
+    default_results_root,
+    launch_sweep,
+    with_results_root,
+)
+from repro.launch.spec import Selection, SweepError
+from repro.runs.console import console, fail
+
+SWEEP = "verify"
+CPU_AGENTS = ("drqv2",)  # the CPU check: DrQ-v2 alone (TACO to 40K frames takes hours more on a CPU)
+CPU_SEEDS = 1  # one seed at a time uses the 2 cores of the machine it was measured on (docs/verification.md)
+
+
+def _has_cuda() -> bool:
+    import torch
+
+    return bool(torch.cuda.is_available())
+
+
+def _agents(agents: Optional[str], sweep_agents: tuple[str, ...], cuda: bool) -> tuple[str, ...]:
+    if agents is None:
+        return sweep_agents if cuda else tuple(a for a in CPU_AGENTS if a in sweep_agents)
+    chosen = tuple(a.strip() for a in agents.split(",") if a.strip())
+    unknown = [a for a in chosen if a not in sweep_agents]
+    if unknown or not chosen:
+        fail(f"--agents: {', '.join(unknown) or 'none given'}; the verify sweep has {', '.join(sweep_agents)}")
+    return chosen
+
+
+def verify_cmd(
+    seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Use seeds 1..N (default: the sweep's 3 on a "
+                                        "GPU machine, 1 on a CPU)."),
+    frames: Optional[int] = typer.Option(None, "--frames", min=1, help="Frame budget of every run (default 60K; a "
+                                         "larger one extends the runs)."),
+    sets: Optional[list[str]] = typer.Option(None, "--set", help="Extra config override key=value (repeatable)."),
+    results_root: Optional[Path] = typer.Option(None, *RESULTS_FLAGS, help="Results root of the runs (default: the "
+                                                "config's runtime.results_root)."),
+    agents: Optional[str] = typer.Option(None, "--agents", help="Comma-separated agents of the sweep to run (default: "
+                                         "drqv2,taco on a GPU machine, drqv2 on a CPU)."),
+    out: Path = typer.Option(Path("results/verify"), "--out", "-o", help="Folder for verify.{csv,md,tex}, "
+                             "verify_frames.{csv,md,tex} and verify.{png,pdf}."),
+    judge_only: bool = typer.Option(False, "--judge-only", help="Judge the verify runs already under the results "
+                                    "root; launch nothing."),
+    min_seeds: int = typer.Option(1, "--min-seeds", min=1, help="Seeds a cell needs before it gets a verdict."),
+    dry_run: bool = typer.Option(False, "--dry-run", help="Print the runs (and what they cost, from a bench file); "
+                                 "launch nothing."),
+    launcher: Launcher = typer.Option(Launcher.local, "--launcher", help="Where to run."),
+    max_parallel: Optional[int] = typer.Option(None, "--max-parallel", min=1, help="Local: runs at once (default: "
+                                               "cores / 2)."),
+    force: bool = typer.Option(False, "--force", help="Move aside run dirs whose saved config differs, then rerun."),
+    cluster_config: Optional[Path] = typer.Option(None, "--cluster-config", help="SLURM launcher YAML."),
+    warm_start: bool = typer.Option(True, "--warm-start/--no-warm-start", help="Local: fork each run from a process "
+                                    "that has imported torch already (ignored with --launcher slurm)."),
+    gpus: Optional[str] = typer.Option(None, "--gpus", help="Local: GPU ids, e.g. 0,1 (as `repro sweep`)."),
+    runs_per_gpu: Optional[int] = typer.Option(None, "--runs-per-gpu", help="Local, with --gpus: runs per GPU."),
+) -> None:
+    """Does this installation learn as the DrQ-v2 authors' code did? Trains the verify sweep (DrQ-v2 and TACO on
+    cartpole_balance to 60K frames; resumable, extendable), then prints one verdict per task and agent."""
+    from repro.launch import spec as specs
+
+    try:
+        spec = specs.load(SWEEP)
+        root_sets = with_results_root(profile_wins(sets), results_root)
+    except SweepError as exc:
+        fail(str(exc))
+    say = console().print
+    if not judge_only:
+        cuda = _has_cuda() or gpus is not None
+        chosen = _agents(agents, spec.agents, cuda)
+        if seeds is None and not cuda:
+            seeds = CPU_SEEDS
+        if agents is None or seeds == CPU_SEEDS:
+            say(f"{'GPU' if cuda else 'no GPU'}: agents {', '.join(chosen)}, seeds 1..{seeds or len(spec.seeds)}"
+                + ("" if cuda else " (the CPU check, docs/verification.md; --agents drqv2,taco --seeds 3 for the "
+                   "whole sweep)"), highlight=False)
+        options = LaunchOptions(launcher, max_parallel, force, cluster_config,
+                                warm_start and launcher == Launcher.local and gpus is None, gpus, runs_per_gpu)
+        report = launch_sweep(SWEEP, Selection(seeds=seeds, frames=frames, sets=root_sets), options, dry_run,
+                              agents=chosen)
+        if report is None:  # --dry-run
+            _print_cost(spec, Selection(seeds=seeds, frames=frames, sets=root_sets), chosen)
+            return
+        if report.interrupted:
+            raise typer.Exit(130)
+        if launcher == Launcher.slurm:
+            say("submitted: judge the runs when they are done with `repro verify --judge-only`", highlight=False)
+            return
+    root = results_root if results_root is not None else _root_from(root_sets)
+    raise typer.Exit(judge_and_write(root, out, min_seeds))
+
+
+def profile_wins(sets: Optional[list[str]]) -> list[str]:
+    """``--set profile=NAME`` (e.g. ``tiny``) with the profile's own settings after it, so that they win over the
+    sweep's budget, evaluation schedule and batch as they would in `repro train profile=NAME` (a profile is a
+    defaults choice, which the sweep's explicit keys would otherwise override); a key also given with --set keeps
+    the --set value."""
+    from omegaconf import OmegaConf
+
+    from repro.config.compose import ConfigError, check_option, conf_dirs
+    from repro.launch import spec as specs
+
+    out = list(sets or ())
+    given = {specs.override_key(s) for s in out}
+    for s in list(out):
+        if specs.override_key(s) != "profile":
+            continue
+        name = s.split("=", 1)[1]
+        try:
+            check_option("profile", name)
+        except ConfigError as exc:
+            fail(str(exc))
+        path = next(p for d in conf_dirs() if (p := d / "profile" / f"{name}.yaml").is_file())
+        flat = OmegaConf.to_container(OmegaConf.load(path))
+        assert isinstance(flat, dict)
+        for key, value in _dotted(flat):
+            if key not in given:
+                out.append(f"{key}={value}")
+    return out
+
+
+def _dotted(data: dict, prefix: str = "") -> list[tuple[str, object]]:
+    out: list[tuple[str, object]] = []
+    for key, value in data.items():
+        if isinstance(value, dict):
+            out += _dotted(value, f"{prefix}{key}.")
+        else:
+            out.append((f"{prefix}{key}", value))
+    return out
+
+
+def _root_from(sets: tuple[str, ...]) -> Path:
+    from repro.launch import spec as specs
+
+    for s in sets:
+        if specs.override_key(s) == "runtime.results_root":
+            return Path(s.split("=", 1)[1].strip("'\""))
+    try:
+        return default_results_root()
+    except SweepError as exc:
+        fail(str(exc))
+
+
+def judge_and_write(root: Path, out: Path, min_seeds: int = 1) -> int:
+    """Judge the verify runs under ``root``, write the tables and the figure to ``out``, print one line per cell;
+    the exit code: 1 when a verdict says the pipeline does not learn as published, else 0."""
+    from analysis.load import ResultsRootError, load_results
+    from analysis.verify import ABOVE, BELOW, NOT_LEARNED, judge, verdict_lines, write_verdicts
+    from paper_figures.verify_plot import plot_verify
+
+    try:
+        results = load_results(root)
+    except ResultsRootError as exc:
+        fail(str(exc))
+    rows = judge(results, min_seeds=min_seeds)
+    con = console()
+    if not rows:
+        con.print(f"no verify runs under {root}: run `repro verify`", highlight=False)
+        return 0
+    for line in verdict_lines(rows):
+        con.print(line, highlight=False, soft_wrap=True)
+    tables = write_verdicts(out, rows)
+    figures = plot_verify(results, rows, out)
+    con.print("wrote " + ", ".join(str(p) for t in tables for p in t.files[:2]) + ", "
+              + ", ".join(str(p) for p in figures), highlight=False, soft_wrap=True)
+    return 1 if any(r.verdict in (BELOW, ABOVE, NOT_LEARNED) for r in rows) else 0
+
+
+def _print_cost(spec, sel: Selection, agents: tuple[str, ...]) -> None:
+    """What `repro plan` expects the planned runs to take, when a bench file of this machine's device exists."""
+    con = console()
+    con.print("expected time: see `repro plan verify` (needs a `repro bench` file)", highlight=False)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("verify")(verify_cmd)
