@@ -36,10 +36,12 @@ import pandas as pd
 
 from analysis.calibration import SOURCE_TEXT, packaged_published, values_at
 from analysis.claim_budget import frames_text
+from analysis.io import atomic_write_text
 from analysis.load import Results
 from analysis.tables import TableOutput, fmt_num, write_table
 from repro.envs.dmc import random_policy_returns
 from repro.envs.registry import get_task
+from repro.runs import runformat
 
 EXPERIMENT = "verify"  # sweeps/verify.yaml's experiment
 BASELINE = "DrQ-v2"  # the method judged against the published band
@@ -325,6 +327,22 @@ def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutp
     frames_table = write_table(out_dir, "verify_frames", fr, "repro verify: each judged frame against the published "
                                f"band (the seeds' range ± {BAND_SD:g} sd).", fr_display, verdict_notes()[:2])
     return verdicts, frames_table
+
+
+KEPT_FILES = (runformat.CONFIG, runformat.RESOLVED, runformat.META, runformat.EVAL, runformat.TRAIN, runformat.DONE)
+
+
+def keep_runs(results: Results, out_dir: Path) -> list[Path]:
+    """Copy the small files of every verify run (config, resolved values, provenance, evaluations, training
+    episodes, DONE; no checkpoint, no replay) to ``out_dir/runs/<run>/``: a run directory `repro verify
+    --judge-only --results out_dir/runs` judges again, kept beside the verdicts (docs/verification/)."""
+    written = []
+    for run_id in verify_cells(results)["run_id"] if not results.runs.empty else []:
+        for name in KEPT_FILES:
+            src = Path(results.root) / str(run_id) / name
+            if src.is_file():
+                written.append(atomic_write_text(out_dir / "runs" / str(run_id) / name, src.read_text()))
+    return written
 
 
 def verdict_lines(rows: Sequence[VerdictRow]) -> list[str]:

@@ -54,6 +54,9 @@ def verify_cmd(
                              "verify_frames.{csv,md,tex} and verify.{png,pdf}."),
     judge_only: bool = typer.Option(False, "--judge-only", help="Judge the verify runs already under the results "
                                     "root; launch nothing."),
+    keep_runs: bool = typer.Option(False, "--keep-runs", help="Also copy each verify run's small files (config, "
+                                   "eval.csv, train.csv, provenance) to OUT/runs/, a results root that "
+                                   "`--judge-only -r OUT/runs` judges again."),
     min_seeds: int = typer.Option(1, "--min-seeds", min=1, help="Seeds a cell needs before it gets a verdict."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Print the runs (and what they cost, from a bench file); "
                                  "launch nothing."),
@@ -99,7 +102,7 @@ def verify_cmd(
             say("submitted: judge the runs when they are done with `repro verify --judge-only`", highlight=False)
             return
     root = results_root if results_root is not None else _root_from(root_sets)
-    raise typer.Exit(judge_and_write(root, out, min_seeds))
+    raise typer.Exit(judge_and_write(root, out, min_seeds, keep_runs))
 
 
 def profile_wins(sets: Optional[list[str]]) -> list[str]:
@@ -153,11 +156,11 @@ def _root_from(sets: tuple[str, ...]) -> Path:
         fail(str(exc))
 
 
-def judge_and_write(root: Path, out: Path, min_seeds: int = 1) -> int:
+def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = False) -> int:
     """Judge the verify runs under ``root``, write the tables and the figure to ``out``, print one line per cell;
     the exit code: 1 when a verdict says the pipeline does not learn as published, else 0."""
     from analysis.load import ResultsRootError, load_results
-    from analysis.verify import ABOVE, BELOW, NOT_LEARNED, judge, verdict_lines, write_verdicts
+    from analysis.verify import ABOVE, BELOW, NOT_LEARNED, judge, keep_runs, verdict_lines, write_verdicts
     from paper_figures.verify_plot import plot_verify
 
     try:
@@ -173,6 +176,8 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1) -> int:
         con.print(line, highlight=False, soft_wrap=True)
     tables = write_verdicts(out, rows)
     figures = plot_verify(results, rows, out)
+    if keep:
+        con.print(f"kept {len(keep_runs(results, out))} run files under {out / 'runs'}", highlight=False)
     con.print("wrote " + ", ".join(str(p) for t in tables for p in t.files[:2]) + ", "
               + ", ".join(str(p) for p in figures), highlight=False, soft_wrap=True)
     return 1 if any(r.verdict in (BELOW, ABOVE, NOT_LEARNED) for r in rows) else 0

@@ -35,7 +35,8 @@ def _actions(n: int, dim: int, seed: int = 0) -> list[np.ndarray]:
 
 
 def test_registry_table() -> None:
-    assert len(TASKS) == 16
+    assert len(TASKS) == 17  # the paper's 16 and repro verify's cartpole_balance
+    assert get_task("cartpole_balance").action_dim == 1 and get_task("cartpole_balance").camera == 0
     assert get_task("quadruped_run").camera == 2 and get_task("walker_run").camera == 0
     assert get_task("reach_duplo").camera == "front_close"
     assert get_task("stick-pull").task == "stick-pull-v3"

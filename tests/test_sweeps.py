@@ -94,7 +94,8 @@ def test_every_paper_sweep_is_declared_and_expands_or_is_refused():
     assert expected <= set(specs.sweep_names())
     for s in specs.load_all():
         raw = yaml.safe_load(s.path.read_text())
-        assert raw["artifacts"] and raw["description"] and "eval" in raw and "frames" in raw
+        # verify (`repro verify`) checks the installation against published curves: no artifact of the paper
+        assert (raw["artifacts"] or s.name == "verify") and raw["description"] and "eval" in raw and "frames" in raw
         reason = specs.unavailable_reason(s)
         if s.name == "offline" and "dt" not in specs.config_groups()["agent"]:  # until the DT agent file lands
             assert reason and "\n" not in reason and "agent dt" in reason

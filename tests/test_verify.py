@@ -188,7 +188,7 @@ def test_verify_tiny_end_to_end(tmp_path):
         assert "no GPU: agents drqv2, seeds 1..1" in dry.stdout
     assert "train.frames=400" in dry.stdout and "agent.batch_size=8" in dry.stdout  # the profile's, after the sweep's
     args = ("--set", "profile=tiny", "--frames", "200", "--agents", "drqv2,taco", "--seeds", "1",
-            "-r", str(tmp_path / "runs"), "-o", str(tmp_path / "out"))
+            "-r", str(tmp_path / "runs"), "-o", str(tmp_path / "out"), "--keep-runs")
     out = _verify(*args)
     assert out.returncode == 0, out.stdout + out.stderr
     lines = [line for line in out.stdout.splitlines() if line.startswith(TASK)]
@@ -201,3 +201,9 @@ def test_verify_tiny_end_to_end(tmp_path):
     assert len(evals) == 2 and all(len(pd.read_csv(e)) == 2 for e in evals)  # frames 0 and 200
     again = _verify(*args)
     assert again.returncode == 0 and "2 already done" in again.stdout
+    # the kept copies (no checkpoint, no replay) are a results root that judges the same
+    kept = tmp_path / "out" / "runs" / "verify" / "drqv2" / "base" / TASK / "seed_1"
+    assert sorted(p.name for p in kept.iterdir()) == sorted(V.KEPT_FILES)
+    rejudged = _verify("--judge-only", "-r", str(tmp_path / "out" / "runs"), "-o", str(tmp_path / "out2"))
+    assert rejudged.returncode == 0, rejudged.stdout + rejudged.stderr
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "out2" / "verify.csv"), table)
