@@ -207,3 +207,14 @@ def test_verify_tiny_end_to_end(tmp_path):
     rejudged = _verify("--judge-only", "-r", str(tmp_path / "out" / "runs"), "-o", str(tmp_path / "out2"))
     assert rejudged.returncode == 0, rejudged.stdout + rejudged.stderr
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "out2" / "verify.csv"), table)
+
+
+def test_the_kept_cpu_run_is_judged_as_recorded():
+    """docs/verification/ holds the CPU check's run files and its verdicts, both written by `repro verify
+    --judge-only --keep-runs`: judging the kept files again gives the recorded table (a change to the rule, the band
+    or the kept files fails here)."""
+    kept = Path(__file__).resolve().parents[1] / "docs" / "verification"
+    rows = V.judge(load_results(kept / "runs"))
+    recorded = pd.read_csv(kept / "verify.csv")
+    pd.testing.assert_frame_equal(V.verdict_frame(rows).reset_index(drop=True), recorded, check_dtype=False)
+    assert list(recorded["verdict"]) == [V.BELOW]
