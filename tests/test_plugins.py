@@ -6,6 +6,7 @@ tree names them, and each is first-class: config, train, sweep, status, bench, t
 from __future__ import annotations
 
 import importlib.metadata
+import itertools
 import math
 import re
 from pathlib import Path
@@ -63,10 +64,70 @@ def test_the_example_registers_through_its_entry_points_only():
     assert not set(online_agents()) & set(offline_agents())
     labels = algo_labels()
     assert (labels["toyrwbc"], labels["toyutd"], labels["toyinv"]) == ("RWBC", "DrQ-v2-UTD", "InvDyn")
-    assert method_label("toy_rwbc", ("taco",)) == "RWBC+TACO"  # an offline learner with TACO, as CQL+TACO
+    assert method_label("toy_rwbc", ("taco", "curl", "reward")) == "RWBC+TACO"  # with TACO, as CQL+TACO
+    assert method_label("toy_rwbc", ("toy_inv",)) == "RWBC+InvDyn"
     root = Path(__file__).resolve().parent
     assert not [p for p in (root.parent / "repro").rglob("*.py") if "toy_rwbc" in p.read_text() or "toy_utd" in
                 p.read_text()]
+
+
+def test_distinct_learner_and_objectives_never_share_a_label():
+    """Every registered learner (the plugin's included) with every set of registered objectives: one label each,
+    from the registry; the paper's methods keep the paper's labels."""
+    objectives = list(objective_names())
+    labels: dict[str, tuple[str, tuple[str, ...]]] = {}
+    for learner in learner_names():
+        for n in range(len(objectives) + 1):
+            for chosen in itertools.combinations(objectives, n):
+                label = method_label(learner, chosen)
+                assert label not in labels, (label, labels.get(label), (learner, chosen))
+                labels[label] = (learner, chosen)
+    bundle = ("taco", "curl", "reward")
+    assert [method_label("actor_critic", o) for o in [(), bundle, ("curl",), ("spr", "curl", "reward"),
+                                                      ("atc", "curl", "reward"), ("driml", "curl", "reward")]] == \
+        ["DrQ-v2", "TACO", "CURL", "SPR", "ATC", "DRIML"]
+    assert [method_label(learner, bundle) for learner in ("cql", "td3bc", "bc")] == ["CQL+TACO", "TD3+BC+TACO",
+                                                                                     "BC+TACO"]
+    assert method_label("cql", ("spr", "curl", "reward")) == "CQL+SPR" != method_label("cql") == "CQL"
+    assert method_label("actor_critic", ("taco", "reward")) == "TACO w/o CURL"  # objective_removal's no_curl
+    assert method_label("actor_critic", ("curl", "reward")) == "CURL+Reward"  # and its no_taco
+    assert method_label("toy_utd", bundle) == "DrQ-v2-UTD+TACO"
+    assert method_label("actor_critic", ["toy_inv"]) == "InvDyn"
+
+
+def test_runs_of_two_methods_never_share_a_table_cell(tmp_path):
+    """The bug of issue 35: an offline learner trained with an objective other than TACO was labelled as the plain
+    learner and averaged into its cells. Runs of CQL, CQL+SPR and CQL+TACO on one task, dataset and experiment (the
+    variant apart) are three methods: three cells of a table grouped by method."""
+    from analysis_fixtures import write_run
+
+    for variant, objectives, final in (("plain", {}, 100.0), ("spr", {"spr": 1.0, "curl": 1.0, "reward": 1.0}, 200.0),
+                                       ("taco", {"taco": 1.0, "curl": 1.0, "reward": 1.0}, 300.0)):
+        write_run(tmp_path, experiment="offline", algo="cql", variant=variant, task="hopper_hop", dataset="medium",
+                  seed=1, final=final, objectives=objectives, action_encoder=bool(objectives))
+    cells = final_scores(load_results(tmp_path)).groupby(["task", "dataset", "method"])["score"].agg(["count", "mean"])
+    assert sorted(cells.index.get_level_values("method")) == ["CQL", "CQL+SPR", "CQL+TACO"]
+    assert cells["count"].tolist() == [1, 1, 1]
+
+
+def test_a_registered_label_is_its_own_and_companions_are_registered(monkeypatch):
+    """A plugin that registers a label already taken (it would name two methods alike) or a companion nobody
+    registers is one line."""
+    import repro.config.schema as schema
+    from repro.config.plugins import ObjectiveSpec
+
+    for spec, message in ((ObjectiveSpec("toy_inv", label="CQL", factory="m:a"), "label 'CQL' is already the label of "
+                                                                                 "learner 'cql'"),
+                          (ObjectiveSpec("toy_inv", label="X", factory="m:a", companions=("nope",)),
+                           "companion 'nope' must be another registered objective")):
+        monkeypatch.setattr(schema, "discover", lambda group, kind, spec=spec: (spec,) if kind is ObjectiveSpec else
+                            discover(group, kind))
+        schema.objective_specs.cache_clear()
+        try:
+            with pytest.raises(PluginError, match=re.escape(message)):
+                schema.objective_specs()
+        finally:
+            schema.objective_specs.cache_clear()
 
 
 def test_the_update_bench_times_the_online_plugin_learner(tmp_path):

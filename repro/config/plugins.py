@@ -41,7 +41,10 @@ class LearnerSpec:
     holding ``agent/<agent>.yaml`` files that use it (added to Hydra's search path, so ``agent=<agent>`` composes).
     ``ranges``: the lowest value of numeric fields of ``section``, ``{field: (low, inclusive)}``, in the form of
     ``repro.config.compose.RANGES`` and checked with it (one line, exit 2, before a run writes anything); a null
-    value is not checked.
+    value is not checked. ``named_by_objectives``: its label names its runs without objectives only; a run with
+    objectives is named by their labels alone (the built-in online actor-critic: the paper's TACO, SPR, CURL are
+    DrQ-v2 with objectives); otherwise a run's label is the learner's label, then its objectives'
+    (``analysis.identity.method_label``).
     """
 
     name: str
@@ -51,21 +54,30 @@ class LearnerSpec:
     factory: str | None = None
     conf: str | Path | None = None
     ranges: Ranges = field(default_factory=dict)
+    named_by_objectives: bool = False
 
 
 @dataclass(frozen=True)
 class ObjectiveSpec:
-    """An auxiliary objective: ``name`` is its key in ``agent.objectives``; ``label`` the method label of an online
-    agent named after it (``taco`` -> ``TACO``; None: no agent of its own); ``factory``, ``conf``: as
-    :class:`LearnerSpec` (the class is an ``repro.agent.objectives.base.Objective``); ``ranges``: as
-    :class:`LearnerSpec`'s, of its settings ``agent.objective_params.<name>.<setting>``, checked in the runs
-    whose ``agent.objectives`` names it."""
+    """An auxiliary objective: ``name`` is its key in ``agent.objectives``; ``label`` its part of a method's label
+    (``taco`` -> ``TACO``, ``CQL+TACO``; None: the name); ``factory``, ``conf``: as :class:`LearnerSpec` (the class
+    is an ``repro.agent.objectives.base.Objective``); ``ranges``: as :class:`LearnerSpec`'s, of its settings
+    ``agent.objective_params.<name>.<setting>``, checked in the runs whose ``agent.objectives`` names it.
+    ``companions``: registered objectives that the method named ``label`` trains with it (the paper's TACO is the
+    TACO, CURL and reward losses): with all of them enabled, ``label`` alone names the lot; with some off, the label
+    says which (``TACO w/o CURL``)."""
 
     name: str
     label: str | None = None
     factory: str | None = None
     conf: str | Path | None = None
     ranges: Ranges = field(default_factory=dict)
+    companions: tuple[str, ...] = ()
+
+    @property
+    def tag(self) -> str:
+        """Its part of a method label: ``label``, or the name when it registers none."""
+        return self.label or self.name
 
 
 Spec = TypeVar("Spec", LearnerSpec, ObjectiveSpec)

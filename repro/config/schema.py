@@ -435,20 +435,22 @@ def choice_fields(section: type = RunConfig, prefix: str = "") -> dict[str, type
 # classes are imported by repro/learners/registry.py and repro/agent/objectives/, which check at import that they
 # build exactly the registered names. Order: the paper's (bench reports, help texts).
 BUILTIN_LEARNERS = (
-    LearnerSpec(LearnerName.actor_critic.value, offline=False, label="DrQ-v2"),
+    LearnerSpec(LearnerName.actor_critic.value, offline=False, label="DrQ-v2", named_by_objectives=True),
     LearnerSpec(LearnerName.bc.value, offline=True, label="BC"),
     LearnerSpec(LearnerName.td3bc.value, offline=True, label="TD3+BC", section=TD3BCConfig),
     LearnerSpec(LearnerName.cql.value, offline=True, label="CQL", section=CQLConfig),
     LearnerSpec(LearnerName.iql.value, offline=True, label="IQL", section=IQLConfig),
     LearnerSpec(LearnerName.dt.value, offline=True, label="DT", section=DTConfig),
 )
+_WITH_CURL_AND_REWARD = (ObjectiveName.curl.value, ObjectiveName.reward.value)  # TACO's loss: TACO + CURL + reward;
+# the Table 2 objectives replace TACO's term and keep the other two
 BUILTIN_OBJECTIVES = (
-    ObjectiveSpec(ObjectiveName.taco.value, label="TACO"),
+    ObjectiveSpec(ObjectiveName.taco.value, label="TACO", companions=_WITH_CURL_AND_REWARD),
     ObjectiveSpec(ObjectiveName.curl.value, label="CURL"),
-    ObjectiveSpec(ObjectiveName.reward.value),
-    ObjectiveSpec(ObjectiveName.spr.value, label="SPR"),
-    ObjectiveSpec(ObjectiveName.atc.value, label="ATC"),
-    ObjectiveSpec(ObjectiveName.driml.value, label="DRIML"),
+    ObjectiveSpec(ObjectiveName.reward.value, label="Reward"),
+    ObjectiveSpec(ObjectiveName.spr.value, label="SPR", companions=_WITH_CURL_AND_REWARD),
+    ObjectiveSpec(ObjectiveName.atc.value, label="ATC", companions=_WITH_CURL_AND_REWARD),
+    ObjectiveSpec(ObjectiveName.driml.value, label="DRIML", companions=_WITH_CURL_AND_REWARD),
 )
 AGENT_FIELDS = frozenset(f.name for f in dataclasses.fields(AgentConfig))
 
@@ -474,7 +476,26 @@ def objective_specs() -> dict[str, ObjectiveSpec]:
         if spec.name in specs:
             raise PluginError(f"objective '{spec.name}' ({OBJECTIVE_GROUP}): the name is taken by a built-in one.")
         specs[spec.name] = spec
+    _check_labels(specs, learner_specs())
     return specs
+
+
+def _check_labels(objectives: dict[str, ObjectiveSpec], learners: dict[str, LearnerSpec]) -> None:
+    """PluginError (one line) unless every registered label is its own (a method label is built from them:
+    two registrations of one label would name two methods alike) and every objective's ``companions`` are
+    registered objectives without companions of their own."""
+    seen: dict[str, str] = {}
+    tags = [*((s.label, f"learner '{s.name}'") for s in learners.values()),
+            *((s.tag, f"objective '{s.name}'") for s in objectives.values())]
+    for tag, who in tags:
+        if tag in seen:
+            raise PluginError(f"{who}: label '{tag}' is already the label of {seen[tag]}.")
+        seen[tag] = who
+    for spec in objectives.values():
+        for other in spec.companions:
+            if other not in objectives or objectives[other].companions or other == spec.name:
+                raise PluginError(f"objective '{spec.name}': companion '{other}' must be another registered "
+                                  "objective without companions of its own.")
 
 
 def learner_names() -> tuple[str, ...]:
