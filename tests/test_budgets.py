@@ -293,14 +293,14 @@ def test_a_sweep_extending_another_trains_every_frame_once(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------ bad input
-@pytest.mark.parametrize("override, message", [
-    ("agent.lr=-1", "agent.lr must be > 0.0 (got -1.0)."),
-    ("agent.latent_action_dim=0", "agent.latent_action_dim must be null (from |A|) or >= 1 (got 0)."),
-    ("agent.dt.weight_decay=-0.5", "agent.dt.weight_decay must be >= 0.0 (got -0.5)."),
+@pytest.mark.parametrize("overrides, message", [
+    (["agent.lr=-1"], "agent.lr must be > 0.0 (got -1.0)."),
+    (["agent.latent_action_dim=0"], "agent.latent_action_dim must be >= 1 (got 0)."),
+    (["agent=dt", "agent.dt.weight_decay=-0.5"], "agent.dt.weight_decay must be >= 0.0 (got -0.5)."),
 ])
-def test_out_of_range_values_are_one_line_before_anything_is_written(tmp_path, override, message):
+def test_out_of_range_values_are_one_line_before_anything_is_written(tmp_path, overrides, message):
     with pytest.raises(ConfigError) as err:
-        compose([override, f"runtime.results_root={tmp_path}"])
+        compose([*overrides, f"runtime.results_root={tmp_path}"])
     assert str(err.value) == message and not any(tmp_path.iterdir())
 
 

@@ -15,38 +15,49 @@ from repro.config.schema import (
     DatasetKind,
     LearnerName,
     ObjectiveName,
-    check_registry,
     is_offline,
-    learner_names,
     normalize_dataset,
 )
 
 
-def test_check_registry_names_what_is_missing_and_what_is_extra():
-    check_registry("learner", {n: None for n in learner_names()}, learner_names())  # equal keys pass
-    with pytest.raises(ValueError, match=r"missing: iql; not registered: -") as err:
-        check_registry("learner", {n: None for n in learner_names() if n != "iql"}, learner_names())
-    assert "\n" not in str(err.value)
-    with pytest.raises(ValueError, match=r"missing: -; not registered: sac"):
-        check_registry("learner", [*learner_names(), "sac"], learner_names())
-
-
 @pytest.mark.parametrize("module, specs, spec", [
-    ("repro.learners.registry", "BUILTIN_LEARNERS", schema.LearnerSpec("newname", offline=True, label="New")),
-    ("repro.agent.objectives", "BUILTIN_OBJECTIVES", schema.ObjectiveSpec("newname"))])
-def test_a_registry_that_lacks_a_registered_name_fails_at_import(monkeypatch, module: str, specs: str, spec):
-    """Re-running the registry module's import with one registration more whose code it does not have."""
+    ("repro.learners.registry", "BUILTIN_LEARNERS",
+     schema.LearnerSpec("newname", offline=True, label="New", factory="repro.learners.newname:New")),
+    ("repro.agent.objectives", "BUILTIN_OBJECTIVES", schema.ObjectiveSpec("newname", factory="repro.agent.x:New"))])
+def test_a_registry_is_built_from_the_registrations_and_names_a_factory_that_does_not_import(
+        monkeypatch, module: str, specs: str, spec):
+    """The learner and objective tables hold exactly the registered names (no hand table): re-running the registry
+    module's import with one registration more gives that name, whose code does not exist here: one line."""
     mod = importlib.import_module(module)
-    what = "learner" if "learners" in module else "objective"
+    table = mod.LEARNERS if "learners" in module else mod.OBJECTIVES
+    assert list(table) == [s.name for s in (schema.learner_specs() if "learners" in module
+                                            else schema.objective_specs()).values()]
     monkeypatch.setattr(schema, specs, (*getattr(schema, specs), spec))
     schema.learner_specs.cache_clear(), schema.objective_specs.cache_clear()
     try:
-        with pytest.raises(ValueError, match=f"the {what} registry .* missing: newname"):
+        with pytest.raises(schema.PluginError, match="^'newname': cannot import its factory .*newname|x") as err:
             importlib.reload(mod)
+        assert "\n" not in str(err.value)
     finally:
         monkeypatch.undo()
         schema.learner_specs.cache_clear(), schema.objective_specs.cache_clear()
         importlib.reload(mod)
+
+
+def test_a_built_in_registration_is_checked_as_a_plugin_s(monkeypatch):
+    """A built-in spec without a factory, or with a range naming no field of its section, is refused as a plugin's."""
+    for spec, message in ((schema.LearnerSpec("newname", offline=True, label="New"), "factory must be 'module:attr"),
+                          (schema.LearnerSpec("newname", offline=True, label="New", factory="m:a",
+                                              section=schema.CQLConfig, ranges={"alpah": (0.0, True)}),
+                           "ranges names 'alpah'")):
+        monkeypatch.setattr(schema, "BUILTIN_LEARNERS", (*schema.BUILTIN_LEARNERS, spec))
+        schema.learner_specs.cache_clear()
+        try:
+            with pytest.raises(schema.PluginError, match=f"^built-in learner 'newname': {message}"):
+                schema.learner_specs()
+        finally:
+            monkeypatch.undo()
+            schema.learner_specs.cache_clear()
 
 
 def test_the_offline_flag_is_registry_data():
@@ -155,3 +166,35 @@ def test_a_value_dropped_from_the_yaml_is_one_config_error_line():
     with pytest.raises(ConfigError, match=r"^no value for agent\.cql\.n_samples \(") as err:
         compose(["~agent.cql.n_samples=10"])  # Hydra deletes the key (at this value)
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["agent=iql", "offline.dataset=medium", "agent.iql.expectile=1"], "agent.iql.expectile must be in (0.0, 1.0) "
+                                                                      "(got 1.0)."),
+    (["agent.discount=1.5"], "agent.discount must be in [0.0, 1.0] (got 1.5)."),
+    (["agent=cql", "offline.dataset=medium", "agent.critic_target_tau=-0.1"],
+     "agent.critic_target_tau must be in [0.0, 1.0] (got -0.1)."),
+    (["agent=dt", "offline.dataset=medium", "agent.dt.dropout=1.0"],
+     "agent.dt.dropout must be in [0.0, 1.0) (got 1.0)."),
+    (["agent=spr", "agent.objective_params.spr.momentum=1.5"],
+     "agent.objective_params.spr.momentum must be in [0.0, 1.0] (got 1.5)."),
+])
+def test_a_value_above_its_upper_bound_is_one_line_exit_2_before_anything_is_written(tmp_path, overrides, message):
+    """Ranges take an upper bound too (issue 35): IQL's expectile was checked only inside its first update (a
+    traceback after the run directory existed)."""
+    from typer.testing import CliRunner
+
+    from repro_app.cli import app
+
+    out = CliRunner().invoke(app, ["train", *overrides, f"runtime.results_root={tmp_path}"])
+    assert out.exit_code == 2 and out.output.strip() == f"error: {message}", out.output
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_learner_s_ranges_are_checked_in_its_own_runs_only():
+    """``agent=taco`` does not check CQL's or DT's section: those are registered ranges of other learners."""
+    from repro.config.compose import ConfigError, compose
+
+    compose(["agent=taco", "agent.cql.n_samples=0", "agent.dt.context=0"])
+    with pytest.raises(ConfigError, match=r"^agent\.dt\.context must be >= 1 \(got 0\)\.$"):
+        compose(["agent=dt", "offline.dataset=medium", "agent.dt.context=0"])

@@ -202,6 +202,8 @@ def test_a_plugin_setting_out_of_its_registered_range_is_one_line_and_exit_2(tmp
     ({"temperatur": (0.0, False)}, "ranges names 'temperatur', which is not a field of its section."),
     ({"temperature": 0.0}, "ranges['temperature'] must be (low, inclusive)"),
     ({"temperature": (0.0, "no")}, "ranges['temperature'] must be (low, inclusive)"),
+    ({"temperature": (1.0, True, 0.5, True)}, "ranges['temperature'] must be (low, inclusive) or (low, inclusive, "
+                                              "high, inclusive)"),
 ])
 def test_unusable_ranges_are_a_one_line_registration_error(ranges, message: str):
     from taco_repro_toy import RWBCConfig

@@ -13,7 +13,7 @@ import yaml
 from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
-from repro.config.plugins import PluginError
+from repro.config.plugins import Bound, PluginError, bound_text, in_bound
 from repro.config.schema import (
     BUDGET_KEYS,
     AgentConfig,
@@ -24,8 +24,8 @@ from repro.config.schema import (
     learner_names,
     objective_names,
     plugin_conf_dirs,
-    plugin_ranges,
     plugin_section,
+    registered_ranges,
     unread_keys,
 )
 
@@ -235,49 +235,36 @@ def _structure(raw: DictConfig) -> DictConfig:
     return schema
 
 
-# The lowest value of each numeric key (counts, sizes, rates): key -> (lowest allowed, whether the lowest is allowed
-# itself). Checked before anything is built or written: torch's optimizers and the networks would otherwise reject
-# such a value with a traceback after the run directory exists. agent.discount and agent.critic_target_tau: [0, 1].
-RANGES: dict[str, tuple[float, bool]] = {
+# The allowed values of each numeric key every run holds (counts, sizes, rates): key -> a bound
+# (repro/config/plugins.py ``Bound``: (low, inclusive) or (low, inclusive, high, inclusive)); a learner's own section
+# and the objectives' parameters are bounded by their registrations (``ranges``). Checked before anything is built
+# or written: torch's optimizers and the networks would otherwise reject such a value with a traceback after the run
+# directory exists.
+RANGES: dict[str, Bound] = {
     **{key: (1, True) for key in ("agent.K", "agent.batch_size", "agent.nstep", "agent.stddev_schedule.step_scale",
                                   "env.action_repeat", "env.frame_stack", "train.frames", "train.eval_every_frames",
-                                  "train.update_every_steps", "replay.capacity")},
+                                  "train.update_every_steps", "replay.capacity", "agent.feature_dim",
+                                  "agent.hidden_dim", "agent.action_hidden_dim", "agent.latent_action_dim")},
     "agent.lr": (0.0, False),
-    "agent.feature_dim": (1, True),
-    "agent.hidden_dim": (1, True),
-    "agent.action_hidden_dim": (1, True),
     "agent.stddev_clip": (0.0, True),
-    "agent.dt.lr": (0.0, False),
-    "agent.dt.weight_decay": (0.0, True),
-    "agent.dt.grad_clip": (0.0, False),
-    "agent.dt.batch_size": (1, True),
-    "agent.dt.context": (1, True),
-    "agent.dt.embed_dim": (1, True),
-    "agent.dt.n_layers": (1, True),
-    "agent.dt.n_heads": (1, True),
-    "agent.dt.warmup_steps": (1, True),
-    "agent.cql.n_samples": (1, True),
-    "agent.cql.temperature": (0.0, False),
+    "agent.discount": (0.0, True, 1.0, True),
+    "agent.critic_target_tau": (0.0, True, 1.0, True),
     "env.image_size": (16, True),
 }
 
 
 def _check_ranges(cfg: DictConfig) -> None:
-    """One line for a value out of its range (:data:`RANGES`, and the ranges registered with the run's plugin learner
-    and objectives), before anything is built or written."""
-    ranges = {**RANGES, **plugin_ranges(str(cfg.agent.learner), [str(k) for k in cfg.agent.objectives])}
-    for key, (low, inclusive) in ranges.items():
+    """One line for a value out of its range (:data:`RANGES`, and the ranges registered with the run's learner and
+    objectives), before anything is built or written. A null value is not checked."""
+    ranges = {**RANGES, **registered_ranges(str(cfg.agent.learner), [str(k) for k in cfg.agent.objectives])}
+    for key, bound in ranges.items():
         value = OmegaConf.select(cfg, key)
         if value is None:
             continue
-        if value < low or (value == low and not inclusive):
-            bound = f">= {low}" if inclusive else f"> {low}"
-            raise ConfigError(f"{key} must be {bound} (got {value}).")
-    if not 0.0 <= cfg.agent.discount <= 1.0 or not 0.0 <= cfg.agent.critic_target_tau <= 1.0:
-        raise ConfigError("agent.discount and agent.critic_target_tau must be in [0, 1].")
-    latent = cfg.agent.latent_action_dim
-    if latent is not None and latent < 1:
-        raise ConfigError(f"agent.latent_action_dim must be null (from |A|) or >= 1 (got {latent}).")
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise ConfigError(f"{key} must be a number {bound_text(bound)} (got {value!r}).")
+        if not in_bound(value, bound):
+            raise ConfigError(f"{key} must be {bound_text(bound)} (got {value}).")
 
 
 def _check_learner(cfg: DictConfig) -> None:
@@ -302,9 +289,6 @@ def _check_learner(cfg: DictConfig) -> None:
             raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
     if cfg.offline.eval_episodes < 0:
         raise ConfigError(f"offline.eval_episodes must be >= 0 (got {cfg.offline.eval_episodes}).")
-    cosine = cfg.agent.iql.actor_lr_cosine_updates
-    if cosine is not None and cosine < 1:
-        raise ConfigError(f"agent.iql.actor_lr_cosine_updates must be null or >= 1 (got {cosine}).")
     if learner == LearnerName.cql and cfg.agent.cql.alpha is None and dataset is not None:
         cfg.agent.cql.alpha = _table6_alpha(str(cfg.task.name), str(dataset))
 

@@ -21,7 +21,11 @@ from typing import TypeVar
 LEARNER_GROUP = "taco_repro.learners"
 OBJECTIVE_GROUP = "taco_repro.objectives"
 NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
-Ranges = Mapping[str, tuple[float, bool]]  # setting -> (lowest allowed, whether the lowest itself is allowed)
+# setting -> its allowed values: (low, inclusive) for a lower bound alone, (low, inclusive, high, inclusive) for both
+# (low None: an upper bound alone); ``inclusive``: whether the bound itself is allowed. (0.0, False): > 0;
+# (0.0, True, 1.0, True): in [0, 1].
+Bound = tuple[float, bool] | tuple[float | None, bool, float, bool]
+Ranges = Mapping[str, Bound]
 
 
 class PluginError(ValueError):
@@ -36,15 +40,16 @@ class LearnerSpec:
     (else in an environment, as the online actor-critic). ``label``: the paper-style method label of its runs in
     tables and figures. ``section``: its typed settings, a dataclass whose values are the ``agent.<name>`` section
     of its agent files (read by it alone: other learners' runs neither hold nor check it). ``factory``: the learner
-    class (or a callable with its signature, ``repro.learners.registry.LearnerFactory``) as ``"module:attribute"``;
-    None only for the built-in learners, whose classes ``repro/learners/registry.py`` imports. ``conf``: a folder
-    holding ``agent/<agent>.yaml`` files that use it (added to Hydra's search path, so ``agent=<agent>`` composes).
-    ``ranges``: the lowest value of numeric fields of ``section``, ``{field: (low, inclusive)}``, in the form of
-    ``repro.config.compose.RANGES`` and checked with it (one line, exit 2, before a run writes anything); a null
-    value is not checked. ``named_by_objectives``: its label names its runs without objectives only; a run with
-    objectives is named by their labels alone (the built-in online actor-critic: the paper's TACO, SPR, CURL are
-    DrQ-v2 with objectives); otherwise a run's label is the learner's label, then its objectives'
-    (``analysis.identity.method_label``).
+    class (or a callable with its signature, ``repro.learners.registry.LearnerFactory``) as ``"module:attribute"``
+    (the built-in learners' too: ``repro/learners/registry.py`` builds its table from the registrations).
+    ``conf``: a folder holding ``agent/<agent>.yaml`` files that use it (added to Hydra's search path, so
+    ``agent=<agent>`` composes).
+    ``ranges``: the allowed values of numeric fields of ``section``, ``{field: bound}`` (a :data:`Bound`:
+    ``(low, inclusive)`` or ``(low, inclusive, high, inclusive)``), in the form of ``repro.config.compose.RANGES``
+    and checked with it (one line, exit 2, before a run writes anything); a null value is not checked.
+    ``named_by_objectives``: its label names its runs without objectives only; a run with objectives is named by
+    their labels alone (the built-in online actor-critic: the paper's TACO, SPR, CURL are DrQ-v2 with objectives);
+    otherwise a run's label is the learner's label, then its objectives' (``analysis.identity.method_label``).
     """
 
     name: str
@@ -98,7 +103,7 @@ def check_spec(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
 
 
 def check_ranges(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
-    """PluginError (one line) for ``ranges`` that cannot be checked: not ``{name: (number, bool)}``, or (a
+    """PluginError (one line) for ``ranges`` that cannot be checked: not ``{name: bound}`` (:data:`Bound`), or (a
     learner's) naming no field of its section."""
     if not isinstance(spec.ranges, Mapping):
         raise PluginError(f"{where}: ranges must be a mapping setting -> (low, inclusive) (got {spec.ranges!r}).")
@@ -108,10 +113,46 @@ def check_ranges(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
     for key, bound in spec.ranges.items():
         if known is not None and key not in known:
             raise PluginError(f"{where}: ranges names '{key}', which is not a field of its section.")
-        if not (isinstance(bound, tuple) and len(bound) == 2 and isinstance(bound[0], (int, float))
-                and not isinstance(bound[0], bool) and isinstance(bound[1], bool)):
-            raise PluginError(f"{where}: ranges['{key}'] must be (low, inclusive), e.g. (0.0, False) for > 0 "
+        if not is_bound(bound):
+            raise PluginError(f"{where}: ranges['{key}'] must be (low, inclusive) or (low, inclusive, high, "
+                              f"inclusive), e.g. (0.0, False) for > 0, (0.0, False, 1.0, False) for in (0, 1) "
                               f"(got {bound!r}).")
+
+
+def _number(x: object) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def is_bound(bound: object) -> bool:
+    """Whether ``bound`` is a :data:`Bound`."""
+    if not isinstance(bound, tuple) or len(bound) not in (2, 4):
+        return False
+    if len(bound) == 2:
+        return _number(bound[0]) and isinstance(bound[1], bool)
+    low, low_in, high, high_in = bound
+    return ((low is None or _number(low)) and isinstance(low_in, bool) and _number(high)
+            and isinstance(high_in, bool) and (low is None or low <= high))
+
+
+def bound_text(bound: Bound) -> str:
+    """``> 0.0``, ``>= 1``, ``in (0.0, 1.0)``, ``in [0.0, 1.0]``, ``<= 1.0``: the allowed values in words."""
+    if len(bound) == 2:
+        return f"{'>=' if bound[1] else '>'} {bound[0]}"
+    low, low_in, high, high_in = bound
+    if low is None:
+        return f"{'<=' if high_in else '<'} {high}"
+    return f"in {'[' if low_in else '('}{low}, {high}{']' if high_in else ')'}"
+
+
+def in_bound(value: float, bound: Bound) -> bool:
+    """Whether ``value`` is allowed by ``bound``."""
+    low, low_in = bound[0], bound[1]
+    if low is not None and (value < low or (value == low and not low_in)):
+        return False
+    if len(bound) == 4:
+        high, high_in = bound[2], bound[3]
+        return value < high or (value == high and high_in)
+    return True
 
 
 def discover(group: str, kind: type[Spec]) -> tuple[Spec, ...]:
