@@ -144,6 +144,8 @@ def _sections(section: type = schema.RunConfig):
         kind = typing.get_type_hints(section)[f.name]
         if isinstance(kind, type) and dataclasses.is_dataclass(kind):
             yield from _sections(kind)
+    if section is schema.RunConfig:  # the learners' own sections (agent.<learner>), the built-in ones'
+        yield from (s.section for s in schema.BUILTIN_LEARNERS if s.section is not None)
 
 
 def test_the_schema_gives_types_only_and_the_yaml_every_value():
@@ -155,8 +157,10 @@ def test_the_schema_gives_types_only_and_the_yaml_every_value():
                     if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING]
     assert not with_default, with_default
     for agent in config_groups()["agent"]:
-        cfg = compose([f"agent={agent}", "offline.dataset=medium", "agent.cql.alpha=1.0"]
-                      if is_offline(agent_learner(agent)) else [f"agent={agent}"])
+        learner = agent_learner(agent)
+        alpha = ["agent.cql.alpha=1.0"] if learner == "cql" else []
+        over = ["offline.dataset=medium", *alpha] if is_offline(learner) else []
+        cfg = compose([f"agent={agent}", *over])
         assert not OmegaConf.missing_keys(cfg), agent
 
 
@@ -164,7 +168,7 @@ def test_a_value_dropped_from_the_yaml_is_one_config_error_line():
     from repro.config.compose import ConfigError, compose
 
     with pytest.raises(ConfigError, match=r"^no value for agent\.cql\.n_samples \(") as err:
-        compose(["~agent.cql.n_samples=10"])  # Hydra deletes the key (at this value)
+        compose(["agent=cql", "offline.dataset=medium", "~agent.cql.n_samples=10"])  # Hydra deletes it (at this value)
     assert "\n" not in str(err.value)
 
 
@@ -191,10 +195,20 @@ def test_a_value_above_its_upper_bound_is_one_line_exit_2_before_anything_is_wri
     assert not list(tmp_path.iterdir())
 
 
-def test_a_learner_s_ranges_are_checked_in_its_own_runs_only():
-    """``agent=taco`` does not check CQL's or DT's section: those are registered ranges of other learners."""
-    from repro.config.compose import ConfigError, compose
+def test_a_run_holds_and_reads_its_own_learner_s_section_only():
+    """A TACO run has no DT, CQL, IQL or TD3+BC section (issue 35): ``agent.dt.context=0`` is an unknown key there
+    (as a plugin learner's would be), and one added with ``++`` (a sweep's override common to every agent) is dropped
+    unread, unchecked; the DT run checks it."""
+    from repro.config.compose import ConfigError, compose, run_keys
 
-    compose(["agent=taco", "agent.cql.n_samples=0", "agent.dt.context=0"])
+    base = compose(["agent=taco"])
+    assert not {"cql", "td3bc", "iql", "dt"} & set(base.agent) and "toy_rwbc" not in base.agent
+    with pytest.raises(ConfigError, match=r"^unknown config key 'agent\.dt\.context'\.") as err:
+        compose(["agent=taco", "agent.dt.context=0"])
+    assert "\n" not in str(err.value)
+    dropped = compose(["agent=taco", "++agent.dt.context=0", "++agent.cql.n_samples=0"])
+    assert run_keys(dropped) == run_keys(base)
+    cql = compose(["agent=cql", "offline.dataset=medium", "++agent.dt.context=0"])
+    assert "dt" not in cql.agent and cql.agent.cql.n_samples == 10
     with pytest.raises(ConfigError, match=r"^agent\.dt\.context must be >= 1 \(got 0\)\.$"):
         compose(["agent=dt", "offline.dataset=medium", "agent.dt.context=0"])

@@ -15,6 +15,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from repro.config.plugins import Bound, PluginError, bound_text, in_bound
 from repro.config.schema import (
+    AGENT_FIELDS,
     BUDGET_KEYS,
     AgentConfig,
     LearnerName,
@@ -24,8 +25,8 @@ from repro.config.schema import (
     learner_names,
     objective_names,
     plugin_conf_dirs,
-    plugin_section,
     registered_ranges,
+    section_type,
     unread_keys,
 )
 
@@ -216,8 +217,9 @@ def validate(raw: DictConfig) -> DictConfig:
 
 
 def _structure(raw: DictConfig) -> DictConfig:
-    """The typed schema for ``raw``: :class:`RunConfig`, and the section of its learner when a plugin registers one
-    (``agent.<learner>``: only that learner's runs hold it). ConfigError for a learner nobody registered."""
+    """The typed schema for ``raw``: :class:`RunConfig`, and the section its learner registers (``agent.<learner>``:
+    only that learner's runs hold it). Another registered learner's section in ``raw`` (``++agent.dt.batch_size=8``
+    given to every agent of a sweep) is removed from it, unread. ConfigError for a learner nobody registered."""
     learner = str(OmegaConf.select(raw, "agent.learner", default=""))
     try:
         names, _ = learner_names(), objective_names()  # every registration loads (one line if one does not)
@@ -225,8 +227,14 @@ def _structure(raw: DictConfig) -> DictConfig:
         raise ConfigError(str(exc)) from None
     if learner not in names:
         raise ConfigError(f"agent.learner={learner} is not one of {', '.join(names)}.")
+    agent_node = raw.get("agent")
+    if isinstance(agent_node, DictConfig):
+        with open_dict(agent_node):
+            for other in names:
+                if other != learner and other in agent_node and other not in AGENT_FIELDS:
+                    agent_node.pop(other)
     schema = OmegaConf.structured(RunConfig)
-    section = plugin_section(learner)
+    section = section_type(learner)
     if section is not None:
         agent = OmegaConf.structured(AgentConfig)
         with open_dict(agent):

@@ -297,8 +297,9 @@ class DTConfig:
 
 @dataclass
 class AgentConfig:
-    """An agent (conf/agent/<agent>.yaml; ``learner`` and ``stddev_schedule.step_scale`` from conf/config.yaml
-    unless the agent file sets them, the four learner sections from conf/agent/shared/)."""
+    """What every learner's agent shares (conf/agent/<agent>.yaml; ``learner`` and ``stddev_schedule.step_scale``
+    from conf/config.yaml unless the agent file sets them). A learner's own settings are its registered ``section``,
+    composed by its own agent files only (a built-in one's from conf/agent/shared/)."""
 
     name: str
     learner: str  # a registered learner (learner_names(); checked by repro.config.compose.validate)
@@ -322,10 +323,8 @@ class AgentConfig:
     compile: bool
     amp: bool
     fast: bool  # agent.fast: repro/agent/fast.py resolves what it turns on
-    cql: CQLConfig
-    td3bc: TD3BCConfig
-    iql: IQLConfig
-    dt: DTConfig
+    # and, in the runs of a learner registered with a ``section``, that section as ``agent.<learner>``
+    # (compose._structure adds it; the learner reads it with :func:`learner_section`)
 
 
 @dataclass
@@ -417,7 +416,7 @@ class RunConfig:
 
 def choice_fields(section: type = RunConfig, prefix: str = "") -> dict[str, type[Choice]]:
     """Dotted config key -> its :class:`Choice` Enum, for every field of ``section`` (and of its sub-sections)
-    typed with one."""
+    typed with one; for the whole :class:`RunConfig`, the registered learners' sections (``agent.<learner>``) too."""
     hints = typing.get_type_hints(section)
     out: dict[str, type[Choice]] = {}
     for f in dataclasses.fields(section):
@@ -426,6 +425,10 @@ def choice_fields(section: type = RunConfig, prefix: str = "") -> dict[str, type
             out[prefix + f.name] = kind
         elif isinstance(kind, type) and dataclasses.is_dataclass(kind):
             out.update(choice_fields(kind, f"{prefix}{f.name}."))
+    if section is RunConfig and not prefix:
+        for spec in learner_specs().values():
+            if spec.section is not None:
+                out.update(choice_fields(spec.section, f"agent.{spec.name}."))
     return out
 
 
@@ -535,13 +538,11 @@ def plugin_conf_dirs() -> tuple[str, ...]:
     return tuple(dict.fromkeys(str(s.conf) for s in specs if s.conf is not None))
 
 
-def plugin_section(learner: str) -> type | None:
-    """The typed section a plugin learner adds as ``agent.<learner>`` (None for a built-in learner, whose sections
-    are fields of :class:`AgentConfig`, and for a learner without one)."""
+def section_type(learner: str) -> type | None:
+    """The typed section a learner registers as ``agent.<learner>`` (None for a learner without one, or one nobody
+    registers)."""
     spec = learner_specs().get(str(learner))
-    if spec is None or spec.section is None or spec.name in AGENT_FIELDS:
-        return None
-    return spec.section
+    return None if spec is None else spec.section
 
 
 def registered_ranges(learner: str, objectives: Iterable[str]) -> dict[str, Bound]:
@@ -565,7 +566,7 @@ S = TypeVar("S")
 
 
 def learner_section(agent: AgentConfig, kind: type[S]) -> S:
-    """A plugin learner's own typed section (``agent.<learner>``, an instance of ``kind``) of a typed agent config."""
+    """A learner's own typed section (``agent.<learner>``, an instance of ``kind``) of a typed agent config."""
     section = vars(agent).get(str(agent.learner))
     if not isinstance(section, kind):
         raise TypeError(f"agent.{agent.learner} is not a {kind.__name__} (is {agent.learner} registered with "

@@ -111,6 +111,12 @@ class SequenceLearner(Protocol):
     def make_sampler(self, episodes: Sequence[Mapping[str, np.ndarray]], seed: int) -> Sampler:
         ...
 
+    @staticmethod
+    def max_episode_length(cfg: AgentConfig) -> int | None:
+        """The most steps a dataset episode may have for this learner's config (DT: the size of its timestep
+        embedding), checked when the dataset loads, before the learner is built; None: any."""
+        ...
+
 
 @runtime_checkable
 class EpisodicActor(Protocol):

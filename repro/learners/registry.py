@@ -19,13 +19,22 @@ LearnerFactory = Callable[..., Learner]  # (cfg, obs_shape, action_dim, device=,
 
 LEARNERS: dict[str, LearnerFactory] = {spec.name: cast(LearnerFactory, load_factory(spec))
                                        for spec in learner_specs().values()}
-__all__ = ["LEARNERS", "LearnerFactory", "build_learner", "samples_episodes"]
+__all__ = ["LEARNERS", "LearnerFactory", "build_learner", "max_episode_length", "samples_episodes"]
 
 
 def samples_episodes(name: str) -> bool:
     """Whether learner ``name`` trains on episode windows (``make_sampler``) instead of a transition replay."""
     factory = LEARNERS[name]
     return isinstance(factory, type) and issubclass(factory, SequenceLearner)
+
+
+def max_episode_length(cfg: AgentConfig) -> int | None:
+    """The most steps a dataset episode may have for the learner of ``cfg`` (a :class:`SequenceLearner`'s
+    ``max_episode_length``; None: any), known before the learner is built."""
+    factory = LEARNERS[cfg.learner]
+    if isinstance(factory, type) and issubclass(factory, SequenceLearner):
+        return factory.max_episode_length(cfg)
+    return None
 
 
 def build_learner(cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
