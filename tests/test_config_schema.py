@@ -212,3 +212,21 @@ def test_a_run_holds_and_reads_its_own_learner_s_section_only():
     assert "dt" not in cql.agent and cql.agent.cql.n_samples == 10
     with pytest.raises(ConfigError, match=r"^agent\.dt\.context must be >= 1 \(got 0\)\.$"):
         compose(["agent=dt", "offline.dataset=medium", "agent.dt.context=0"])
+
+
+def test_no_generic_module_names_a_built_in_learner():
+    """What a learner resolves from its config and data is its own hook (``LearnerSpec.resolve``: CQL's Table-6
+    alpha; ``max_episode_length``: DT's timestep embedding): the modules every run goes through name no learner, as
+    an attribute (``cfg.agent.cql``, ``LearnerName.cql``) or a string constant (``"cql_alpha"``, ``"dt"``)."""
+    import ast
+    from pathlib import Path
+
+    names = {s.name for s in schema.BUILTIN_LEARNERS} - {"actor_critic"}
+    names |= {f"{n}_{field}" for n in names for field in ("alpha", "max_timestep")}
+    root = Path(schema.__file__).resolve().parents[1]
+    for module in ("config/compose.py", "runs/rundir.py", "train/build.py", "train/api.py", "train/start.py"):
+        tree = ast.parse((root / module).read_text(encoding="utf-8"))
+        named = [(node.lineno, node.attr if isinstance(node, ast.Attribute) else node.value) for node in ast.walk(tree)
+                 if isinstance(node, ast.Attribute) and node.attr in names
+                 or isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in names]
+        assert not named, (module, named)

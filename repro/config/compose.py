@@ -13,7 +13,7 @@ import yaml
 from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
-from repro.config.plugins import Bound, PluginError, bound_text, in_bound
+from repro.config.plugins import Bound, PluginError, bound_text, in_bound, load_factory
 from repro.config.schema import (
     AGENT_FIELDS,
     BUDGET_KEYS,
@@ -23,6 +23,7 @@ from repro.config.schema import (
     choice_fields,
     is_offline,
     learner_names,
+    learner_specs,
     objective_names,
     plugin_conf_dirs,
     registered_ranges,
@@ -297,22 +298,20 @@ def _check_learner(cfg: DictConfig) -> None:
             raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
     if cfg.offline.eval_episodes < 0:
         raise ConfigError(f"offline.eval_episodes must be >= 0 (got {cfg.offline.eval_episodes}).")
-    if learner == LearnerName.cql and cfg.agent.cql.alpha is None and dataset is not None:
-        cfg.agent.cql.alpha = _table6_alpha(str(cfg.task.name), str(dataset))
+    _resolve(cfg)
 
 
-def _table6_alpha(task: str, dataset: str) -> float:
-    """CQL's alpha from the paper's Table 6 for a dataset kind; a folder or an unlisted pair needs agent.cql.alpha."""
-    from repro.config.paper_defaults import cql_alpha
-
-    if is_folder_value(dataset):
-        raise ConfigError(f"agent.cql.alpha: Table 6 gives alpha per task and dataset kind, not for the folder "
-                          f"'{dataset}'; set agent.cql.alpha (one of 0.5, 1, 2, 4, 8 in the paper).")
+def _resolve(cfg: DictConfig) -> None:
+    """What the run's learner resolves from its config (``LearnerSpec.resolve``: CQL's Table-6 alpha), in place."""
+    spec = learner_specs().get(str(cfg.agent.learner))
+    if spec is None or spec.resolve is None:
+        return
     try:
-        return float(cql_alpha(task, dataset))
-    except ValueError:
-        raise ConfigError(f"agent.cql.alpha: Table 6 has no value for task {task} and dataset {dataset}; "
-                          "set agent.cql.alpha.") from None
+        resolve = load_factory(spec, "resolve")
+        assert callable(resolve)
+        resolve(cfg)
+    except (PluginError, ValueError) as exc:
+        raise ConfigError(str(exc).splitlines()[0]) from None
 
 
 def typed(cfg: DictConfig) -> RunConfig:

@@ -50,6 +50,10 @@ class LearnerSpec:
     ``named_by_objectives``: its label names its runs without objectives only; a run with objectives is named by
     their labels alone (the built-in online actor-critic: the paper's TACO, SPR, CURL are DrQ-v2 with objectives);
     otherwise a run's label is the learner's label, then its objectives' (``analysis.identity.method_label``).
+    ``resolve``: a function ``(cfg: DictConfig) -> None`` as ``"module:attribute"`` (light: the config layer calls
+    it) that fills what the learner resolves from its run's config once it is validated, in place, before anything
+    is written (CQL's alpha from the paper's Table 6 when ``agent.cql.alpha`` is null); ValueError (one line) for a
+    config it cannot resolve. So no generic module names a learner.
     """
 
     name: str
@@ -60,6 +64,7 @@ class LearnerSpec:
     conf: str | Path | None = None
     ranges: Ranges = field(default_factory=dict)
     named_by_objectives: bool = False
+    resolve: str | None = None
 
 
 @dataclass(frozen=True)
@@ -94,6 +99,8 @@ def check_spec(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
         raise PluginError(f"{where}: name '{spec.name}' must be lower-case letters, digits and '_'.")
     if spec.factory is None or ":" not in spec.factory:
         raise PluginError(f"{where}: factory must be 'module:attribute' (got {spec.factory!r}).")
+    if isinstance(spec, LearnerSpec) and spec.resolve is not None and ":" not in spec.resolve:
+        raise PluginError(f"{where}: resolve must be 'module:attribute' (got {spec.resolve!r}).")
     if spec.conf is not None and not (Path(spec.conf) / "agent").is_dir():
         raise PluginError(f"{where}: conf folder {spec.conf} has no agent/ folder.")
     if isinstance(spec, LearnerSpec) and spec.section is not None and not (
@@ -174,15 +181,17 @@ def discover(group: str, kind: type[Spec]) -> tuple[Spec, ...]:
     return tuple(out)
 
 
-def load_factory(spec: LearnerSpec | ObjectiveSpec) -> object:
-    """The object a plugin's ``factory`` names, imported by ``pkgutil.resolve_name``; PluginError (one line) when it
-    fails. Called by the layer that builds it (``repro.learners.registry``, ``repro.agent.objectives``); a plugin's
-    modules are outside this project, so tests/test_layers.py's one-way rule does not apply to them."""
+def load_factory(spec: LearnerSpec | ObjectiveSpec, attribute: str = "factory") -> object:
+    """The object a registration's ``factory`` (or its ``resolve``) names, imported by ``pkgutil.resolve_name``;
+    PluginError (one line) when it fails. Called by the layer that builds it (``repro.learners.registry``,
+    ``repro.agent.objectives``; ``resolve``: the config); a plugin's modules are outside this project, so
+    tests/test_layers.py's one-way rule does not apply to them."""
     import pkgutil
 
-    assert spec.factory is not None
+    target = getattr(spec, attribute)
+    assert isinstance(target, str)
     try:
-        return pkgutil.resolve_name(spec.factory)
+        return pkgutil.resolve_name(target)
     except (ImportError, AttributeError, ValueError) as exc:
-        raise PluginError(f"'{spec.name}': cannot import its factory {spec.factory}: {type(exc).__name__}: {exc}") \
+        raise PluginError(f"'{spec.name}': cannot import its {attribute} {target}: {type(exc).__name__}: {exc}") \
             from None

@@ -445,6 +445,7 @@ BUILTIN_LEARNERS = (
     LearnerSpec(LearnerName.td3bc.value, offline=True, label="TD3+BC", section=TD3BCConfig,
                 factory="repro.learners.td3bc:TD3BC", ranges={"alpha": _NON_NEGATIVE}),
     LearnerSpec(LearnerName.cql.value, offline=True, label="CQL", section=CQLConfig, factory="repro.learners.cql:CQL",
+                resolve="repro.config.paper_defaults:resolve_cql_alpha",
                 ranges={"alpha": _NON_NEGATIVE, "n_samples": _AT_LEAST_1, "temperature": _POSITIVE}),
     LearnerSpec(LearnerName.iql.value, offline=True, label="IQL", section=IQLConfig, factory="repro.learners.iql:IQL",
                 ranges={"expectile": _OPEN_UNIT, "beta": _NON_NEGATIVE, "max_weight": _POSITIVE,

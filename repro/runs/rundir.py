@@ -29,6 +29,7 @@ from repro.runs.runformat import (
     META,
     REPLAY,
     RESOLVED,
+    RESOLVED_FIELDS,
     WRITER_LOCK,
     reached_budgets,
     read_done,
@@ -125,10 +126,11 @@ def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
 
     Read from the learner (``repro.learners.base.Learner``), not recomputed: the latent action dim is its
     ``action_encoder.latent_dim`` (None without an action encoder), the objectives are its active ``weights``. A
-    learner adds or replaces fields (an offline learner: ``algorithm``, ``cql_alpha``, ...) through ``resolved``.
+    learner adds or replaces fields (CQL: ``cql_alpha``, ...) through ``resolved``; a field no learner gives is null.
     """
     encoder = learner.action_encoder
-    values: dict[str, Any] = {
+    values: dict[str, Any] = dict.fromkeys(RESOLVED_FIELDS)
+    values.update({
         "learner": rc.agent.learner,
         "K": int(rc.agent.K),
         "batch_size": int(rc.agent.batch_size),
@@ -138,8 +140,7 @@ def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
         "latent_action_dim": None if encoder is None else int(encoder.latent_dim),
         "objectives": {str(k): float(w) for k, w in learner.weights.items()},
         "dataset": rc.offline.dataset if is_offline(rc.agent.learner) else None,
-        "cql_alpha": None,
-    }
+    })
     values.update(learner.resolved)
     return values
 
