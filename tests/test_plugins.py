@@ -130,6 +130,27 @@ def test_a_registered_label_is_its_own_and_companions_are_registered(monkeypatch
             schema.objective_specs.cache_clear()
 
 
+def test_docs_extending_states_the_files_a_plugin_method_costs():
+    """docs/extending.md's table counts the example's files: those that name the method or hold its code. A file the
+    method needs and the table does not count (a section YAML of its own, say) names it, and fails here."""
+    root = Path(__file__).resolve().parent
+    example = root / "plugin_example"
+    costs = {"toy_rwbc": ["pyproject.toml", "taco_repro_toy/__init__.py", "taco_repro_toy/learner.py",
+                          "taco_repro_toy/losses.py", "taco_repro_toy/conf/agent/toy_rwbc.yaml"],
+             "toy_inv": ["pyproject.toml", "taco_repro_toy/__init__.py", "taco_repro_toy/objective.py",
+                         "taco_repro_toy/losses.py", "taco_repro_toy/conf/agent/toy_inv.yaml"]}
+    code = {"toy_rwbc": ("RWBC", "return_weights", "weighted_bc_loss"),
+            "toy_inv": ("InverseDynamics", "inverse_dynamics_loss")}
+    files = [p for p in example.rglob("*") if p.is_file() and p.suffix in (".py", ".toml", ".yaml")]
+    for method, listed in costs.items():
+        naming = sorted(str(p.relative_to(example)) for p in files
+                        if any(word in p.read_text() for word in (method, *code[method])))
+        assert naming == sorted(listed), (method, naming)
+    table = (root.parent / "docs" / "extending.md").read_text()
+    assert f"| an offline (or online) learner | {len(costs['toy_rwbc'])} files:" in table
+    assert f"| an auxiliary objective | {len(costs['toy_inv'])} files:" in table
+
+
 def test_the_update_bench_times_the_online_plugin_learner(tmp_path):
     """`repro bench --algo toy_utd`: the plugin's online learner is built through the registry and timed."""
     args = ["bench", "--algo", "toy_utd", "--batch", "2", "--repeats", "1", "--warmup", "0", "--results",

@@ -54,9 +54,6 @@ class BC(LearnerBase, ModuleSet):
         """Deterministic action in [-1, 1] for float observations (B, C, H, W)."""
         return self.actor(self.encoder(obs), 1.0).mean
 
-    def stddev(self, step: int) -> float:
-        return 0.0
-
     @torch.no_grad()
     def act(self, obs: np.ndarray, step: int, eval_mode: bool) -> np.ndarray:
         obs_t = torch.as_tensor(obs, device=self.device).float().unsqueeze(0)
