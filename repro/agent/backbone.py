@@ -316,6 +316,11 @@ class BackboneLearner(LearnerBase, ModuleSet):
     def action_encoder(self) -> ActionEncoder | None:
         return self.backbone.action_encoder
 
+    def acting_modules(self) -> dict[str, nn.Module]:
+        """The encoder and the actor: what a recorded policy snapshot keeps (the online protocol's hook)."""
+        modules = self.modules()
+        return {"encoder": modules["encoder"], "actor": modules["actor"]}
+
     def stddev(self, step: int) -> float:
         return self.cfg.stddev_schedule(step)
 

@@ -57,7 +57,7 @@ class ModuleSet:
 
 
 class LearnerBase:
-    """The defaults of the learner protocol's optional hooks (``repro/learners/base.py`` ``Learner``), for a learner
+    """The defaults of the learner protocol's optional hooks (``repro/agent/protocol.py`` ``Learner``), for a learner
     that does not need them: no auxiliary objectives, no action encoder, ``agent.batch_size`` transitions per
     update, nothing to record in resolved.json and no use for the dataset's returns."""
 

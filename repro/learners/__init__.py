@@ -1,6 +1,6 @@
-"""Learners: one protocol (base.Learner) and a registry keyed by ``agent.learner``."""
+"""Learners: the protocol (repro/agent/protocol.py, re-exported here) and the registry keyed by ``agent.learner``."""
 
-from repro.learners.base import (
+from repro.agent.protocol import (
     EpisodicActor,
     Learner,
     LearnerBase,

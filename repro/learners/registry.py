@@ -11,9 +11,9 @@ from typing import cast
 
 import torch
 
+from repro.agent.protocol import Learner, SequenceLearner
 from repro.config.plugins import load_factory
 from repro.config.schema import AgentConfig, learner_specs
-from repro.learners.base import Learner, SequenceLearner
 
 LearnerFactory = Callable[..., Learner]  # (cfg, obs_shape, action_dim, device=, explore_steps=) -> Learner
 

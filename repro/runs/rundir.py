@@ -13,7 +13,7 @@ import sys
 import time
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 from omegaconf import DictConfig, OmegaConf
@@ -37,6 +37,9 @@ from repro.runs.runformat import (
     run_path,
     run_state,
 )
+
+if TYPE_CHECKING:  # the type only: rundir is read by commands that build no learner (torch stays unimported)
+    from repro.agent.protocol import Learner
 
 __all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "REPLAY", "RESOLVED", "WRITER_LOCK", "RunDirMismatch",
            "config_text", "read_done", "run_budget", "read_meta", "read_saved_config", "reached_budgets",
@@ -121,10 +124,10 @@ def saved_config(path: str | Path) -> DictConfig:
     return validate(OmegaConf.create(saved))
 
 
-def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
+def resolved_values(rc: RunConfig, learner: Learner) -> dict[str, Any]:
     """What ``learner`` (as built for ``rc``) actually uses, as resolved.json records it (runformat.RESOLVED_FIELDS).
 
-    Read from the learner (``repro.learners.base.Learner``), not recomputed: the latent action dim is its
+    Read from the learner (``repro.agent.protocol.Learner``), not recomputed: the latent action dim is its
     ``action_encoder.latent_dim`` (None without an action encoder), the objectives are its active ``weights``. A
     learner adds or replaces fields (CQL: ``cql_alpha``, ...) through ``resolved``; a field no learner gives is null.
     """

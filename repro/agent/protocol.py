@@ -1,4 +1,6 @@
-"""The learner protocol: what a trainer (online or offline) and the rest of the tree need from a learner.
+"""The learner protocol: what a trainer (online or offline) and the rest of the tree need from a learner. It lives
+beside its defaults (``LearnerBase``, ``repro/agent/modules.py``) in layer 2, so that every layer from 2 up names a
+learner by this type (``repro.runs.rundir.resolved_values``, ``repro.data.record``), never ``Any``.
 
 A learner owns its networks and optimizers. ``update`` takes one batch of tensors as returned by
 ``ReplayBuffer.sample(batch_size, **learner.sample_options)`` and returns its metrics as detached 0-d tensors
@@ -87,9 +89,15 @@ class Learner(Protocol):
 
 @runtime_checkable
 class OnlineLearner(Learner, Protocol):
-    """What the online loop needs on top: the exploration std at a step (a train.csv column)."""
+    """What the online loop needs on top: the exploration std at a step (a train.csv column), and the modules that
+    act (``runtime.record=true`` keeps their state after each evaluation, ``repro/data/record.py``)."""
 
     def stddev(self, step: int) -> float:
+        ...
+
+    def acting_modules(self) -> Mapping[str, torch.nn.Module]:
+        """The modules acting needs, by name (the DrQ-v2 backbone's ``encoder`` and ``actor``): a recorded policy
+        snapshot holds their state dicts."""
         ...
 
 
