@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from repro.agent.losses import Metrics
-from repro.agent.modules import LearnerBase
+from repro.agent.modules import LearnerBase, count_parameters
 from repro.agent.networks import ActionEncoder
 from repro.config.schema import AgentConfig
 
@@ -145,14 +145,3 @@ class ReturnConditioned(EpisodicActor, Protocol):
 
     def set_target_return(self, value: float) -> None:
         ...
-
-
-def count_parameters(modules: dict[str, torch.nn.Module]) -> list[tuple[str, int]]:
-    """Trainable parameters per named module, a parameter shared by two modules counted at the first."""
-    rows: list[tuple[str, int]] = []
-    seen: set[int] = set()
-    for name, mod in modules.items():
-        params = [p for p in mod.parameters() if p.requires_grad and id(p) not in seen]
-        seen.update(id(p) for p in params)
-        rows.append((name, sum(p.numel() for p in params)))
-    return rows

@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from repro.agent.aug import RandomShift
+from repro.agent.backbone import optimize
 from repro.agent.losses import Metrics
 from repro.agent.modules import LearnerBase, ModuleSet
 from repro.agent.networks import Actor, Encoder
@@ -61,9 +62,5 @@ class BC(LearnerBase, ModuleSet):
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         loss = bc_loss(self.policy(self.aug(batch["obs"].float())), batch["action"])
-        self.encoder_opt.zero_grad(set_to_none=True)
-        self.actor_opt.zero_grad(set_to_none=True)
-        loss.backward()
-        self.actor_opt.step()
-        self.encoder_opt.step()
+        optimize(loss, self.actor_opt, self.encoder_opt)
         return {"bc_loss": loss.detach()}

@@ -19,8 +19,7 @@ import torch
 from torch import nn
 
 from repro.agent.losses import Metrics
-from repro.agent.modules import LearnerBase
-from repro.agent.protocol import count_parameters
+from repro.agent.modules import LearnerBase, count_parameters
 from repro.config.schema import AgentConfig, DTConfig, learner_section
 from repro.learners.dt_model import DecisionTransformer, EvalContext, SequenceSampler, batch_to_tensors, make_optimizer
 from repro.learners.losses.dt import action_loss

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
+from repro.agent import fast
 from repro.agent.backbone import BackboneLearner, optimize
 from repro.agent.losses import CRITIC_METRICS, Metrics
 from repro.agent.networks import mlp, orthogonal_init, trunk
@@ -74,7 +75,7 @@ class IQL(BackboneLearner):
         super().__init__(cfg, obs_shape, action_dim, device)  # the backbone
         bb = self.backbone
         self.value = ValueNet(bb.repr_dim, cfg.feature_dim, cfg.hidden_dim).to(bb.device)
-        self.value_opt = torch.optim.Adam(self.value.parameters(), lr=cfg.lr)
+        self.value_opt = fast.adam(bb.fast)(self.value.parameters(), lr=cfg.lr)  # the backbone's Adam
         self.log_std: LogStd | None = None
         if own.learned_log_std:  # trained by the actor's optimizer, as the JAX actor's log_stds
             self.log_std = LogStd(action_dim).to(bb.device)
