@@ -35,7 +35,7 @@ class CQL(BackboneLearner):
 
     @property
     def resolved(self) -> dict[str, object]:
-        return {"algorithm": "cql", "cql_alpha": learner_section(self.cfg, CQLConfig).alpha}
+        return {"cql_alpha": learner_section(self.cfg, CQLConfig).alpha}
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         bb = self.backbone

@@ -102,7 +102,7 @@ class IQL(BackboneLearner):
     @property
     def resolved(self) -> dict[str, object]:
         # iql_reward_scale: 1.0 unless iql.reward_scaling=return_range
-        return {"algorithm": "iql", "iql_reward_scale": self.reward_scale}
+        return {"iql_reward_scale": self.reward_scale}
 
     # ----------------------------------------------------------------- update
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:

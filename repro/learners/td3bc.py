@@ -30,10 +30,6 @@ class TD3BC(BackboneLearner):
 
     update_metrics = CRITIC_METRICS + ACTOR_METRICS
 
-    @property
-    def resolved(self) -> dict[str, object]:
-        return {"algorithm": "td3bc"}
-
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         bb = self.backbone
         h, next_h, action, reward, discount = bb.encode_batch(batch, autocast=False)
