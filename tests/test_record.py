@@ -51,7 +51,7 @@ class _Policy:
         self.actor = Actor(self.encoder.repr_dim, 6, rc.agent.feature_dim, rc.agent.hidden_dim)
         self.stddev = rc.agent.stddev_schedule
 
-    def modules(self) -> dict[str, torch.nn.Module]:
+    def acting_modules(self) -> dict[str, torch.nn.Module]:
         return {"encoder": self.encoder, "actor": self.actor}
 
 
