@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import functools
 import re
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
-from repro.config.schema import is_offline, learner_specs, objective_specs
+from repro.config.schema import learner_specs, objective_specs
 
 # agent.name (normalised: lower case, alphanumerics only) -> the paper's label, for the algorithms no registration
 # names: the online learner without an objective, and the baselines whose published curves the paper compares to
@@ -30,12 +30,6 @@ def algo_labels() -> dict[str, str]:
     labels.update({algo_key(s.name): s.label for s in objective_specs().values() if s.label is not None})
     labels.update({algo_key(s.name): s.label for s in learner_specs().values()})
     return labels
-
-
-@functools.cache
-def offline_learners() -> frozenset[str]:
-    """The offline learners' names, normalised (agent.name of their plain agent files), from the registry."""
-    return frozenset(algo_key(n) for n in learner_specs() if is_offline(n))
 
 
 # Names the paper prints that a plain title-casing would get wrong.
@@ -68,16 +62,41 @@ def enabled_objectives(objectives: Mapping[str, Any] | None) -> tuple[str, ...]:
     return tuple(sorted(out))
 
 
-def method_label(name: Any, objectives: tuple[str, ...] = ()) -> str:
-    """The paper's label of a method: ``TACO``, ``DrQ-v2``, ``CQL+TACO`` (an offline learner with TACO).
+def algo_label(name: Any) -> str:
+    """The label of an algorithm (``agent.name``, e.g. a bench result's agent file) from its name alone:
+    :func:`algo_labels`, else the name. A run's label is :func:`method_label`, from what it trained."""
+    return algo_labels().get(algo_key(name), str(name))
 
-    ``name``: an online run's algorithm (``agent.name``) or an offline run's learner (``agent.learner``: ``cql``
-    for the ``cql_taco`` agent)."""
-    key = algo_key(name)
-    label = algo_labels().get(key, str(name))
-    if key in offline_learners() and "taco" in objectives:
-        label += "+TACO"
-    return label
+
+def objective_tags(objectives: Iterable[str]) -> list[str]:
+    """The parts of a method label for the enabled ``objectives``, in registration order (names nobody registers
+    here, a plugin's not installed: by name, last). An objective whose ``companions`` are all enabled names them
+    too (TACO is the TACO, CURL and reward losses); with some of them off it says which (``TACO w/o CURL``)."""
+    specs = objective_specs()
+    on = set(map(str, objectives))
+    absorbed = {c for name in on if name in specs for c in specs[name].companions if c in on}
+    tags = []
+    for name in [*(n for n in specs if n in on), *sorted(on - set(specs))]:
+        spec = specs.get(name)
+        if spec is None:
+            tags.append(name)
+        elif name not in absorbed:
+            missing = [specs[c].tag for c in spec.companions if c not in on]
+            tags.append(spec.tag + (f" w/o {', '.join(missing)}" if missing else ""))
+    return tags
+
+
+def method_label(learner: Any, objectives: Iterable[str] = ()) -> str:
+    """A method's label, from the registry: the label of ``learner`` (``agent.learner``) then the label of each
+    enabled objective (:func:`objective_tags`): ``CQL+TACO``, ``TD3+BC+SPR``. A learner registered with
+    ``named_by_objectives`` (the online actor-critic) is named by its objectives alone when it has any: ``TACO``,
+    ``SPR``, and ``DrQ-v2`` without. Two distinct (learner, enabled objectives) pairs never share a label
+    (tests/test_plugins.py). A learner nobody registers here (a plugin's not installed) is named by its name."""
+    spec = learner_specs().get(str(learner))
+    tags = objective_tags(objectives)
+    if spec is not None and spec.named_by_objectives and tags:
+        return "+".join(tags)
+    return "+".join([spec.label if spec is not None else str(learner), *tags])
 
 
 def task_display(task: str) -> str:

@@ -186,11 +186,11 @@ def resolved_columns(values: dict[str, Any], algo: Any) -> dict[str, Any]:
 
 
 def _method(values: dict[str, Any], algo: Any, objectives: tuple[str, ...]) -> str | None:
-    """The paper's label: an offline run's from its learner (``td3bc_taco`` trains learner td3bc with TACO's
-    objectives: ``TD3+BC+TACO``), an online run's from its algorithm name."""
-    if values.get("dataset") is not None and values.get("learner"):
+    """The paper's label, from what the run trained: its learner and its enabled objectives (``td3bc_taco`` trains
+    learner td3bc with TACO's objectives: ``TD3+BC+TACO``; ``taco`` the online learner with them: ``TACO``)."""
+    if values.get("learner"):
         return method_label(values["learner"], objectives)
-    return method_label(algo, objectives) if algo is not None else None
+    return method_label("actor_critic", objectives) if algo is not None else None
 
 
 def _int_or_none(value: Any) -> int | None:

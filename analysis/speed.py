@@ -7,7 +7,7 @@ from typing import Any
 
 import pandas as pd
 
-from analysis.identity import method_label
+from analysis.identity import algo_label
 from analysis.load import Results
 
 
@@ -68,7 +68,7 @@ def speed_measurements(results: Results, experiments: tuple[str, ...] = ("speed"
             source = "bench " + str(bench.get("path", "")).rsplit("/", 1)[-1]
             rows.append(
                 {
-                    "method": method_label(res["algo"]),
+                    "method": algo_label(res["algo"]),
                     "batch_size": res.get("batch_size"),
                     "fps": float(fps),
                     "hardware": hw_text,

@@ -21,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 from repro.agent.agent import ACTOR_METRICS, CRITIC_METRICS
 from repro.agent.networks import default_latent_action_dim
 from repro.config.compose import compose, group_options, typed, validate
+from repro.config.schema import is_offline
 from repro.data.reference import PAPER_TACO_RETURN, normalized_score, score_reference
 from repro.envs import get_task
 from repro.runs import rundir, runformat
@@ -32,7 +33,6 @@ EVAL_EVERY = 20_000
 DMC9 = ["quadruped_run", "hopper_hop", "walker_run", "quadruped_walk", "cheetah_run", "finger_turn_hard",
         "acrobot_swingup", "reacher_hard", "reach_duplo"]
 METAWORLD6 = ["hammer", "assembly", "disassemble", "stick-pull", "pick-place-wall", "hand-insert"]
-OFFLINE_LEARNERS = ("td3bc", "cql", "iql", "bc", "dt")  # agent.learner of the offline agents
 UPDATES = 10_000  # the synthetic offline.updates budget
 EVAL_EVERY_UPDATES = 2_000
 
@@ -132,7 +132,7 @@ def write_run(
             "offline.dataset": dataset, "agent.cql.alpha": cql_alpha, **({
                 "offline.updates": updates, "offline.eval_every_updates": eval_every_updates}
                 if dataset is not None else {})})
-    offline = str(cfg.agent.learner) in OFFLINE_LEARNERS
+    offline = is_offline(str(cfg.agent.learner))
     run = path or rundir.run_dir(cfg)
     run.mkdir(parents=True, exist_ok=True)
     rundir.write_config(run, cfg)

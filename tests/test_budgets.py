@@ -25,7 +25,7 @@ from analysis.load import load_results  # noqa: E402
 from analysis.scores import final_scores, learning_curves  # noqa: E402
 from helpers import assert_wandb_mirrors_csv, launch_app, write_sweep  # noqa: E402
 from offline_fixtures import write_dataset  # noqa: E402
-from repro.config.compose import ConfigError, compose, compose_base  # noqa: E402
+from repro.config.compose import ConfigError, compose, compose_base, run_keys  # noqa: E402
 from repro.config.schema import learner_sections, unread_keys  # noqa: E402
 from repro.launch.spec import load_file  # noqa: E402
 from repro.launch.spec.sharing import shared_frames  # noqa: E402
@@ -120,7 +120,7 @@ def test_analysis_marks_the_budget_end_row_and_reads_each_budget_s_prefix(online
 def test_a_changed_default_of_an_unread_section_leaves_the_run_resumable_and_done(online):
     """The issue's probe: cql.n_samples 10 -> 11 refused an online TACO run; an online run does not read agent.cql."""
     cfg = compose([*FAST, "experiment=budgets", f"runtime.results_root={online['root']}", "train.frames=200",
-                   "agent.cql.n_samples=11", "agent.iql.expectile=0.9", "agent.dt.n_layers=5",
+                   "++agent.cql.n_samples=11", "++agent.iql.expectile=0.9", "++agent.dt.n_layers=5",
                    "offline.eval_episodes=3"])
     assert rundir.config_diff(online["extended"], cfg) == []
     said: list[str] = []
@@ -149,7 +149,7 @@ def test_each_offline_learner_reads_only_its_own_section_and_the_online_agent_no
         assert "offline" in data and "frames" not in data["train"] and "capacity" not in data["replay"]
     offline = compose(["agent=cql", "offline.dataset=medium"])
     changed = compose(["agent=cql", "offline.dataset=medium", "agent.cql.n_samples=11"])
-    other = compose(["agent=cql", "offline.dataset=medium", "agent.iql.expectile=0.9", "train.seed_frames=7"])
+    other = compose(["agent=cql", "offline.dataset=medium", "++agent.iql.expectile=0.9", "train.seed_frames=7"])
     from repro.config.compose import identity
 
     assert identity(offline) == identity(other) != identity(changed)
@@ -246,6 +246,7 @@ def test_every_key_of_todays_config_is_in_the_current_format_or_has_a_migration(
 
 def test_a_v1_file_behaves_as_its_old_behaviour_for_the_learners_that_had_it():
     raw = OmegaConf.to_container(compose(["agent=cql", "offline.dataset=medium"]), resolve=True, enum_to_str=True)
+    raw["agent"]["dt"] = dict(migrate.v2_defaults()["agent"]["dt"])  # a version-1 file held every learner's section
     del raw["agent"]["cql"]["clip_policy_samples"], raw["agent"]["dt"]["init"], raw["train"]["eval_episodes"]
     out = migrate.migrate_config(raw)
     assert out["format"] == migrate.CONFIG_FORMAT and out["agent"]["cql"]["clip_policy_samples"] is False  # CQL's old
@@ -255,6 +256,19 @@ def test_a_v1_file_behaves_as_its_old_behaviour_for_the_learners_that_had_it():
         migrate.migrate_config({"format": migrate.CONFIG_FORMAT + 1})
     assert [str(d) for d in migrate.diff({"a": {"b": 1}}, {"a": {"b": 2, "c": 3}})] == \
         ["a.b: 1 -> 2", "a.c: <absent> -> 3"]
+
+
+@pytest.mark.parametrize("overrides, sections", [
+    (["agent=taco"], []), (["agent=cql", "offline.dataset=medium"], ["cql"]),
+    (["agent=dt", "offline.dataset=medium"], ["dt"]), (["agent=td3bc_taco", "offline.dataset=medium"], ["td3bc"])])
+def test_a_format_3_file_keeps_its_identity_in_format_4(overrides, sections):
+    """Format 3 -> 4 (issue 35: a learner's section is composed by its own agent files only): a file written by the
+    version before, which held its learner's section only, reads as today's config of the same command, its
+    identity unchanged; each run holds its own learner's section and no other."""
+    today = run_keys(compose(overrides))
+    out = migrate.migrate_config({**copy.deepcopy(today), "format": 3})
+    assert out == {**today, "format": 4}
+    assert [k for k in ("cql", "td3bc", "iql", "dt") if k in out["agent"]] == sections
 
 
 # ------------------------------------------------------------------------------------------ sweeps share runs
@@ -293,14 +307,14 @@ def test_a_sweep_extending_another_trains_every_frame_once(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------ bad input
-@pytest.mark.parametrize("override, message", [
-    ("agent.lr=-1", "agent.lr must be > 0.0 (got -1.0)."),
-    ("agent.latent_action_dim=0", "agent.latent_action_dim must be null (from |A|) or >= 1 (got 0)."),
-    ("agent.dt.weight_decay=-0.5", "agent.dt.weight_decay must be >= 0.0 (got -0.5)."),
+@pytest.mark.parametrize("overrides, message", [
+    (["agent.lr=-1"], "agent.lr must be > 0.0 (got -1.0)."),
+    (["agent.latent_action_dim=0"], "agent.latent_action_dim must be >= 1 (got 0)."),
+    (["agent=dt", "agent.dt.weight_decay=-0.5"], "agent.dt.weight_decay must be >= 0.0 (got -0.5)."),
 ])
-def test_out_of_range_values_are_one_line_before_anything_is_written(tmp_path, override, message):
+def test_out_of_range_values_are_one_line_before_anything_is_written(tmp_path, overrides, message):
     with pytest.raises(ConfigError) as err:
-        compose([override, f"runtime.results_root={tmp_path}"])
+        compose([*overrides, f"runtime.results_root={tmp_path}"])
     assert str(err.value) == message and not any(tmp_path.iterdir())
 
 

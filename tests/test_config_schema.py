@@ -15,38 +15,49 @@ from repro.config.schema import (
     DatasetKind,
     LearnerName,
     ObjectiveName,
-    check_registry,
     is_offline,
-    learner_names,
     normalize_dataset,
 )
 
 
-def test_check_registry_names_what_is_missing_and_what_is_extra():
-    check_registry("learner", {n: None for n in learner_names()}, learner_names())  # equal keys pass
-    with pytest.raises(ValueError, match=r"missing: iql; not registered: -") as err:
-        check_registry("learner", {n: None for n in learner_names() if n != "iql"}, learner_names())
-    assert "\n" not in str(err.value)
-    with pytest.raises(ValueError, match=r"missing: -; not registered: sac"):
-        check_registry("learner", [*learner_names(), "sac"], learner_names())
-
-
 @pytest.mark.parametrize("module, specs, spec", [
-    ("repro.learners.registry", "BUILTIN_LEARNERS", schema.LearnerSpec("newname", offline=True, label="New")),
-    ("repro.agent.objectives", "BUILTIN_OBJECTIVES", schema.ObjectiveSpec("newname"))])
-def test_a_registry_that_lacks_a_registered_name_fails_at_import(monkeypatch, module: str, specs: str, spec):
-    """Re-running the registry module's import with one registration more whose code it does not have."""
+    ("repro.learners.registry", "BUILTIN_LEARNERS",
+     schema.LearnerSpec("newname", offline=True, label="New", factory="repro.learners.newname:New")),
+    ("repro.agent.objectives", "BUILTIN_OBJECTIVES", schema.ObjectiveSpec("newname", factory="repro.agent.x:New"))])
+def test_a_registry_is_built_from_the_registrations_and_names_a_factory_that_does_not_import(
+        monkeypatch, module: str, specs: str, spec):
+    """The learner and objective tables hold exactly the registered names (no hand table): re-running the registry
+    module's import with one registration more gives that name, whose code does not exist here: one line."""
     mod = importlib.import_module(module)
-    what = "learner" if "learners" in module else "objective"
+    table = mod.LEARNERS if "learners" in module else mod.OBJECTIVES
+    assert list(table) == [s.name for s in (schema.learner_specs() if "learners" in module
+                                            else schema.objective_specs()).values()]
     monkeypatch.setattr(schema, specs, (*getattr(schema, specs), spec))
     schema.learner_specs.cache_clear(), schema.objective_specs.cache_clear()
     try:
-        with pytest.raises(ValueError, match=f"the {what} registry .* missing: newname"):
+        with pytest.raises(schema.PluginError, match="^'newname': cannot import its factory .*newname|x") as err:
             importlib.reload(mod)
+        assert "\n" not in str(err.value)
     finally:
         monkeypatch.undo()
         schema.learner_specs.cache_clear(), schema.objective_specs.cache_clear()
         importlib.reload(mod)
+
+
+def test_a_built_in_registration_is_checked_as_a_plugin_s(monkeypatch):
+    """A built-in spec without a factory, or with a range naming no field of its section, is refused as a plugin's."""
+    for spec, message in ((schema.LearnerSpec("newname", offline=True, label="New"), "factory must be 'module:attr"),
+                          (schema.LearnerSpec("newname", offline=True, label="New", factory="m:a",
+                                              section=schema.CQLConfig, ranges={"alpah": (0.0, True)}),
+                           "ranges names 'alpah'")):
+        monkeypatch.setattr(schema, "BUILTIN_LEARNERS", (*schema.BUILTIN_LEARNERS, spec))
+        schema.learner_specs.cache_clear()
+        try:
+            with pytest.raises(schema.PluginError, match=f"^built-in learner 'newname': {message}"):
+                schema.learner_specs()
+        finally:
+            monkeypatch.undo()
+            schema.learner_specs.cache_clear()
 
 
 def test_the_offline_flag_is_registry_data():
@@ -133,6 +144,8 @@ def _sections(section: type = schema.RunConfig):
         kind = typing.get_type_hints(section)[f.name]
         if isinstance(kind, type) and dataclasses.is_dataclass(kind):
             yield from _sections(kind)
+    if section is schema.RunConfig:  # the learners' own sections (agent.<learner>), the built-in ones'
+        yield from (s.section for s in schema.BUILTIN_LEARNERS if s.section is not None)
 
 
 def test_the_schema_gives_types_only_and_the_yaml_every_value():
@@ -144,8 +157,10 @@ def test_the_schema_gives_types_only_and_the_yaml_every_value():
                     if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING]
     assert not with_default, with_default
     for agent in config_groups()["agent"]:
-        cfg = compose([f"agent={agent}", "offline.dataset=medium", "agent.cql.alpha=1.0"]
-                      if is_offline(agent_learner(agent)) else [f"agent={agent}"])
+        learner = agent_learner(agent)
+        alpha = ["agent.cql.alpha=1.0"] if learner == "cql" else []
+        over = ["offline.dataset=medium", *alpha] if is_offline(learner) else []
+        cfg = compose([f"agent={agent}", *over])
         assert not OmegaConf.missing_keys(cfg), agent
 
 
@@ -153,5 +168,65 @@ def test_a_value_dropped_from_the_yaml_is_one_config_error_line():
     from repro.config.compose import ConfigError, compose
 
     with pytest.raises(ConfigError, match=r"^no value for agent\.cql\.n_samples \(") as err:
-        compose(["~agent.cql.n_samples=10"])  # Hydra deletes the key (at this value)
+        compose(["agent=cql", "offline.dataset=medium", "~agent.cql.n_samples=10"])  # Hydra deletes it (at this value)
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["agent=iql", "offline.dataset=medium", "agent.iql.expectile=1"], "agent.iql.expectile must be in (0.0, 1.0) "
+                                                                      "(got 1.0)."),
+    (["agent.discount=1.5"], "agent.discount must be in [0.0, 1.0] (got 1.5)."),
+    (["agent=cql", "offline.dataset=medium", "agent.critic_target_tau=-0.1"],
+     "agent.critic_target_tau must be in [0.0, 1.0] (got -0.1)."),
+    (["agent=dt", "offline.dataset=medium", "agent.dt.dropout=1.0"],
+     "agent.dt.dropout must be in [0.0, 1.0) (got 1.0)."),
+    (["agent=spr", "agent.objective_params.spr.momentum=1.5"],
+     "agent.objective_params.spr.momentum must be in [0.0, 1.0] (got 1.5)."),
+])
+def test_a_value_above_its_upper_bound_is_one_line_exit_2_before_anything_is_written(tmp_path, overrides, message):
+    """Ranges take an upper bound too (issue 35): IQL's expectile was checked only inside its first update (a
+    traceback after the run directory existed)."""
+    from typer.testing import CliRunner
+
+    from repro_app.cli import app
+
+    out = CliRunner().invoke(app, ["train", *overrides, f"runtime.results_root={tmp_path}"])
+    assert out.exit_code == 2 and out.output.strip() == f"error: {message}", out.output
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_run_holds_and_reads_its_own_learner_s_section_only():
+    """A TACO run has no DT, CQL, IQL or TD3+BC section (issue 35): ``agent.dt.context=0`` is an unknown key there
+    (as a plugin learner's would be), and one added with ``++`` (a sweep's override common to every agent) is dropped
+    unread, unchecked; the DT run checks it."""
+    from repro.config.compose import ConfigError, compose, run_keys
+
+    base = compose(["agent=taco"])
+    assert not {"cql", "td3bc", "iql", "dt"} & set(base.agent) and "toy_rwbc" not in base.agent
+    with pytest.raises(ConfigError, match=r"^unknown config key 'agent\.dt\.context'\.") as err:
+        compose(["agent=taco", "agent.dt.context=0"])
+    assert "\n" not in str(err.value)
+    dropped = compose(["agent=taco", "++agent.dt.context=0", "++agent.cql.n_samples=0"])
+    assert run_keys(dropped) == run_keys(base)
+    cql = compose(["agent=cql", "offline.dataset=medium", "++agent.dt.context=0"])
+    assert "dt" not in cql.agent and cql.agent.cql.n_samples == 10
+    with pytest.raises(ConfigError, match=r"^agent\.dt\.context must be >= 1 \(got 0\)\.$"):
+        compose(["agent=dt", "offline.dataset=medium", "agent.dt.context=0"])
+
+
+def test_no_generic_module_names_a_built_in_learner():
+    """What a learner resolves from its config and data is its own hook (``LearnerSpec.resolve``: CQL's Table-6
+    alpha; ``max_episode_length``: DT's timestep embedding): the modules every run goes through name no learner, as
+    an attribute (``cfg.agent.cql``, ``LearnerName.cql``) or a string constant (``"cql_alpha"``, ``"dt"``)."""
+    import ast
+    from pathlib import Path
+
+    names = {s.name for s in schema.BUILTIN_LEARNERS} - {"actor_critic"}
+    names |= {f"{n}_{field}" for n in names for field in ("alpha", "max_timestep")}
+    root = Path(schema.__file__).resolve().parents[1]
+    for module in ("config/compose.py", "runs/rundir.py", "train/build.py", "train/api.py", "train/start.py"):
+        tree = ast.parse((root / module).read_text(encoding="utf-8"))
+        named = [(node.lineno, node.attr if isinstance(node, ast.Attribute) else node.value) for node in ast.walk(tree)
+                 if isinstance(node, ast.Attribute) and node.attr in names
+                 or isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in names]
+        assert not named, (module, named)

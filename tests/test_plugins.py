@@ -6,6 +6,7 @@ tree names them, and each is first-class: config, train, sweep, status, bench, t
 from __future__ import annotations
 
 import importlib.metadata
+import itertools
 import math
 import re
 from pathlib import Path
@@ -63,10 +64,91 @@ def test_the_example_registers_through_its_entry_points_only():
     assert not set(online_agents()) & set(offline_agents())
     labels = algo_labels()
     assert (labels["toyrwbc"], labels["toyutd"], labels["toyinv"]) == ("RWBC", "DrQ-v2-UTD", "InvDyn")
-    assert method_label("toy_rwbc", ("taco",)) == "RWBC+TACO"  # an offline learner with TACO, as CQL+TACO
+    assert method_label("toy_rwbc", ("taco", "curl", "reward")) == "RWBC+TACO"  # with TACO, as CQL+TACO
+    assert method_label("toy_rwbc", ("toy_inv",)) == "RWBC+InvDyn"
     root = Path(__file__).resolve().parent
     assert not [p for p in (root.parent / "repro").rglob("*.py") if "toy_rwbc" in p.read_text() or "toy_utd" in
                 p.read_text()]
+
+
+def test_distinct_learner_and_objectives_never_share_a_label():
+    """Every registered learner (the plugin's included) with every set of registered objectives: one label each,
+    from the registry; the paper's methods keep the paper's labels."""
+    objectives = list(objective_names())
+    labels: dict[str, tuple[str, tuple[str, ...]]] = {}
+    for learner in learner_names():
+        for n in range(len(objectives) + 1):
+            for chosen in itertools.combinations(objectives, n):
+                label = method_label(learner, chosen)
+                assert label not in labels, (label, labels.get(label), (learner, chosen))
+                labels[label] = (learner, chosen)
+    bundle = ("taco", "curl", "reward")
+    assert [method_label("actor_critic", o) for o in [(), bundle, ("curl",), ("spr", "curl", "reward"),
+                                                      ("atc", "curl", "reward"), ("driml", "curl", "reward")]] == \
+        ["DrQ-v2", "TACO", "CURL", "SPR", "ATC", "DRIML"]
+    assert [method_label(learner, bundle) for learner in ("cql", "td3bc", "bc")] == ["CQL+TACO", "TD3+BC+TACO",
+                                                                                     "BC+TACO"]
+    assert method_label("cql", ("spr", "curl", "reward")) == "CQL+SPR" != method_label("cql") == "CQL"
+    assert method_label("actor_critic", ("taco", "reward")) == "TACO w/o CURL"  # objective_removal's no_curl
+    assert method_label("actor_critic", ("curl", "reward")) == "CURL+Reward"  # and its no_taco
+    assert method_label("toy_utd", bundle) == "DrQ-v2-UTD+TACO"
+    assert method_label("actor_critic", ["toy_inv"]) == "InvDyn"
+
+
+def test_runs_of_two_methods_never_share_a_table_cell(tmp_path):
+    """The bug of issue 35: an offline learner trained with an objective other than TACO was labelled as the plain
+    learner and averaged into its cells. Runs of CQL, CQL+SPR and CQL+TACO on one task, dataset and experiment (the
+    variant apart) are three methods: three cells of a table grouped by method."""
+    from analysis_fixtures import write_run
+
+    for variant, objectives, final in (("plain", {}, 100.0), ("spr", {"spr": 1.0, "curl": 1.0, "reward": 1.0}, 200.0),
+                                       ("taco", {"taco": 1.0, "curl": 1.0, "reward": 1.0}, 300.0)):
+        write_run(tmp_path, experiment="offline", algo="cql", variant=variant, task="hopper_hop", dataset="medium",
+                  seed=1, final=final, objectives=objectives, action_encoder=bool(objectives))
+    cells = final_scores(load_results(tmp_path)).groupby(["task", "dataset", "method"])["score"].agg(["count", "mean"])
+    assert sorted(cells.index.get_level_values("method")) == ["CQL", "CQL+SPR", "CQL+TACO"]
+    assert cells["count"].tolist() == [1, 1, 1]
+
+
+def test_a_registered_label_is_its_own_and_companions_are_registered(monkeypatch):
+    """A plugin that registers a label already taken (it would name two methods alike) or a companion nobody
+    registers is one line."""
+    import repro.config.schema as schema
+    from repro.config.plugins import ObjectiveSpec
+
+    for spec, message in ((ObjectiveSpec("toy_inv", label="CQL", factory="m:a"), "label 'CQL' is already the label of "
+                                                                                 "learner 'cql'"),
+                          (ObjectiveSpec("toy_inv", label="X", factory="m:a", companions=("nope",)),
+                           "companion 'nope' must be another registered objective")):
+        monkeypatch.setattr(schema, "discover", lambda group, kind, spec=spec: (spec,) if kind is ObjectiveSpec else
+                            discover(group, kind))
+        schema.objective_specs.cache_clear()
+        try:
+            with pytest.raises(PluginError, match=re.escape(message)):
+                schema.objective_specs()
+        finally:
+            schema.objective_specs.cache_clear()
+
+
+def test_docs_extending_states_the_files_a_plugin_method_costs():
+    """docs/extending.md's table counts the example's files: those that name the method or hold its code. A file the
+    method needs and the table does not count (a section YAML of its own, say) names it, and fails here."""
+    root = Path(__file__).resolve().parent
+    example = root / "plugin_example"
+    costs = {"toy_rwbc": ["pyproject.toml", "taco_repro_toy/__init__.py", "taco_repro_toy/learner.py",
+                          "taco_repro_toy/losses.py", "taco_repro_toy/conf/agent/toy_rwbc.yaml"],
+             "toy_inv": ["pyproject.toml", "taco_repro_toy/__init__.py", "taco_repro_toy/objective.py",
+                         "taco_repro_toy/losses.py", "taco_repro_toy/conf/agent/toy_inv.yaml"]}
+    code = {"toy_rwbc": ("RWBC", "return_weights", "weighted_bc_loss"),
+            "toy_inv": ("InverseDynamics", "inverse_dynamics_loss")}
+    files = [p for p in example.rglob("*") if p.is_file() and p.suffix in (".py", ".toml", ".yaml")]
+    for method, listed in costs.items():
+        naming = sorted(str(p.relative_to(example)) for p in files
+                        if any(word in p.read_text() for word in (method, *code[method])))
+        assert naming == sorted(listed), (method, naming)
+    table = (root.parent / "docs" / "extending.md").read_text()
+    assert f"| an offline (or online) learner | {len(costs['toy_rwbc'])} files:" in table
+    assert f"| an auxiliary objective | {len(costs['toy_inv'])} files:" in table
 
 
 def test_the_update_bench_times_the_online_plugin_learner(tmp_path):
@@ -141,6 +223,8 @@ def test_a_plugin_setting_out_of_its_registered_range_is_one_line_and_exit_2(tmp
     ({"temperatur": (0.0, False)}, "ranges names 'temperatur', which is not a field of its section."),
     ({"temperature": 0.0}, "ranges['temperature'] must be (low, inclusive)"),
     ({"temperature": (0.0, "no")}, "ranges['temperature'] must be (low, inclusive)"),
+    ({"temperature": (1.0, True, 0.5, True)}, "ranges['temperature'] must be (low, inclusive) or (low, inclusive, "
+                                              "high, inclusive)"),
 ])
 def test_unusable_ranges_are_a_one_line_registration_error(ranges, message: str):
     from taco_repro_toy import RWBCConfig

@@ -51,7 +51,7 @@ class _Policy:
         self.actor = Actor(self.encoder.repr_dim, 6, rc.agent.feature_dim, rc.agent.hidden_dim)
         self.stddev = rc.agent.stddev_schedule
 
-    def modules(self) -> dict[str, torch.nn.Module]:
+    def acting_modules(self) -> dict[str, torch.nn.Module]:
         return {"encoder": self.encoder, "actor": self.actor}
 
 
@@ -274,3 +274,25 @@ def test_make_each_kind_from_a_recorded_run(tiny_taco: Path, tiny_taco_watched: 
     # an unrecorded source
     res = run_make("--source", str(unrecorded), "--kind", "medium")
     assert res.exit_code == 2 and "no recording" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_a_snapshot_keeps_the_modules_the_learner_s_acting_hook_names(tmp_path):
+    """``runtime.record=true`` for any online learner implementing the protocol (issue 35): the snapshot holds what
+    ``acting_modules()`` returns, not what ``modules()`` happens to call "encoder" and "actor"."""
+    from repro.data.record import PolicySpec, snapshot_path
+
+    class NotOnTheBackbone:
+        def acting_modules(self) -> dict[str, torch.nn.Module]:
+            return {"encoder": torch.nn.Linear(2, 3), "actor": torch.nn.Linear(3, 1)}
+
+        def stddev(self, step: int) -> float:
+            return 0.25
+
+        def modules(self) -> dict[str, torch.nn.Module]:
+            raise AssertionError("the recorder reads acting_modules()")
+
+    rec = Recorder(tmp_path, PolicySpec((9, 8, 8), 1, 3, 3))
+    rec.snapshot(NotOnTheBackbone(), step=10, frame=20, eval_return=1.5)  # type: ignore[arg-type]
+    snap = load_snapshot(snapshot_path(rec.snapshots, 10))
+    assert snap["encoder"]["weight"].shape == (3, 2) and snap["actor"]["weight"].shape == (1, 3)
+    assert (snap["stddev"], snap["step"], snap["eval_return"]) == (0.25, 10, 1.5)

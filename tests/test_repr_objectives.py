@@ -40,7 +40,7 @@ def agent_for(overrides: list[str], seed: int = 0) -> Agent:
 def aux_for(agent: Agent, batch: dict[str, torch.Tensor]) -> AuxBatch:
     bb = agent.backbone
     return AuxBatch(batch, bb.encoder, bb.aug, bb.encode_action_sequence, agent.cfg.reward_target,
-                    bb.encode_action_steps)
+                    bb.encode_action)
 
 
 def grad_norm(module: nn.Module) -> float:
@@ -59,7 +59,7 @@ def plain_aux(agent: Agent, batch: dict[str, torch.Tensor]) -> AuxBatch:
     """Like aux_for but without augmentation, so every view can be recomputed outside the objective."""
     bb = agent.backbone
     return AuxBatch(batch, bb.encoder, lambda x: x, bb.encode_action_sequence, agent.cfg.reward_target,
-                    bb.encode_action_steps)
+                    bb.encode_action)
 
 
 def f64(t: torch.Tensor) -> np.ndarray:
@@ -248,7 +248,7 @@ def test_spr_rollout_predicts_every_step_with_per_step_actions():
 
     def plain(b):
         return AuxBatch(b, agent.backbone.encoder, lambda x: x, agent.backbone.encode_action_sequence, "nstep",
-                        agent.backbone.encode_action_steps)
+                        agent.backbone.encode_action)
 
     p1, p2 = spr.predict(plain(batch)), spr.predict(plain(changed))
     assert torch.equal(p1[:, :2], p2[:, :2]) and not torch.allclose(p1[:, 2], p2[:, 2])

@@ -118,8 +118,7 @@ def test_sweeps_command_lists_run_counts_and_refusals(tmp_path, monkeypatch):
     assert code == 0, out
     assert re.search(r"horizon\s*│\s*F8\s*│\s*108", out)
     assert re.search(r"action_repeat\s*│\s*F9\s*│\s*54", out)
-    if "dt" in specs.config_groups()["agent"]:
-        assert re.search(r"offline\s*│\s*T3,T6\s*│\s*504", out)
+    assert re.search(r"offline\s*│\s*T3,T6\s*│\s*504", out)
     # a sweep selecting an option the packaged config lacks is listed as refused, with what is missing
     folder = tmp_path / "sweeps"
     folder.mkdir()

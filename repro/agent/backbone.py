@@ -155,11 +155,8 @@ class DrQV2Backbone:
 
     # ----------------------------------------------------------------- acting
     def encode_action(self, action: torch.Tensor) -> torch.Tensor:
+        """(..., |A|) -> (..., step_dim): each action encoded alone (raw without an action encoder)."""
         return self.action_encoder(action) if self.action_encoder is not None else action
-
-    def encode_action_steps(self, actions: torch.Tensor) -> torch.Tensor:
-        """(B, K, |A|) -> (B, K, step_dim): each action encoded alone (raw without an action encoder)."""
-        return self.action_encoder(actions) if self.action_encoder is not None else actions
 
     def encode_action_sequence(self, actions: torch.Tensor) -> torch.Tensor:
         if self.action_encoder is not None:
@@ -257,7 +254,7 @@ class DrQV2Backbone:
         if self.aux_opt is None:
             return {}
         aux = AuxBatch(batch, self._encode, self.aug, self.encode_action_sequence, self.cfg.reward_target,
-                       self.encode_action_steps)
+                       self.encode_action)
         total = torch.zeros((), device=self.device)
         metrics: Metrics = {}
         with self.autocast():
@@ -315,6 +312,11 @@ class BackboneLearner(LearnerBase, ModuleSet):
     @property
     def action_encoder(self) -> ActionEncoder | None:
         return self.backbone.action_encoder
+
+    def acting_modules(self) -> dict[str, nn.Module]:
+        """The encoder and the actor: what a recorded policy snapshot keeps (the online protocol's hook)."""
+        modules = self.modules()
+        return {"encoder": modules["encoder"], "actor": modules["actor"]}
 
     def stddev(self, step: int) -> float:
         return self.cfg.stddev_schedule(step)

@@ -27,16 +27,8 @@ class ModuleSet:
         raise NotImplementedError
 
     def parameter_counts(self) -> list[tuple[str, int]]:
-        """Trainable parameters per module; a parameter shared by two modules counts at the first."""
-        rows: list[tuple[str, int]] = []
-        seen: set[int] = set()
-        for name, mod in self.modules().items():
-            if name in self.untrained:
-                continue
-            params = [p for p in mod.parameters() if p.requires_grad and id(p) not in seen]
-            seen.update(id(p) for p in params)
-            rows.append((name, sum(p.numel() for p in params)))
-        return rows
+        """Trainable parameters per trained module; a parameter shared by two modules counts at the first."""
+        return count_parameters({k: m for k, m in self.modules().items() if k not in self.untrained})
 
     def state_dict(self) -> dict:
         """Plain tensors and containers (checkpoints load with ``weights_only=True``)."""
@@ -57,7 +49,7 @@ class ModuleSet:
 
 
 class LearnerBase:
-    """The defaults of the learner protocol's optional hooks (``repro/learners/base.py`` ``Learner``), for a learner
+    """The defaults of the learner protocol's optional hooks (``repro/agent/protocol.py`` ``Learner``), for a learner
     that does not need them: no auxiliary objectives, no action encoder, ``agent.batch_size`` transitions per
     update, nothing to record in resolved.json and no use for the dataset's returns."""
 
@@ -85,3 +77,14 @@ class LearnerBase:
 
     def set_dataset_returns(self, returns: Sequence[float]) -> None:
         """The offline dataset's episode returns (IQL's reward scaling reads them); default: unused."""
+
+
+def count_parameters(modules: dict[str, torch.nn.Module]) -> list[tuple[str, int]]:
+    """Trainable parameters per named module, a parameter shared by two modules counted at the first."""
+    rows: list[tuple[str, int]] = []
+    seen: set[int] = set()
+    for name, mod in modules.items():
+        params = [p for p in mod.parameters() if p.requires_grad and id(p) not in seen]
+        seen.update(id(p) for p in params)
+        rows.append((name, sum(p.numel() for p in params)))
+    return rows

@@ -17,12 +17,12 @@ from typing import Any
 import numpy as np
 import torch
 
+from repro.agent.protocol import SequenceLearner
 from repro.bench.clock import timed
 from repro.config.compose import ConfigError, compose, config_groups, offline_agents, typed
 from repro.config.schema import AgentConfig
 from repro.data.replay import ReplayBuffer
 from repro.envs import get_task
-from repro.learners.base import SequenceLearner
 from repro.learners.registry import LEARNERS, build_learner
 
 REFERENCE = "drqv2"  # the online update every ratio is taken against

@@ -13,8 +13,9 @@ import yaml
 from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
-from repro.config.plugins import PluginError
+from repro.config.plugins import Bound, PluginError, bound_text, in_bound, load_factory
 from repro.config.schema import (
+    AGENT_FIELDS,
     BUDGET_KEYS,
     AgentConfig,
     LearnerName,
@@ -22,10 +23,11 @@ from repro.config.schema import (
     choice_fields,
     is_offline,
     learner_names,
+    learner_specs,
     objective_names,
     plugin_conf_dirs,
-    plugin_ranges,
-    plugin_section,
+    registered_ranges,
+    section_type,
     unread_keys,
 )
 
@@ -216,8 +218,9 @@ def validate(raw: DictConfig) -> DictConfig:
 
 
 def _structure(raw: DictConfig) -> DictConfig:
-    """The typed schema for ``raw``: :class:`RunConfig`, and the section of its learner when a plugin registers one
-    (``agent.<learner>``: only that learner's runs hold it). ConfigError for a learner nobody registered."""
+    """The typed schema for ``raw``: :class:`RunConfig`, and the section its learner registers (``agent.<learner>``:
+    only that learner's runs hold it). Another registered learner's section in ``raw`` (``++agent.dt.batch_size=8``
+    given to every agent of a sweep) is removed from it, unread. ConfigError for a learner nobody registered."""
     learner = str(OmegaConf.select(raw, "agent.learner", default=""))
     try:
         names, _ = learner_names(), objective_names()  # every registration loads (one line if one does not)
@@ -225,8 +228,14 @@ def _structure(raw: DictConfig) -> DictConfig:
         raise ConfigError(str(exc)) from None
     if learner not in names:
         raise ConfigError(f"agent.learner={learner} is not one of {', '.join(names)}.")
+    agent_node = raw.get("agent")
+    if isinstance(agent_node, DictConfig):
+        with open_dict(agent_node):
+            for other in names:
+                if other != learner and other in agent_node and other not in AGENT_FIELDS:
+                    agent_node.pop(other)
     schema = OmegaConf.structured(RunConfig)
-    section = plugin_section(learner)
+    section = section_type(learner)
     if section is not None:
         agent = OmegaConf.structured(AgentConfig)
         with open_dict(agent):
@@ -235,49 +244,36 @@ def _structure(raw: DictConfig) -> DictConfig:
     return schema
 
 
-# The lowest value of each numeric key (counts, sizes, rates): key -> (lowest allowed, whether the lowest is allowed
-# itself). Checked before anything is built or written: torch's optimizers and the networks would otherwise reject
-# such a value with a traceback after the run directory exists. agent.discount and agent.critic_target_tau: [0, 1].
-RANGES: dict[str, tuple[float, bool]] = {
+# The allowed values of each numeric key every run holds (counts, sizes, rates): key -> a bound
+# (repro/config/plugins.py ``Bound``: (low, inclusive) or (low, inclusive, high, inclusive)); a learner's own section
+# and the objectives' parameters are bounded by their registrations (``ranges``). Checked before anything is built
+# or written: torch's optimizers and the networks would otherwise reject such a value with a traceback after the run
+# directory exists.
+RANGES: dict[str, Bound] = {
     **{key: (1, True) for key in ("agent.K", "agent.batch_size", "agent.nstep", "agent.stddev_schedule.step_scale",
                                   "env.action_repeat", "env.frame_stack", "train.frames", "train.eval_every_frames",
-                                  "train.update_every_steps", "replay.capacity")},
+                                  "train.update_every_steps", "replay.capacity", "agent.feature_dim",
+                                  "agent.hidden_dim", "agent.action_hidden_dim", "agent.latent_action_dim")},
     "agent.lr": (0.0, False),
-    "agent.feature_dim": (1, True),
-    "agent.hidden_dim": (1, True),
-    "agent.action_hidden_dim": (1, True),
     "agent.stddev_clip": (0.0, True),
-    "agent.dt.lr": (0.0, False),
-    "agent.dt.weight_decay": (0.0, True),
-    "agent.dt.grad_clip": (0.0, False),
-    "agent.dt.batch_size": (1, True),
-    "agent.dt.context": (1, True),
-    "agent.dt.embed_dim": (1, True),
-    "agent.dt.n_layers": (1, True),
-    "agent.dt.n_heads": (1, True),
-    "agent.dt.warmup_steps": (1, True),
-    "agent.cql.n_samples": (1, True),
-    "agent.cql.temperature": (0.0, False),
+    "agent.discount": (0.0, True, 1.0, True),
+    "agent.critic_target_tau": (0.0, True, 1.0, True),
     "env.image_size": (16, True),
 }
 
 
 def _check_ranges(cfg: DictConfig) -> None:
-    """One line for a value out of its range (:data:`RANGES`, and the ranges registered with the run's plugin learner
-    and objectives), before anything is built or written."""
-    ranges = {**RANGES, **plugin_ranges(str(cfg.agent.learner), [str(k) for k in cfg.agent.objectives])}
-    for key, (low, inclusive) in ranges.items():
+    """One line for a value out of its range (:data:`RANGES`, and the ranges registered with the run's learner and
+    objectives), before anything is built or written. A null value is not checked."""
+    ranges = {**RANGES, **registered_ranges(str(cfg.agent.learner), [str(k) for k in cfg.agent.objectives])}
+    for key, bound in ranges.items():
         value = OmegaConf.select(cfg, key)
         if value is None:
             continue
-        if value < low or (value == low and not inclusive):
-            bound = f">= {low}" if inclusive else f"> {low}"
-            raise ConfigError(f"{key} must be {bound} (got {value}).")
-    if not 0.0 <= cfg.agent.discount <= 1.0 or not 0.0 <= cfg.agent.critic_target_tau <= 1.0:
-        raise ConfigError("agent.discount and agent.critic_target_tau must be in [0, 1].")
-    latent = cfg.agent.latent_action_dim
-    if latent is not None and latent < 1:
-        raise ConfigError(f"agent.latent_action_dim must be null (from |A|) or >= 1 (got {latent}).")
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise ConfigError(f"{key} must be a number {bound_text(bound)} (got {value!r}).")
+        if not in_bound(value, bound):
+            raise ConfigError(f"{key} must be {bound_text(bound)} (got {value}).")
 
 
 def _check_learner(cfg: DictConfig) -> None:
@@ -302,25 +298,20 @@ def _check_learner(cfg: DictConfig) -> None:
             raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
     if cfg.offline.eval_episodes < 0:
         raise ConfigError(f"offline.eval_episodes must be >= 0 (got {cfg.offline.eval_episodes}).")
-    cosine = cfg.agent.iql.actor_lr_cosine_updates
-    if cosine is not None and cosine < 1:
-        raise ConfigError(f"agent.iql.actor_lr_cosine_updates must be null or >= 1 (got {cosine}).")
-    if learner == LearnerName.cql and cfg.agent.cql.alpha is None and dataset is not None:
-        cfg.agent.cql.alpha = _table6_alpha(str(cfg.task.name), str(dataset))
+    _resolve(cfg)
 
 
-def _table6_alpha(task: str, dataset: str) -> float:
-    """CQL's alpha from the paper's Table 6 for a dataset kind; a folder or an unlisted pair needs agent.cql.alpha."""
-    from repro.config.paper_defaults import cql_alpha
-
-    if is_folder_value(dataset):
-        raise ConfigError(f"agent.cql.alpha: Table 6 gives alpha per task and dataset kind, not for the folder "
-                          f"'{dataset}'; set agent.cql.alpha (one of 0.5, 1, 2, 4, 8 in the paper).")
+def _resolve(cfg: DictConfig) -> None:
+    """What the run's learner resolves from its config (``LearnerSpec.resolve``: CQL's Table-6 alpha), in place."""
+    spec = learner_specs().get(str(cfg.agent.learner))
+    if spec is None or spec.resolve is None:
+        return
     try:
-        return float(cql_alpha(task, dataset))
-    except ValueError:
-        raise ConfigError(f"agent.cql.alpha: Table 6 has no value for task {task} and dataset {dataset}; "
-                          "set agent.cql.alpha.") from None
+        resolve = load_factory(spec, "resolve")
+        assert callable(resolve)
+        resolve(cfg)
+    except (PluginError, ValueError) as exc:
+        raise ConfigError(str(exc).splitlines()[0]) from None
 
 
 def typed(cfg: DictConfig) -> RunConfig:

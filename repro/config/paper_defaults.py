@@ -11,6 +11,8 @@ import csv
 from functools import lru_cache
 from pathlib import Path
 
+from omegaconf import DictConfig
+
 from repro.config.schema import normalize_dataset
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -37,6 +39,26 @@ def cql_alpha(task: str, dataset: str) -> float:
         raise ValueError(f"no Table 6 CQL alpha for task={task!r} dataset={dataset!r} (known tasks: "
                          f"{', '.join(tasks)}; datasets: {', '.join(kinds)}); set agent.cql.alpha")
     return table[key]
+
+
+def resolve_cql_alpha(cfg: DictConfig) -> None:
+    """Learner ``cql``'s ``resolve`` hook (repro/config/schema.py): a null ``agent.cql.alpha`` takes Table 6's value
+    for the run's task and dataset kind, before anything is written. ValueError (one line) for a dataset folder or
+    a pair the table lacks: the run must set agent.cql.alpha."""
+    dataset = cfg.offline.dataset
+    if cfg.agent.cql.alpha is not None or dataset is None:
+        return
+    from repro.config.compose import is_folder_value
+
+    dataset = str(dataset)
+    if is_folder_value(dataset):
+        raise ValueError(f"agent.cql.alpha: Table 6 gives alpha per task and dataset kind, not for the folder "
+                         f"'{dataset}'; set agent.cql.alpha (one of 0.5, 1, 2, 4, 8 in the paper).")
+    try:
+        cfg.agent.cql.alpha = float(cql_alpha(str(cfg.task.name), dataset))
+    except ValueError:
+        raise ValueError(f"agent.cql.alpha: Table 6 has no value for task {cfg.task.name} and dataset {dataset}; "
+                         "set agent.cql.alpha.") from None
 
 
 def online_means(method: str) -> dict[str, float]:

@@ -21,7 +21,11 @@ from typing import TypeVar
 LEARNER_GROUP = "taco_repro.learners"
 OBJECTIVE_GROUP = "taco_repro.objectives"
 NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
-Ranges = Mapping[str, tuple[float, bool]]  # setting -> (lowest allowed, whether the lowest itself is allowed)
+# setting -> its allowed values: (low, inclusive) for a lower bound alone, (low, inclusive, high, inclusive) for both
+# (low None: an upper bound alone); ``inclusive``: whether the bound itself is allowed. (0.0, False): > 0;
+# (0.0, True, 1.0, True): in [0, 1].
+Bound = tuple[float, bool] | tuple[float | None, bool, float, bool]
+Ranges = Mapping[str, Bound]
 
 
 class PluginError(ValueError):
@@ -36,12 +40,20 @@ class LearnerSpec:
     (else in an environment, as the online actor-critic). ``label``: the paper-style method label of its runs in
     tables and figures. ``section``: its typed settings, a dataclass whose values are the ``agent.<name>`` section
     of its agent files (read by it alone: other learners' runs neither hold nor check it). ``factory``: the learner
-    class (or a callable with its signature, ``repro.learners.registry.LearnerFactory``) as ``"module:attribute"``;
-    None only for the built-in learners, whose classes ``repro/learners/registry.py`` imports. ``conf``: a folder
-    holding ``agent/<agent>.yaml`` files that use it (added to Hydra's search path, so ``agent=<agent>`` composes).
-    ``ranges``: the lowest value of numeric fields of ``section``, ``{field: (low, inclusive)}``, in the form of
-    ``repro.config.compose.RANGES`` and checked with it (one line, exit 2, before a run writes anything); a null
-    value is not checked.
+    class (or a callable with its signature, ``repro.learners.registry.LearnerFactory``) as ``"module:attribute"``
+    (the built-in learners' too: ``repro/learners/registry.py`` builds its table from the registrations).
+    ``conf``: a folder holding ``agent/<agent>.yaml`` files that use it (added to Hydra's search path, so
+    ``agent=<agent>`` composes).
+    ``ranges``: the allowed values of numeric fields of ``section``, ``{field: bound}`` (a :data:`Bound`:
+    ``(low, inclusive)`` or ``(low, inclusive, high, inclusive)``), in the form of ``repro.config.compose.RANGES``
+    and checked with it (one line, exit 2, before a run writes anything); a null value is not checked.
+    ``named_by_objectives``: its label names its runs without objectives only; a run with objectives is named by
+    their labels alone (the built-in online actor-critic: the paper's TACO, SPR, CURL are DrQ-v2 with objectives);
+    otherwise a run's label is the learner's label, then its objectives' (``analysis.identity.method_label``).
+    ``resolve``: a function ``(cfg: DictConfig) -> None`` as ``"module:attribute"`` (light: the config layer calls
+    it) that fills what the learner resolves from its run's config once it is validated, in place, before anything
+    is written (CQL's alpha from the paper's Table 6 when ``agent.cql.alpha`` is null); ValueError (one line) for a
+    config it cannot resolve. So no generic module names a learner.
     """
 
     name: str
@@ -51,21 +63,31 @@ class LearnerSpec:
     factory: str | None = None
     conf: str | Path | None = None
     ranges: Ranges = field(default_factory=dict)
+    named_by_objectives: bool = False
+    resolve: str | None = None
 
 
 @dataclass(frozen=True)
 class ObjectiveSpec:
-    """An auxiliary objective: ``name`` is its key in ``agent.objectives``; ``label`` the method label of an online
-    agent named after it (``taco`` -> ``TACO``; None: no agent of its own); ``factory``, ``conf``: as
-    :class:`LearnerSpec` (the class is an ``repro.agent.objectives.base.Objective``); ``ranges``: as
-    :class:`LearnerSpec`'s, of its settings ``agent.objective_params.<name>.<setting>``, checked in the runs
-    whose ``agent.objectives`` names it."""
+    """An auxiliary objective: ``name`` is its key in ``agent.objectives``; ``label`` its part of a method's label
+    (``taco`` -> ``TACO``, ``CQL+TACO``; None: the name); ``factory``, ``conf``: as :class:`LearnerSpec` (the class
+    is an ``repro.agent.objectives.base.Objective``); ``ranges``: as :class:`LearnerSpec`'s, of its settings
+    ``agent.objective_params.<name>.<setting>``, checked in the runs whose ``agent.objectives`` names it.
+    ``companions``: registered objectives that the method named ``label`` trains with it (the paper's TACO is the
+    TACO, CURL and reward losses): with all of them enabled, ``label`` alone names the lot; with some off, the label
+    says which (``TACO w/o CURL``)."""
 
     name: str
     label: str | None = None
     factory: str | None = None
     conf: str | Path | None = None
     ranges: Ranges = field(default_factory=dict)
+    companions: tuple[str, ...] = ()
+
+    @property
+    def tag(self) -> str:
+        """Its part of a method label: ``label``, or the name when it registers none."""
+        return self.label or self.name
 
 
 Spec = TypeVar("Spec", LearnerSpec, ObjectiveSpec)
@@ -77,6 +99,8 @@ def check_spec(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
         raise PluginError(f"{where}: name '{spec.name}' must be lower-case letters, digits and '_'.")
     if spec.factory is None or ":" not in spec.factory:
         raise PluginError(f"{where}: factory must be 'module:attribute' (got {spec.factory!r}).")
+    if isinstance(spec, LearnerSpec) and spec.resolve is not None and ":" not in spec.resolve:
+        raise PluginError(f"{where}: resolve must be 'module:attribute' (got {spec.resolve!r}).")
     if spec.conf is not None and not (Path(spec.conf) / "agent").is_dir():
         raise PluginError(f"{where}: conf folder {spec.conf} has no agent/ folder.")
     if isinstance(spec, LearnerSpec) and spec.section is not None and not (
@@ -86,7 +110,7 @@ def check_spec(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
 
 
 def check_ranges(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
-    """PluginError (one line) for ``ranges`` that cannot be checked: not ``{name: (number, bool)}``, or (a
+    """PluginError (one line) for ``ranges`` that cannot be checked: not ``{name: bound}`` (:data:`Bound`), or (a
     learner's) naming no field of its section."""
     if not isinstance(spec.ranges, Mapping):
         raise PluginError(f"{where}: ranges must be a mapping setting -> (low, inclusive) (got {spec.ranges!r}).")
@@ -96,10 +120,46 @@ def check_ranges(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
     for key, bound in spec.ranges.items():
         if known is not None and key not in known:
             raise PluginError(f"{where}: ranges names '{key}', which is not a field of its section.")
-        if not (isinstance(bound, tuple) and len(bound) == 2 and isinstance(bound[0], (int, float))
-                and not isinstance(bound[0], bool) and isinstance(bound[1], bool)):
-            raise PluginError(f"{where}: ranges['{key}'] must be (low, inclusive), e.g. (0.0, False) for > 0 "
+        if not is_bound(bound):
+            raise PluginError(f"{where}: ranges['{key}'] must be (low, inclusive) or (low, inclusive, high, "
+                              f"inclusive), e.g. (0.0, False) for > 0, (0.0, False, 1.0, False) for in (0, 1) "
                               f"(got {bound!r}).")
+
+
+def _number(x: object) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def is_bound(bound: object) -> bool:
+    """Whether ``bound`` is a :data:`Bound`."""
+    if not isinstance(bound, tuple) or len(bound) not in (2, 4):
+        return False
+    if len(bound) == 2:
+        return _number(bound[0]) and isinstance(bound[1], bool)
+    low, low_in, high, high_in = bound
+    return ((low is None or _number(low)) and isinstance(low_in, bool) and _number(high)
+            and isinstance(high_in, bool) and (low is None or low <= high))
+
+
+def bound_text(bound: Bound) -> str:
+    """``> 0.0``, ``>= 1``, ``in (0.0, 1.0)``, ``in [0.0, 1.0]``, ``<= 1.0``: the allowed values in words."""
+    if len(bound) == 2:
+        return f"{'>=' if bound[1] else '>'} {bound[0]}"
+    low, low_in, high, high_in = bound
+    if low is None:
+        return f"{'<=' if high_in else '<'} {high}"
+    return f"in {'[' if low_in else '('}{low}, {high}{']' if high_in else ')'}"
+
+
+def in_bound(value: float, bound: Bound) -> bool:
+    """Whether ``value`` is allowed by ``bound``."""
+    low, low_in = bound[0], bound[1]
+    if low is not None and (value < low or (value == low and not low_in)):
+        return False
+    if len(bound) == 4:
+        high, high_in = bound[2], bound[3]
+        return value < high or (value == high and high_in)
+    return True
 
 
 def discover(group: str, kind: type[Spec]) -> tuple[Spec, ...]:
@@ -121,15 +181,17 @@ def discover(group: str, kind: type[Spec]) -> tuple[Spec, ...]:
     return tuple(out)
 
 
-def load_factory(spec: LearnerSpec | ObjectiveSpec) -> object:
-    """The object a plugin's ``factory`` names, imported by ``pkgutil.resolve_name``; PluginError (one line) when it
-    fails. Called by the layer that builds it (``repro.learners.registry``, ``repro.agent.objectives``); a plugin's
-    modules are outside this project, so tests/test_layers.py's one-way rule does not apply to them."""
+def load_factory(spec: LearnerSpec | ObjectiveSpec, attribute: str = "factory") -> object:
+    """The object a registration's ``factory`` (or its ``resolve``) names, imported by ``pkgutil.resolve_name``;
+    PluginError (one line) when it fails. Called by the layer that builds it (``repro.learners.registry``,
+    ``repro.agent.objectives``; ``resolve``: the config); a plugin's modules are outside this project, so
+    tests/test_layers.py's one-way rule does not apply to them."""
     import pkgutil
 
-    assert spec.factory is not None
+    target = getattr(spec, attribute)
+    assert isinstance(target, str)
     try:
-        return pkgutil.resolve_name(spec.factory)
+        return pkgutil.resolve_name(target)
     except (ImportError, AttributeError, ValueError) as exc:
-        raise PluginError(f"'{spec.name}': cannot import its factory {spec.factory}: {type(exc).__name__}: {exc}") \
+        raise PluginError(f"'{spec.name}': cannot import its {attribute} {target}: {type(exc).__name__}: {exc}") \
             from None

@@ -15,7 +15,16 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any, Optional, TypeVar
 
-from repro.config.plugins import LEARNER_GROUP, OBJECTIVE_GROUP, LearnerSpec, ObjectiveSpec, PluginError, discover
+from repro.config.plugins import (
+    LEARNER_GROUP,
+    OBJECTIVE_GROUP,
+    Bound,
+    LearnerSpec,
+    ObjectiveSpec,
+    PluginError,
+    check_spec,
+    discover,
+)
 
 
 class Choice(str, enum.Enum):
@@ -210,16 +219,6 @@ def normalize_dataset(name: Any) -> str | None:
     return DATASET_ALIASES.get(text, text) or None
 
 
-def check_registry(what: str, keys: Iterable[Any], names: Iterable[str]) -> None:
-    """Raise ValueError (one line) unless the ``keys`` of a registry of code are exactly the registered ``names``."""
-    keys, allowed = {str(k) for k in keys}, {str(n) for n in names}
-    if keys != allowed:
-        missing, extra = sorted(allowed - keys), sorted(keys - allowed)
-        raise ValueError(f"the {what} registry must hold exactly the registered {what}s (repro/config/schema.py and "
-                         f"the installed plugins); missing: {', '.join(missing) or '-'}; not registered: "
-                         f"{', '.join(extra) or '-'}")
-
-
 @dataclass
 class StdSchedule:
     """Linear decay of the policy std (conf/agent/*.yaml ``stddev_schedule``)."""
@@ -298,8 +297,9 @@ class DTConfig:
 
 @dataclass
 class AgentConfig:
-    """An agent (conf/agent/<agent>.yaml; ``learner`` and ``stddev_schedule.step_scale`` from conf/config.yaml
-    unless the agent file sets them, the four learner sections from conf/agent/shared/)."""
+    """What every learner's agent shares (conf/agent/<agent>.yaml; ``learner`` and ``stddev_schedule.step_scale``
+    from conf/config.yaml unless the agent file sets them). A learner's own settings are its registered ``section``,
+    composed by its own agent files only (a built-in one's from conf/agent/shared/)."""
 
     name: str
     learner: str  # a registered learner (learner_names(); checked by repro.config.compose.validate)
@@ -323,10 +323,8 @@ class AgentConfig:
     compile: bool
     amp: bool
     fast: bool  # agent.fast: repro/agent/fast.py resolves what it turns on
-    cql: CQLConfig
-    td3bc: TD3BCConfig
-    iql: IQLConfig
-    dt: DTConfig
+    # and, in the runs of a learner registered with a ``section``, that section as ``agent.<learner>``
+    # (compose._structure adds it; the learner reads it with :func:`learner_section`)
 
 
 @dataclass
@@ -418,7 +416,7 @@ class RunConfig:
 
 def choice_fields(section: type = RunConfig, prefix: str = "") -> dict[str, type[Choice]]:
     """Dotted config key -> its :class:`Choice` Enum, for every field of ``section`` (and of its sub-sections)
-    typed with one."""
+    typed with one; for the whole :class:`RunConfig`, the registered learners' sections (``agent.<learner>``) too."""
     hints = typing.get_type_hints(section)
     out: dict[str, type[Choice]] = {}
     for f in dataclasses.fields(section):
@@ -427,28 +425,53 @@ def choice_fields(section: type = RunConfig, prefix: str = "") -> dict[str, type
             out[prefix + f.name] = kind
         elif isinstance(kind, type) and dataclasses.is_dataclass(kind):
             out.update(choice_fields(kind, f"{prefix}{f.name}."))
+    if section is RunConfig and not prefix:
+        for spec in learner_specs().values():
+            if spec.section is not None:
+                out.update(choice_fields(spec.section, f"agent.{spec.name}."))
     return out
 
 
 # ------------------------------------------------------------------------------------ the registry (one source)
-# The built-in learners and objectives, registered as a plugin registers its own (repro/config/plugins.py); their
-# classes are imported by repro/learners/registry.py and repro/agent/objectives/, which check at import that they
-# build exactly the registered names. Order: the paper's (bench reports, help texts).
+# The built-in learners and objectives, registered as a plugin registers its own (repro/config/plugins.py): each
+# names its code by ``factory``, which repro/learners/registry.py and repro/agent/objectives/ import to build their
+# tables from these registrations. ``ranges``: the allowed values of a learner's own section (checked in its runs
+# only) and of an objective's parameters. Order: the paper's (bench reports, help texts).
+_POSITIVE, _AT_LEAST_1, _NON_NEGATIVE, _OPEN_UNIT = (0.0, False), (1, True), (0.0, True), (0.0, False, 1.0, False)
 BUILTIN_LEARNERS = (
-    LearnerSpec(LearnerName.actor_critic.value, offline=False, label="DrQ-v2"),
-    LearnerSpec(LearnerName.bc.value, offline=True, label="BC"),
-    LearnerSpec(LearnerName.td3bc.value, offline=True, label="TD3+BC", section=TD3BCConfig),
-    LearnerSpec(LearnerName.cql.value, offline=True, label="CQL", section=CQLConfig),
-    LearnerSpec(LearnerName.iql.value, offline=True, label="IQL", section=IQLConfig),
-    LearnerSpec(LearnerName.dt.value, offline=True, label="DT", section=DTConfig),
+    LearnerSpec(LearnerName.actor_critic.value, offline=False, label="DrQ-v2", named_by_objectives=True,
+                factory="repro.agent.agent:Agent"),
+    LearnerSpec(LearnerName.bc.value, offline=True, label="BC", factory="repro.learners.bc:BC"),
+    LearnerSpec(LearnerName.td3bc.value, offline=True, label="TD3+BC", section=TD3BCConfig,
+                factory="repro.learners.td3bc:TD3BC", ranges={"alpha": _NON_NEGATIVE}),
+    LearnerSpec(LearnerName.cql.value, offline=True, label="CQL", section=CQLConfig, factory="repro.learners.cql:CQL",
+                resolve="repro.config.paper_defaults:resolve_cql_alpha",
+                ranges={"alpha": _NON_NEGATIVE, "n_samples": _AT_LEAST_1, "temperature": _POSITIVE}),
+    LearnerSpec(LearnerName.iql.value, offline=True, label="IQL", section=IQLConfig, factory="repro.learners.iql:IQL",
+                ranges={"expectile": _OPEN_UNIT, "beta": _NON_NEGATIVE, "max_weight": _POSITIVE,
+                        "actor_lr_cosine_updates": _AT_LEAST_1}),
+    LearnerSpec(LearnerName.dt.value, offline=True, label="DT", section=DTConfig, factory="repro.learners.dt:DT",
+                ranges={"context": _AT_LEAST_1, "embed_dim": _AT_LEAST_1, "n_layers": _AT_LEAST_1,
+                        "n_heads": _AT_LEAST_1, "dropout": (0.0, True, 1.0, False), "lr": _POSITIVE,
+                        "weight_decay": _NON_NEGATIVE, "warmup_steps": _AT_LEAST_1, "grad_clip": _POSITIVE,
+                        "batch_size": _AT_LEAST_1, "rtg_scale": _POSITIVE, "max_timestep": _AT_LEAST_1}),
 )
+_WITH_CURL_AND_REWARD = (ObjectiveName.curl.value, ObjectiveName.reward.value)  # TACO's loss: TACO + CURL + reward;
+# the Table 2 objectives replace TACO's term and keep the other two
+_MOMENTUM = (0.0, True, 1.0, True)  # target <- m target + (1 - m) online
 BUILTIN_OBJECTIVES = (
-    ObjectiveSpec(ObjectiveName.taco.value, label="TACO"),
-    ObjectiveSpec(ObjectiveName.curl.value, label="CURL"),
-    ObjectiveSpec(ObjectiveName.reward.value),
-    ObjectiveSpec(ObjectiveName.spr.value, label="SPR"),
-    ObjectiveSpec(ObjectiveName.atc.value, label="ATC"),
-    ObjectiveSpec(ObjectiveName.driml.value, label="DRIML"),
+    ObjectiveSpec(ObjectiveName.taco.value, label="TACO", companions=_WITH_CURL_AND_REWARD,
+                  factory="repro.agent.objectives.taco:TACOObjective"),
+    ObjectiveSpec(ObjectiveName.curl.value, label="CURL", factory="repro.agent.objectives.taco:CURLObjective"),
+    ObjectiveSpec(ObjectiveName.reward.value, label="Reward", factory="repro.agent.objectives.taco:RewardObjective"),
+    ObjectiveSpec(ObjectiveName.spr.value, label="SPR", companions=_WITH_CURL_AND_REWARD,
+                  factory="repro.agent.objectives.spr:SPRObjective",
+                  ranges={"momentum": _MOMENTUM, "projection_dim": _AT_LEAST_1}),
+    ObjectiveSpec(ObjectiveName.atc.value, label="ATC", companions=_WITH_CURL_AND_REWARD,
+                  factory="repro.agent.objectives.atc:ATCObjective",
+                  ranges={"momentum": _MOMENTUM, "predictor_hidden": _AT_LEAST_1}),
+    ObjectiveSpec(ObjectiveName.driml.value, label="DRIML", companions=_WITH_CURL_AND_REWARD,
+                  factory="repro.agent.objectives.driml:DRIMLObjective"),
 )
 AGENT_FIELDS = frozenset(f.name for f in dataclasses.fields(AgentConfig))
 
@@ -457,6 +480,8 @@ AGENT_FIELDS = frozenset(f.name for f in dataclasses.fields(AgentConfig))
 def learner_specs() -> dict[str, LearnerSpec]:
     """Every registered learner by name: the built-in ones, then the installed plugins' (entry-point group
     ``taco_repro.learners``) by name. PluginError (one line) for a plugin that clashes with one."""
+    for spec in BUILTIN_LEARNERS:
+        check_spec(spec, f"built-in learner '{spec.name}'")
     specs = {s.name: s for s in BUILTIN_LEARNERS}
     for spec in discover(LEARNER_GROUP, LearnerSpec):
         if spec.name in specs or spec.name in AGENT_FIELDS:
@@ -469,12 +494,33 @@ def learner_specs() -> dict[str, LearnerSpec]:
 @cache
 def objective_specs() -> dict[str, ObjectiveSpec]:
     """Every registered objective by name: the built-in ones, then the plugins' (``taco_repro.objectives``)."""
+    for spec in BUILTIN_OBJECTIVES:
+        check_spec(spec, f"built-in objective '{spec.name}'")
     specs = {s.name: s for s in BUILTIN_OBJECTIVES}
     for spec in discover(OBJECTIVE_GROUP, ObjectiveSpec):
         if spec.name in specs:
             raise PluginError(f"objective '{spec.name}' ({OBJECTIVE_GROUP}): the name is taken by a built-in one.")
         specs[spec.name] = spec
+    _check_labels(specs, learner_specs())
     return specs
+
+
+def _check_labels(objectives: dict[str, ObjectiveSpec], learners: dict[str, LearnerSpec]) -> None:
+    """PluginError (one line) unless every registered label is its own (a method label is built from them:
+    two registrations of one label would name two methods alike) and every objective's ``companions`` are
+    registered objectives without companions of their own."""
+    seen: dict[str, str] = {}
+    tags = [*((s.label, f"learner '{s.name}'") for s in learners.values()),
+            *((s.tag, f"objective '{s.name}'") for s in objectives.values())]
+    for tag, who in tags:
+        if tag in seen:
+            raise PluginError(f"{who}: label '{tag}' is already the label of {seen[tag]}.")
+        seen[tag] = who
+    for spec in objectives.values():
+        for other in spec.companions:
+            if other not in objectives or objectives[other].companions or other == spec.name:
+                raise PluginError(f"objective '{spec.name}': companion '{other}' must be another registered "
+                                  "objective without companions of its own.")
 
 
 def learner_names() -> tuple[str, ...]:
@@ -493,20 +539,19 @@ def plugin_conf_dirs() -> tuple[str, ...]:
     return tuple(dict.fromkeys(str(s.conf) for s in specs if s.conf is not None))
 
 
-def plugin_section(learner: str) -> type | None:
-    """The typed section a plugin learner adds as ``agent.<learner>`` (None for a built-in learner, whose sections
-    are fields of :class:`AgentConfig`, and for a learner without one)."""
+def section_type(learner: str) -> type | None:
+    """The typed section a learner registers as ``agent.<learner>`` (None for a learner without one, or one nobody
+    registers)."""
     spec = learner_specs().get(str(learner))
-    if spec is None or spec.section is None or spec.name in AGENT_FIELDS:
-        return None
-    return spec.section
+    return None if spec is None else spec.section
 
 
-def plugin_ranges(learner: str, objectives: Iterable[str]) -> dict[str, tuple[float, bool]]:
-    """The registered ranges of a run's plugin settings (``LearnerSpec.ranges``, ``ObjectiveSpec.ranges``) by their
-    dotted keys, in the form of ``repro.config.compose.RANGES``: ``agent.<learner>.<field>`` and
-    ``agent.objective_params.<objective>.<setting>``. Unregistered names give none (their own check names them)."""
-    out: dict[str, tuple[float, bool]] = {}
+def registered_ranges(learner: str, objectives: Iterable[str]) -> dict[str, Bound]:
+    """The registered ranges of a run's learner section and objective parameters (``LearnerSpec.ranges``,
+    ``ObjectiveSpec.ranges``) by their dotted keys, in the form of ``repro.config.compose.RANGES``:
+    ``agent.<learner>.<field>`` and ``agent.objective_params.<objective>.<setting>``. Unregistered names give none
+    (their own check names them)."""
+    out: dict[str, Bound] = {}
     spec = learner_specs().get(str(learner))
     if spec is not None:
         out.update({f"agent.{spec.name}.{key}": bound for key, bound in spec.ranges.items()})
@@ -522,7 +567,7 @@ S = TypeVar("S")
 
 
 def learner_section(agent: AgentConfig, kind: type[S]) -> S:
-    """A plugin learner's own typed section (``agent.<learner>``, an instance of ``kind``) of a typed agent config."""
+    """A learner's own typed section (``agent.<learner>``, an instance of ``kind``) of a typed agent config."""
     section = vars(agent).get(str(agent.learner))
     if not isinstance(section, kind):
         raise TypeError(f"agent.{agent.learner} is not a {kind.__name__} (is {agent.learner} registered with "

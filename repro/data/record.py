@@ -24,6 +24,8 @@ from typing import Any, cast
 import numpy as np
 import torch
 
+from repro.agent.protocol import OnlineLearner
+from repro.config.schema import AgentConfig
 from repro.data.episodes import EpisodeStore
 from repro.runs.fsutil import atomic_output, atomic_write
 
@@ -84,7 +86,7 @@ class Recorder:
         self.policy = policy
 
     @classmethod
-    def open(cls, run_dir: str | Path, agent_cfg: Any, obs_shape: tuple[int, int, int], action_dim: int,
+    def open(cls, run_dir: str | Path, agent_cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
              checkpoint: dict | None) -> Recorder:
         """The recorder of a (re)starting run, rewound to ``checkpoint`` (None: a start from scratch)."""
         shape = cast("tuple[int, int, int]", tuple(obs_shape))
@@ -125,14 +127,13 @@ class Recorder:
             except OSError:  # no hard links on this filesystem
                 shutil.copyfile(written, tmp)
 
-    def snapshot(self, agent: Any, step: int, frame: int, eval_return: float) -> None:
-        """Keep the acting part of ``agent`` (its modules ``encoder`` and ``actor``, ``.stddev(step)``) after the
-        evaluation at ``step``, with that evaluation's mean return."""
-        modules = agent.modules()
-        state = {"format": SNAPSHOT_FORMAT, "step": int(step), "frame": int(frame),
-                 "eval_return": float(eval_return), "stddev": float(agent.stddev(step)),
-                 "policy": self.policy.as_dict(), "encoder": _cpu_state(modules["encoder"]),
-                 "actor": _cpu_state(modules["actor"])}
+    def snapshot(self, agent: OnlineLearner, step: int, frame: int, eval_return: float) -> None:
+        """Keep the acting part of ``agent`` (its ``acting_modules()``, ``.stddev(step)``) after the evaluation at
+        ``step``, with that evaluation's mean return."""
+        state: dict[str, Any] = {"format": SNAPSHOT_FORMAT, "step": int(step), "frame": int(frame),
+                                 "eval_return": float(eval_return), "stddev": float(agent.stddev(step)),
+                                 "policy": self.policy.as_dict()}
+        state.update({name: _cpu_state(module) for name, module in agent.acting_modules().items()})
 
         def write(f) -> None:
             buf = io.BytesIO()

@@ -1,6 +1,6 @@
-"""Learners: one protocol (base.Learner) and a registry keyed by ``agent.learner``."""
+"""Learners: the protocol (repro/agent/protocol.py, re-exported here) and the registry keyed by ``agent.learner``."""
 
-from repro.learners.base import (
+from repro.agent.protocol import (
     EpisodicActor,
     Learner,
     LearnerBase,
@@ -9,7 +9,8 @@ from repro.learners.base import (
     Sampler,
     SequenceLearner,
 )
-from repro.learners.registry import LEARNERS, build_learner, samples_episodes
+from repro.learners.registry import LEARNERS, build_learner, max_episode_length, samples_episodes
 
 __all__ = ["LEARNERS", "EpisodicActor", "Learner", "LearnerBase", "OnlineLearner", "ReturnConditioned", "Sampler",
-           "SequenceLearner", "build_learner", "samples_episodes"]
+           "SequenceLearner", "build_learner", "max_episode_length",
+           "samples_episodes"]

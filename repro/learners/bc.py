@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from repro.agent.aug import RandomShift
+from repro.agent.backbone import optimize
 from repro.agent.losses import Metrics
 from repro.agent.modules import LearnerBase, ModuleSet
 from repro.agent.networks import Actor, Encoder
@@ -54,9 +55,6 @@ class BC(LearnerBase, ModuleSet):
         """Deterministic action in [-1, 1] for float observations (B, C, H, W)."""
         return self.actor(self.encoder(obs), 1.0).mean
 
-    def stddev(self, step: int) -> float:
-        return 0.0
-
     @torch.no_grad()
     def act(self, obs: np.ndarray, step: int, eval_mode: bool) -> np.ndarray:
         obs_t = torch.as_tensor(obs, device=self.device).float().unsqueeze(0)
@@ -64,9 +62,5 @@ class BC(LearnerBase, ModuleSet):
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         loss = bc_loss(self.policy(self.aug(batch["obs"].float())), batch["action"])
-        self.encoder_opt.zero_grad(set_to_none=True)
-        self.actor_opt.zero_grad(set_to_none=True)
-        loss.backward()
-        self.actor_opt.step()
-        self.encoder_opt.step()
+        optimize(loss, self.actor_opt, self.encoder_opt)
         return {"bc_loss": loss.detach()}

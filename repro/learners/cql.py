@@ -21,6 +21,7 @@ import torch
 from repro.agent.backbone import BackboneLearner, optimize
 from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics
 from repro.agent.networks import TruncatedNormal
+from repro.config.schema import CQLConfig, learner_section
 from repro.learners.losses import cql as cql_loss
 
 REGULARISER_METRICS = tuple(f"cql_{part}_q{i}" for i in (1, 2)
@@ -34,7 +35,7 @@ class CQL(BackboneLearner):
 
     @property
     def resolved(self) -> dict[str, object]:
-        return {"algorithm": "cql", "cql_alpha": self.cfg.cql.alpha}
+        return {"cql_alpha": learner_section(self.cfg, CQLConfig).alpha}
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         bb = self.backbone
@@ -61,7 +62,7 @@ class CQL(BackboneLearner):
                       step: int) -> tuple[tuple[torch.Tensor, ...], Metrics]:
         """V-D4RL's draw order: N uniform actions, then N policy samples at h, then N at h' (each (B, N, A),
         noise clipped to ``stddev_clip`` unless ``cql.clip_policy_samples`` is off)."""
-        bb, c = self.backbone, self.cfg.cql
+        bb, c = self.backbone, learner_section(self.cfg, CQLConfig)
         n, batch = c.n_samples, h.shape[0]
         std = bb.stddev(step)
         clip = self.cfg.stddev_clip if c.clip_policy_samples else None

@@ -19,9 +19,8 @@ import torch
 from torch import nn
 
 from repro.agent.losses import Metrics
-from repro.agent.modules import LearnerBase
-from repro.config.schema import AgentConfig
-from repro.learners.base import count_parameters
+from repro.agent.modules import LearnerBase, count_parameters
+from repro.config.schema import AgentConfig, DTConfig, learner_section
 from repro.learners.dt_model import DecisionTransformer, EvalContext, SequenceSampler, batch_to_tensors, make_optimizer
 from repro.learners.losses.dt import action_loss
 
@@ -35,7 +34,7 @@ class DT(LearnerBase):
                  device: torch.device | str = "cpu", explore_steps: int = 0):
         if obs_shape[0] % 3:
             raise ValueError(f"obs_shape {obs_shape}: channels must be 3 x frame_stack")
-        self.cfg, self.dt = cfg, cfg.dt
+        self.cfg, self.dt = cfg, learner_section(cfg, DTConfig)
         self.device = torch.device(device)
         self.action_dim = action_dim
         self.frame_stack = obs_shape[0] // 3
@@ -52,6 +51,11 @@ class DT(LearnerBase):
         self.train(True)
 
     # ----------------------------------------------------------------- protocol
+    @staticmethod
+    def max_episode_length(cfg: AgentConfig) -> int | None:
+        """``agent.dt.max_timestep``: the timestep embedding's size."""
+        return int(learner_section(cfg, DTConfig).max_timestep)
+
     @property
     def batch_size(self) -> int:
         """Windows per update: ``agent.dt.batch_size`` (the offline loop and the bench read this)."""

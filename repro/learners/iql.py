@@ -22,10 +22,11 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
+from repro.agent import fast
 from repro.agent.backbone import BackboneLearner, optimize
 from repro.agent.losses import CRITIC_METRICS, Metrics
 from repro.agent.networks import mlp, orthogonal_init, trunk
-from repro.config.schema import AgentConfig, RewardScaling, ValueForTargets
+from repro.config.schema import AgentConfig, IQLConfig, RewardScaling, ValueForTargets, learner_section
 from repro.learners.losses import iql as iql_loss
 
 VALUE_METRICS = ("value_loss", "value_v")
@@ -67,15 +68,16 @@ class IQL(BackboneLearner):
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
         # the Enums raise ValueError for a value outside them (compose refuses one first, in one line)
-        self.targets_from_v_before = ValueForTargets(cfg.iql.value_for_targets) == ValueForTargets.before  # CORL's
-        self.scales_rewards = RewardScaling(cfg.iql.reward_scaling) == RewardScaling.return_range
+        self.own = own = learner_section(cfg, IQLConfig)  # agent.iql
+        self.targets_from_v_before = ValueForTargets(own.value_for_targets) == ValueForTargets.before  # CORL's
+        self.scales_rewards = RewardScaling(own.reward_scaling) == RewardScaling.return_range
         self.reward_scale = 1.0  # set by set_dataset_returns when scales_rewards
         super().__init__(cfg, obs_shape, action_dim, device)  # the backbone
         bb = self.backbone
         self.value = ValueNet(bb.repr_dim, cfg.feature_dim, cfg.hidden_dim).to(bb.device)
-        self.value_opt = torch.optim.Adam(self.value.parameters(), lr=cfg.lr)
+        self.value_opt = fast.adam(bb.fast)(self.value.parameters(), lr=cfg.lr)  # the backbone's Adam
         self.log_std: LogStd | None = None
-        if cfg.iql.learned_log_std:  # trained by the actor's optimizer, as the JAX actor's log_stds
+        if own.learned_log_std:  # trained by the actor's optimizer, as the JAX actor's log_stds
             self.log_std = LogStd(action_dim).to(bb.device)
             bb.actor_opt.add_param_group({"params": list(self.log_std.parameters())})
 
@@ -100,7 +102,7 @@ class IQL(BackboneLearner):
     @property
     def resolved(self) -> dict[str, object]:
         # iql_reward_scale: 1.0 unless iql.reward_scaling=return_range
-        return {"algorithm": "iql", "iql_reward_scale": self.reward_scale}
+        return {"iql_reward_scale": self.reward_scale}
 
     # ----------------------------------------------------------------- update
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
@@ -127,7 +129,7 @@ class IQL(BackboneLearner):
         with torch.no_grad():
             tq1, tq2 = bb.critic_target(h, bb.encode_action(action))
         v = self.value(h)
-        loss, metrics = iql_loss.value_loss(tq1, tq2, v, expectile=self.cfg.iql.expectile)
+        loss, metrics = iql_loss.value_loss(tq1, tq2, v, expectile=self.own.expectile)
         optimize(loss, self.value_opt)
         return (tq1, tq2), metrics
 
@@ -135,7 +137,7 @@ class IQL(BackboneLearner):
                     v: torch.Tensor, step: int) -> Metrics:
         """One advantage-weighted regression step of log pi(a|sg(h)) (learning rate: ``iql.actor_lr_cosine_updates``
         decays it to 0 like the JAX code's schedule; null keeps it constant)."""
-        bb, c = self.backbone, self.cfg.iql
+        bb, c = self.backbone, self.own
         if c.actor_lr_cosine_updates is not None:
             for group in bb.actor_opt.param_groups:
                 group["lr"] = iql_loss.cosine_lr(self.cfg.lr, step, c.actor_lr_cosine_updates)

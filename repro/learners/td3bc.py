@@ -19,6 +19,7 @@ import torch
 
 from repro.agent.backbone import BackboneLearner, optimize
 from repro.agent.losses import CRITIC_METRICS, Metrics
+from repro.config.schema import TD3BCConfig, learner_section
 from repro.learners.losses import td3bc as td3bc_loss
 
 ACTOR_METRICS = ("actor_loss", "actor_lambda", "actor_bc", "actor_q")
@@ -28,10 +29,6 @@ class TD3BC(BackboneLearner):
     """Offline learner ``td3bc``."""
 
     update_metrics = CRITIC_METRICS + ACTOR_METRICS
-
-    @property
-    def resolved(self) -> dict[str, object]:
-        return {"algorithm": "td3bc"}
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         bb = self.backbone
@@ -48,7 +45,7 @@ class TD3BC(BackboneLearner):
         dist = bb.actor(h, bb.stddev(step))
         policy_action = dist.sample(clip=self.cfg.stddev_clip)
         q1, q2 = bb.critic(h, bb.encode_action(policy_action))
-        c = self.cfg.td3bc
+        c = learner_section(self.cfg, TD3BCConfig)
         loss, metrics = td3bc_loss.actor_loss(q1, q2, policy_action, data_action, alpha=c.alpha,
                                               lambda_from=c.lambda_from)
         optimize(loss, bb.actor_opt)

@@ -13,6 +13,10 @@ Versions:
 - config 2: ``format: 2``; only the keys the run's learner reads (``repro.config.compose.prune_unread``).
 - config 3: ``format: 3``; ``agent.fast`` (issue 26; runs written before it ran the plain path: ``false``). The
   packaged defaults when version 3 began are ``data/config_v3_defaults.yaml``.
+- config 4: ``format: 4``; each learner's own section (``agent.cql``, ``agent.td3bc``, ``agent.iql``, ``agent.dt``) is
+  composed by its own agent files only, no longer a field of every run's agent config (issue 35). A file of
+  version 2 or 3 already held only its learner's section (``prune_unread``): the step renumbers it. The packaged
+  defaults when version 4 began are ``data/config_v4_defaults.yaml``.
 - meta 1: no ``format`` key, no ``budgets``.
 - meta 2: ``format: 2``; ``budgets`` (each budget the run reached: ``budget``, ``finished``) and ``extensions``
   (``from``, ``to``, ``time``); ``migrations`` lists the files migrated on disk (``file``, ``from``, ``to``, ``time``).
@@ -32,7 +36,7 @@ import yaml
 from repro.config.compose import ABSENT, get_key, pop_key, prune_unread, set_key
 from repro.config.schema import LearnerName
 
-CONFIG_FORMAT = 3  # the version config.yaml is written in
+CONFIG_FORMAT = 4  # the version config.yaml is written in
 META_FORMAT = 2  # the version meta.json is written in
 V2_DEFAULTS = Path(__file__).resolve().parent / "data" / "config_v2_defaults.yaml"
 CURRENT_DEFAULTS = Path(__file__).resolve().parent / "data" / f"config_v{CONFIG_FORMAT}_defaults.yaml"
@@ -162,7 +166,13 @@ def _config_2_to_3(data: dict) -> dict:
     return {**data, "format": 3}
 
 
-CONFIG_STEPS: dict[int, Callable[[dict], dict]] = {1: _config_1_to_2, 2: _config_2_to_3}
+def _config_3_to_4(data: dict) -> dict:
+    """The learners' sections left ``AgentConfig`` for their agent files (issue 35): a run holds its learner's own
+    section only, as every file of version 2 or 3 already did (``prune_unread``, which the step applies again)."""
+    return {**prune_unread(data), "format": 4}
+
+
+CONFIG_STEPS: dict[int, Callable[[dict], dict]] = {1: _config_1_to_2, 2: _config_2_to_3, 3: _config_3_to_4}
 
 
 def config_version(data: dict) -> int:
@@ -183,14 +193,6 @@ def migrate_config(data: dict) -> dict:
     while version < CONFIG_FORMAT:
         out = CONFIG_STEPS[version](out)
         version = config_version(out)
-    return out
-
-
-def without_keys(data: dict, keys: tuple[str, ...]) -> dict:
-    """A copy of ``data`` without the dotted ``keys``."""
-    out = copy.deepcopy(data)
-    for key in keys:
-        pop_key(out, key)
     return out
 
 

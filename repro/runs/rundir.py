@@ -13,7 +13,7 @@ import sys
 import time
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 from omegaconf import DictConfig, OmegaConf
@@ -29,6 +29,7 @@ from repro.runs.runformat import (
     META,
     REPLAY,
     RESOLVED,
+    RESOLVED_FIELDS,
     WRITER_LOCK,
     reached_budgets,
     read_done,
@@ -36,6 +37,9 @@ from repro.runs.runformat import (
     run_path,
     run_state,
 )
+
+if TYPE_CHECKING:  # the type only: rundir is read by commands that build no learner (torch stays unimported)
+    from repro.agent.protocol import Learner
 
 __all__ = ["CHECKPOINT", "CONFIG", "DONE", "META", "REPLAY", "RESOLVED", "WRITER_LOCK", "RunDirMismatch",
            "config_text", "read_done", "run_budget", "read_meta", "read_saved_config", "reached_budgets",
@@ -120,15 +124,16 @@ def saved_config(path: str | Path) -> DictConfig:
     return validate(OmegaConf.create(saved))
 
 
-def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
+def resolved_values(rc: RunConfig, learner: Learner) -> dict[str, Any]:
     """What ``learner`` (as built for ``rc``) actually uses, as resolved.json records it (runformat.RESOLVED_FIELDS).
 
-    Read from the learner (``repro.learners.base.Learner``), not recomputed: the latent action dim is its
+    Read from the learner (``repro.agent.protocol.Learner``), not recomputed: the latent action dim is its
     ``action_encoder.latent_dim`` (None without an action encoder), the objectives are its active ``weights``. A
-    learner adds or replaces fields (an offline learner: ``algorithm``, ``cql_alpha``, ...) through ``resolved``.
+    learner adds or replaces fields (CQL: ``cql_alpha``, ...) through ``resolved``; a field no learner gives is null.
     """
     encoder = learner.action_encoder
-    values: dict[str, Any] = {
+    values: dict[str, Any] = dict.fromkeys(RESOLVED_FIELDS)
+    values.update({
         "learner": rc.agent.learner,
         "K": int(rc.agent.K),
         "batch_size": int(rc.agent.batch_size),
@@ -138,8 +143,7 @@ def resolved_values(rc: RunConfig, learner: Any) -> dict[str, Any]:
         "latent_action_dim": None if encoder is None else int(encoder.latent_dim),
         "objectives": {str(k): float(w) for k, w in learner.weights.items()},
         "dataset": rc.offline.dataset if is_offline(rc.agent.learner) else None,
-        "cql_alpha": None,
-    }
+    })
     values.update(learner.resolved)
     return values
 

@@ -50,7 +50,7 @@ TRAIN_REQUIRED = ("frame", "fps")  # a readable train.csv has at least these
 OFFLINE_EVAL_COLUMNS = ["update", "episode_reward", "episode_reward_std", "episode_length", "success",
                         "eval_episodes", "normalized_score", "reference_return", "score_reference", "total_time"]
 OFFLINE_TRAIN_COLUMNS = ["update", "updates_per_s", "total_time"]  # followed by the learner's metric names
-# A return-conditioned learner (Decision Transformer; learners.base.ReturnConditioned) is evaluated twice on the
+# A return-conditioned learner (Decision Transformer; agent.protocol.ReturnConditioned) is evaluated twice on the
 # same episode seeds: at the best online return (the columns above: target_return, target_reference 'source' or
 # 'paper' as score_reference, or 'dataset' when neither is known) and at the dataset's best episode return
 # (dataset_target_return and the *_dataset_target columns; normalised by the same reference_return).

@@ -21,7 +21,7 @@ from repro.data.offline_replay import (
     resolve_dataset,
 )
 from repro.envs.base import Env
-from repro.learners import Learner, SequenceLearner, build_learner, samples_episodes
+from repro.learners import Learner, SequenceLearner, build_learner, max_episode_length, samples_episodes
 from repro.runs.video import VIDEO_DIR, EvalVideos
 from repro.runs.wblog import WandbRun
 from repro.train.devices import resolve_device
@@ -66,7 +66,7 @@ def load_dataset(rc: RunConfig) -> OfflineData:
     if samples_episodes(rc.agent.learner):  # the learner samples its own windows: episodes, no replay
         return load_offline_episodes(directory, task=rc.task.name, action_dim=run_action_dim(rc),
                                      frame_shape=(3, rc.env.image_size, rc.env.image_size),
-                                     max_length=rc.agent.dt.max_timestep)
+                                     max_length=max_episode_length(rc.agent))
     return load_offline_data(directory, task=rc.task.name, action_dim=run_action_dim(rc),
                              frame_shape=(3, rc.env.image_size, rc.env.image_size), frame_stack=rc.env.frame_stack,
                              nstep=rc.agent.nstep, K=rc.agent.K, discount=rc.agent.discount, seed=rc.seed,

@@ -12,8 +12,8 @@ from typing import Any, Union
 import numpy as np
 import torch
 
+from repro.agent.protocol import EpisodicActor, Learner
 from repro.envs.base import Env
-from repro.learners.base import EpisodicActor, Learner
 
 
 def episode_seed(seed: int, kind: int, index: int, sub: int = 0) -> int:

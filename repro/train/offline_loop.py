@@ -25,12 +25,12 @@ from typing import Any, Union
 
 import numpy as np
 
+from repro.agent.protocol import Learner, ReturnConditioned, Sampler
 from repro.config.schema import OfflineConfig
 from repro.data.offline_replay import DatasetError
 from repro.data.reference import normalized_score
 from repro.data.replay import ReplayBuffer
 from repro.envs.base import Env
-from repro.learners.base import Learner, ReturnConditioned, Sampler
 from repro.runs.logger import CsvPairLogger
 from repro.runs.runformat import OFFLINE_TRAIN_COLUMNS, offline_eval_columns
 from repro.runs.video import EvalVideos

@@ -13,12 +13,12 @@ from typing import Any
 
 import numpy as np
 
+from repro.agent.protocol import OnlineLearner
 from repro.config.schema import TrainConfig
 from repro.data.episodes import EpisodeStore
 from repro.data.record import Recorder
 from repro.data.replay import ReplayBuffer
 from repro.envs.base import Env, TimeStep
-from repro.learners.base import OnlineLearner
 from repro.runs.logger import RunLogger
 from repro.runs.video import EvalVideos
 from repro.train.common import (

@@ -1,20 +1,21 @@
-"""Registry of auxiliary objectives; importing this package registers the built-in ones and the plugins' (the names
-are registered in repro/config/schema.py, ``objective_specs``: a plugin's names its class by ``factory``)."""
+"""Auxiliary objectives by name: the table is built from the registrations (repro/config/schema.py
+``objective_specs``: the built-in ones and the entry-point group ``taco_repro.objectives``), each naming its class by
+``factory``, imported here. A built-in objective is registered exactly as a plugin's."""
 
-from repro.agent.objectives import atc as _atc  # noqa: F401  (registers atc)
-from repro.agent.objectives import driml as _driml  # noqa: F401  (registers driml)
-from repro.agent.objectives import spr as _spr  # noqa: F401  (registers spr)
-from repro.agent.objectives import taco as _taco  # noqa: F401  (registers taco, curl, reward)
-from repro.agent.objectives.base import OBJECTIVES, AuxBatch, Objective, ObjectiveContext, register
-from repro.config.plugins import load_factory
-from repro.config.schema import check_registry, objective_names, objective_specs
+from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext
+from repro.config.plugins import ObjectiveSpec, PluginError, load_factory
+from repro.config.schema import objective_specs
 
-for _spec in objective_specs().values():
-    if _spec.factory is not None:  # a plugin's objective: its class, under its registered name
-        _cls = load_factory(_spec)
-        if not (isinstance(_cls, type) and issubclass(_cls, Objective)):
-            raise TypeError(f"objective '{_spec.name}': {_spec.factory} is not an Objective subclass")
-        register(_spec.name)(_cls)
-check_registry("objective", OBJECTIVES, objective_names())  # every registered objective has its code
 
-__all__ = ["OBJECTIVES", "AuxBatch", "Objective", "ObjectiveContext", "register"]
+def _objective_class(spec: ObjectiveSpec) -> type[Objective]:
+    """The class ``spec.factory`` names, an :class:`Objective` subclass, named ``spec.name`` (its metric columns)."""
+    cls = load_factory(spec)
+    if not (isinstance(cls, type) and issubclass(cls, Objective)):
+        raise PluginError(f"objective '{spec.name}': {spec.factory} is not an Objective subclass")
+    cls.name = spec.name
+    return cls
+
+
+OBJECTIVES: dict[str, type[Objective]] = {spec.name: _objective_class(spec) for spec in objective_specs().values()}
+
+__all__ = ["OBJECTIVES", "AuxBatch", "Objective", "ObjectiveContext"]

@@ -18,11 +18,10 @@ import torch
 from torch import nn
 
 from repro.agent.networks import orthogonal_init
-from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, info_nce, register
+from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, info_nce
 from repro.agent.objectives.common import MomentumTarget, read_params
 
 
-@register("atc")
 class ATCObjective(Objective):
     """InfoNCE between (c_t + MLP(c_t)) W and the momentum target's latent of o_{t+K}."""
 

@@ -13,19 +13,6 @@ from torch import nn
 from repro.agent.networks import SharedHeads
 from repro.config.schema import RewardTarget
 
-OBJECTIVES: dict[str, type[Objective]] = {}
-
-
-def register(name: str) -> Callable[[type[Objective]], type[Objective]]:
-    """Class decorator adding an objective to the registry under ``name``."""
-
-    def wrap(cls: type[Objective]) -> type[Objective]:
-        cls.name = name
-        OBJECTIVES[name] = cls
-        return cls
-
-    return wrap
-
 
 @dataclass
 class ObjectiveContext:
@@ -121,7 +108,7 @@ class AuxBatch:
 class Objective(nn.Module, abc.ABC):
     """Base class: subclasses build parameters from the context and implement ``forward``."""
 
-    name: ClassVar[str] = ""
+    name: ClassVar[str] = ""  # its registered name (repro/agent/objectives/__init__.py sets it from the registration)
     needs_future_seq: bool = False  # whether batches must carry obs_{t+1}..obs_{t+K} (future_obs_seq)
     extra_metrics: ClassVar[tuple[str, ...]] = ()  # metric suffixes besides "loss", e.g. ("acc",)
 

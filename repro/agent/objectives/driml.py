@@ -13,7 +13,7 @@ import torch
 from torch import nn
 
 from repro.agent.networks import orthogonal_init
-from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, info_nce, register
+from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, info_nce
 
 
 def first_action_only(action_seq: torch.Tensor) -> torch.Tensor:
@@ -23,7 +23,6 @@ def first_action_only(action_seq: torch.Tensor) -> torch.Tensor:
     return action_seq * keep
 
 
-@register("driml")
 class DRIMLObjective(Objective):
     """InfoNCE between G(z_t, encode([a_t, 0, .., 0])) and H(z_{t+K}) with the shared bilinear W."""
 

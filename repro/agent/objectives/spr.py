@@ -18,11 +18,10 @@ import torch
 from torch import nn
 
 from repro.agent.networks import orthogonal_init
-from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, register
+from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext
 from repro.agent.objectives.common import MomentumTarget, negative_cosine, read_params  # noqa: F401
 
 
-@register("spr")
 class SPRObjective(Objective):
     """Negative cosine between q(g(T(z_t, u_seq))) and the momentum target's g_m(H_m(f_m(o_{t+K})))."""
 

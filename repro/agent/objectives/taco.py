@@ -6,10 +6,9 @@ import torch
 from torch import nn
 
 from repro.agent.networks import orthogonal_init
-from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, info_nce, register
+from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, info_nce
 
 
-@register("taco")
 class TACOObjective(Objective):
     """InfoNCE between G(z_t, u_t..u_{t+K-1}) and H(z_{t+K}) with the shared bilinear W."""
 
@@ -31,7 +30,6 @@ class TACOObjective(Objective):
         return loss, {"taco_loss": loss.detach(), "taco_acc": acc}
 
 
-@register("curl")
 class CURLObjective(Objective):
     """InfoNCE between two augmentations of the same observation, through H and W."""
 
@@ -49,7 +47,6 @@ class CURLObjective(Objective):
         return loss, {"curl_loss": loss.detach(), "curl_acc": acc}
 
 
-@register("reward")
 class RewardObjective(Objective):
     """Mean squared error of a reward head on (z_t, u_t..u_{t+K-1})."""
 

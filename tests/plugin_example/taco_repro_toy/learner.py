@@ -48,9 +48,6 @@ class RWBC(ModuleSet, LearnerBase):
     def metric_names(self) -> list[str]:
         return list(METRICS)
 
-    def stddev(self, step: int) -> float:
-        return 0.0  # a deterministic policy
-
     def policy(self, obs: torch.Tensor) -> torch.Tensor:
         """The actor's tanh mean, in [-1, 1], for float observations (B, C, H, W)."""
         return self.nets["actor"](self.nets["encoder"](obs), 1.0).mean

@@ -1,4 +1,6 @@
-"""The learner protocol: what a trainer (online or offline) and the rest of the tree need from a learner.
+"""The learner protocol: what a trainer (online or offline) and the rest of the tree need from a learner. It lives
+beside its defaults (``LearnerBase``, ``repro/agent/modules.py``) in layer 2, so that every layer from 2 up names a
+learner by this type (``repro.runs.rundir.resolved_values``, ``repro.data.record``), never ``Any``.
 
 A learner owns its networks and optimizers. ``update`` takes one batch of tensors as returned by
 ``ReplayBuffer.sample(batch_size, **learner.sample_options)`` and returns its metrics as detached 0-d tensors
@@ -22,7 +24,7 @@ import numpy as np
 import torch
 
 from repro.agent.losses import Metrics
-from repro.agent.modules import LearnerBase
+from repro.agent.modules import LearnerBase, count_parameters
 from repro.agent.networks import ActionEncoder
 from repro.config.schema import AgentConfig
 
@@ -87,9 +89,15 @@ class Learner(Protocol):
 
 @runtime_checkable
 class OnlineLearner(Learner, Protocol):
-    """What the online loop needs on top: the exploration std at a step (a train.csv column)."""
+    """What the online loop needs on top: the exploration std at a step (a train.csv column), and the modules that
+    act (``runtime.record=true`` keeps their state after each evaluation, ``repro/data/record.py``)."""
 
     def stddev(self, step: int) -> float:
+        ...
+
+    def acting_modules(self) -> Mapping[str, torch.nn.Module]:
+        """The modules acting needs, by name (the DrQ-v2 backbone's ``encoder`` and ``actor``): a recorded policy
+        snapshot holds their state dicts."""
         ...
 
 
@@ -109,6 +117,12 @@ class SequenceLearner(Protocol):
     builds its batches from the dataset's episodes with ``make_sampler`` instead of loading a replay."""
 
     def make_sampler(self, episodes: Sequence[Mapping[str, np.ndarray]], seed: int) -> Sampler:
+        ...
+
+    @staticmethod
+    def max_episode_length(cfg: AgentConfig) -> int | None:
+        """The most steps a dataset episode may have for this learner's config (DT: the size of its timestep
+        embedding), checked when the dataset loads, before the learner is built; None: any."""
         ...
 
 
@@ -131,14 +145,3 @@ class ReturnConditioned(EpisodicActor, Protocol):
 
     def set_target_return(self, value: float) -> None:
         ...
-
-
-def count_parameters(modules: dict[str, torch.nn.Module]) -> list[tuple[str, int]]:
-    """Trainable parameters per named module, a parameter shared by two modules counted at the first."""
-    rows: list[tuple[str, int]] = []
-    seen: set[int] = set()
-    for name, mod in modules.items():
-        params = [p for p in mod.parameters() if p.requires_grad and id(p) not in seen]
-        seen.update(id(p) for p in params)
-        rows.append((name, sum(p.numel() for p in params)))
-    return rows
