@@ -23,11 +23,14 @@ in the list's order), resamples each task's column over its own runs, calls the 
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+from analysis.cache import lookup
 
 CI_SIZE = 0.95
 CHUNK_ELEMENTS = 4_000_000  # resampled values per chunk (~32 MB of float64, plus the same of indices)
@@ -40,11 +43,13 @@ class Statistic:
     """A statistic of one or more (runs x tasks) matrices, computed for many repetitions at once.
 
     ``vector(*arrays)``: arrays of shape (reps, runs_i, tasks_i), returns (reps, k). ``cost``: temporary values
-    per resampled value (bounds the chunk)."""
+    per resampled value (bounds the chunk). ``key``: what, besides the name, the statistic depends on (the
+    cache of intervals tells statistics apart by both)."""
 
     name: str
     vector: Callable[..., np.ndarray]
     cost: int = 1
+    key: str = ""
 
     def point(self, *arrays: np.ndarray) -> np.ndarray:
         """The statistic of the data itself (k values), as rliable's point estimate."""
@@ -115,7 +120,7 @@ def score_distribution(taus: np.ndarray) -> Statistic:
         flat = x.reshape(x.shape[0], 1, -1)
         return (flat > t[None, :, None]).mean(axis=2)
 
-    return Statistic("score distribution", vector, cost=len(t))
+    return Statistic("score distribution", vector, cost=len(t), key=t.tobytes().hex())
 
 
 def _mask(bound: int) -> int:
@@ -251,14 +256,23 @@ def interval_estimates(stat: Statistic, arrays: Sequence[np.ndarray], reps: int,
                        size: float = CI_SIZE) -> tuple[np.ndarray, np.ndarray]:
     """(point estimates (k,), CIs (2, k)): the statistic of the data and the percentile interval of its
     stratified bootstrap, as ``rliable.library.get_interval_estimates(..., method='percentile')``."""
-    mats = [np.asarray(a, dtype=float) for a in arrays]
+    mats = [np.ascontiguousarray(a, dtype=float) for a in arrays]
     if any(a.ndim != 2 for a in mats):
         raise ValueError("the bootstrap takes (runs x tasks) matrices")
-    point = stat.point(*mats)
-    values = bootstrap_values(stat, mats, reps, seed)
-    alpha = (1.0 - size) / 2
-    q = [100 * alpha, 100 * (1.0 - alpha)]
-    return point, np.percentile(values, q, axis=0)
+    h = hashlib.sha1(f"{stat.name}|{stat.key}|{reps}|{seed}|{size!r}".encode())
+    for a in mats:
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+
+    def compute() -> tuple[np.ndarray, np.ndarray]:
+        point = stat.point(*mats)
+        values = bootstrap_values(stat, mats, reps, seed)
+        alpha = (1.0 - size) / 2
+        q = [100 * alpha, 100 * (1.0 - alpha)]
+        return point, np.percentile(values, q, axis=0)
+
+    point, cis = lookup("intervals", h.hexdigest(), compute)  # the same interval is computed once (analysis/cache.py)
+    return point.copy(), cis.copy()
 
 
 def nan_interval(k: int = 1) -> np.ndarray:
