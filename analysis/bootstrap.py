@@ -130,7 +130,7 @@ def _mask(bound: int) -> int:
 
 def _orbit(step: np.ndarray, count: int) -> np.ndarray:
     """``[0, step[0], step[step[0]], ...]``: ``count`` iterates of ``step`` from position 0, by doubling."""
-    out = np.zeros(1, dtype=np.int64)
+    out = np.zeros(1, dtype=step.dtype)
     jump = step
     while len(out) < count:
         out = np.concatenate([out, jump[out]])
@@ -198,20 +198,25 @@ class IndexStream:
         words = self.words
         total = len(words)
         end = total + 1  # absorbing: ran out of words
-        pos = np.arange(total + 2, dtype=np.int64)
+        pos = np.arange(total + 2, dtype=np.int32)  # positions fit: a chunk's words are far below 2**31
         pos[-1] = end
         values, accepted, cums = [], [], []
         step = pos.copy()
         for bound, count in self.groups:
             masked = words & np.uint32(_mask(bound))
             ok = masked < bound
-            cum = np.concatenate([[0], np.cumsum(ok)])  # accepted words before each position (total + 1)
-            target = cum[np.minimum(step, total)] + count
-            nxt = np.searchsorted(cum, target, side="left")
-            nxt[(nxt > total) | (step == end)] = end
+            cum = np.zeros(total + 1, dtype=np.int32)  # accepted words before each position
+            np.cumsum(ok, out=cum[1:])
+            acc = np.flatnonzero(ok).astype(np.int32)
+            # a segment from position p ends after its count-th accepted word: acc[cum[p] + count - 1] + 1
+            last = cum[np.minimum(step, total)] + np.int32(count - 1)
+            short = (last >= len(acc)) | (step == end)
+            nxt = np.empty_like(step)
+            nxt[~short] = acc[last[~short]] + 1
+            nxt[short] = end
             step = nxt
             values.append(masked)
-            accepted.append(np.flatnonzero(ok))
+            accepted.append(acc)
             cums.append(cum)
         starts = _orbit(step, reps + 1)
         if starts[-1] == end:

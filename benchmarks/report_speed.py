@@ -1,10 +1,11 @@
 """The analysis commands at the paper's scale: writes the full-coverage tree of tests/analysis_fixtures.py with
 the paper's budgets (6 seeds, 1M frames, an evaluation every 10K frames, a train.csv row per 1000-frame episode;
-offline runs of 100K updates evaluated every 10K) and times ``repro report``, ``repro figures --all``,
-``repro claims`` and ``repro plan --claims`` on it, each in its own process, with its peak memory (the largest
-resident set of the process and the children it waited for).
+offline runs of 100K updates evaluated every 10K) and times ``repro report`` (with an empty cache, then again on
+the unchanged tree: the incremental report), ``repro figures --all``, ``repro claims`` and ``repro plan --claims``
+on it, each in its own process, with its CPU seconds and peak memory (the largest resident set of the process and
+the children it waited for). An existing output folder is emptied first, except for ``report-again``.
 
-    python benchmarks/report_speed.py --root /tmp/paper-scale            # writes the tree once, then times
+    python benchmarks/report_speed.py --root /tmp/paper-scale            # writes the tree once, then times all
     python benchmarks/report_speed.py --root /tmp/paper-scale --only report --json /tmp/t.json
 
 Not a test: the numbers go to docs/performance.md ("The report at the paper's scale"). Run it on a quiet
@@ -27,11 +28,14 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 PAPER_SCALE = {"frames": 1_000_000, "eval_every": 10_000, "train_rows": 1000, "updates": 100_000,
                "eval_every_updates": 10_000}
+# name: (arguments, output folder). ``report-again`` reruns the report into the same folder: the incremental report
+# on an unchanged tree (analysis/cache.py); the others start without a cache (their own folders).
 COMMANDS = {
-    "report": ["report"],
-    "figures": ["figures", "--all"],
-    "claims": ["claims"],
-    "plan": ["plan", "--claims"],
+    "report": (["report"], "report"),
+    "report-again": (["report"], "report"),
+    "figures": (["figures", "--all"], "figures"),
+    "claims": (["claims"], "claims"),
+    "plan": (["plan", "--claims"], "plan"),
 }
 
 
@@ -61,13 +65,15 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
-def time_command(name: str, args: list[str], root: Path, out: Path, extra: list[str]) -> dict:
+def time_command(name: str, args: list[str], folder: str, root: Path, out: Path, extra: list[str]) -> dict:
     """Run ``repro <args>`` on the tree; wall and CPU seconds and peak resident memory (MB)."""
-    cmd = [sys.executable, "-m", "repro", *args, "--results", str(root), "--out", str(out / name), *extra]
+    cmd = [sys.executable, "-m", "repro", *args, "--results", str(root), "--out", str(out / folder), *extra]
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     load = os.getloadavg()[0]
     log = out / f"{name}.log"
     log.parent.mkdir(parents=True, exist_ok=True)
+    if name != "report-again" and (out / folder).exists():
+        shutil.rmtree(out / folder)  # no cache from an earlier timing
     start = time.perf_counter()
     with log.open("w") as f:
         proc = subprocess.Popen(cmd, env=env, stdout=f, stderr=subprocess.STDOUT)
@@ -75,7 +81,7 @@ def time_command(name: str, args: list[str], root: Path, out: Path, extra: list[
     proc.returncode = os.waitstatus_to_exitcode(status)
     wall = time.perf_counter() - start
     output = log.read_text()
-    return {"command": "repro " + " ".join(args), "rc": proc.returncode, "wall_s": round(wall, 2),
+    return {"name": name, "command": "repro " + " ".join(args), "rc": proc.returncode, "wall_s": round(wall, 2),
             "cpu_s": round(usage.ru_utime + usage.ru_stime, 2), "peak_mb": round(usage.ru_maxrss / 1024, 1),
             "load_before": round(load, 2), "tail": output.strip().splitlines()[-3:]}
 
@@ -95,9 +101,10 @@ def main() -> None:
     out = a.out or a.root.with_name(a.root.name + "-out")
     results = {"cpu": cpu_model(), "cores": os.cpu_count(), "runs": runs, "scale": PAPER_SCALE, "commands": []}
     for name in a.only or list(COMMANDS):
-        r = time_command(name, COMMANDS[name], a.root, out, a.extra)
+        args, folder = COMMANDS[name]
+        r = time_command(name, args, folder, a.root, out, a.extra)
         results["commands"].append(r)
-        print(f"{r['command']:<24} rc={r['rc']} wall {r['wall_s']:7.1f} s  cpu {r['cpu_s']:7.1f} s  "
+        print(f"{name:<14} {r['command']:<22} rc={r['rc']} wall {r['wall_s']:7.1f} s  cpu {r['cpu_s']:7.1f} s  "
               f"peak {r['peak_mb']:7.1f} MB  (load {r['load_before']})", flush=True)
         if r["rc"]:
             print("\n".join(r["tail"]), flush=True)
