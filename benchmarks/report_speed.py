@@ -99,11 +99,12 @@ def main() -> None:
     runs = write_tree(a.root, a.seeds)
     print(f"tree: {runs} runs under {a.root} ({time.perf_counter() - t0:.0f} s)", flush=True)
     out = a.out or a.root.with_name(a.root.name + "-out")
-    results = {"cpu": cpu_model(), "cores": os.cpu_count(), "runs": runs, "scale": PAPER_SCALE, "commands": []}
+    timed: list[dict] = []
+    results = {"cpu": cpu_model(), "cores": os.cpu_count(), "runs": runs, "scale": PAPER_SCALE, "commands": timed}
     for name in a.only or list(COMMANDS):
         args, folder = COMMANDS[name]
         r = time_command(name, args, folder, a.root, out, a.extra)
-        results["commands"].append(r)
+        timed.append(r)
         print(f"{name:<14} {r['command']:<22} rc={r['rc']} wall {r['wall_s']:7.1f} s  cpu {r['cpu_s']:7.1f} s  "
               f"peak {r['peak_mb']:7.1f} MB  (load {r['load_before']})", flush=True)
         if r["rc"]:
