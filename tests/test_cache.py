@@ -84,3 +84,26 @@ def test_cli_reuses_the_cache_and_no_cache_writes_none(tmp_path: Path):
     res = runner.invoke(app, [*args, "-o", str(tmp_path / "b"), "--no-cache"])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "a" / ".cache").is_dir() and not (tmp_path / "b" / ".cache").exists()
+
+
+def test_f13_random_action_frames_render_once_then_come_from_the_cache(tmp_path: Path, monkeypatch):
+    from analysis.context import Context
+    from paper_figures import f13_frames
+
+    calls: list[list[str]] = []
+
+    def fake(tasks, timeout=600.0):
+        calls.append(list(tasks))
+        return {t: np.full((3, 4, 4, 3), i, dtype=np.uint8) for i, t in enumerate(tasks)}, ""
+
+    monkeypatch.setattr(f13_frames, "random_action_frames", fake)
+    (tmp_path / "empty").mkdir()
+    ctx = Context(results=load_results(tmp_path / "empty"))  # no run saved frames
+    with opened(tmp_path / "out"):
+        first = f13_frames.all_frames(ctx)
+    with opened(tmp_path / "out"):
+        second = f13_frames.all_frames(ctx)
+    assert calls == [f13_frames.TASKS]  # rendered once, all tasks in one call
+    for task in f13_frames.TASKS:
+        np.testing.assert_array_equal(first[task][0], second[task][0])
+        assert second[task][1].startswith("random actions")
