@@ -34,6 +34,8 @@ from analysis.cache import lookup
 
 CI_SIZE = 0.95
 CHUNK_ELEMENTS = 4_000_000  # resampled values per chunk (~32 MB of float64, plus the same of indices)
+# 32-bit words per chunk of the several-bounds stream: its walk keeps about 15 bytes per word and bound
+MIXED_WORDS = 1_000_000
 ESTIMATOR = ("analysis/bootstrap.py: rliable's stratified bootstrap and percentile interval as whole-array "
              "operations, equal to rliable's get_interval_estimates for the same random state")
 
@@ -162,9 +164,19 @@ class IndexStream:
     def per_rep(self) -> int:
         return sum(n * m for n, m in self.shapes)
 
+    @property
+    def mixed(self) -> bool:
+        """Whether several numbers of runs interleave (the masked-and-rejected stream)."""
+        return len({b for b, _ in self.groups}) > 1
+
+    @property
+    def words_per_rep(self) -> int:
+        """32-bit words one repetition consumes on average (a bounded draw rejects what its mask exceeds)."""
+        return math.ceil(sum(c * (_mask(b) + 1) / b for b, c in self.groups))
+
     def take(self, reps: int) -> list[np.ndarray]:
         """The next ``reps`` repetitions' indices: one (reps, runs, tasks) array per matrix."""
-        if len({b for b, _ in self.groups}) <= 1:
+        if not self.mixed:
             drawn = [self.rs.randint(0, b, size=(reps, c)) for b, c in self.groups]
         else:
             drawn = self._take_mixed(reps)
@@ -183,8 +195,7 @@ class IndexStream:
 
     def _take_mixed(self, reps: int) -> list[np.ndarray]:
         """Several bounds interleaved: the words ``randint`` would consume, masked and rejected in place."""
-        need = sum(c * (_mask(b) + 1) / b for b, c in self.groups)  # expected words per repetition
-        size = int(reps * need * 1.1) + 64
+        size = int(reps * self.words_per_rep * 1.1) + 64
         while True:
             if len(self.words) < size:
                 more = self.rs.randint(0, 2**32, size=size - len(self.words), dtype=np.uint32)
@@ -243,6 +254,8 @@ def bootstrap_values(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, s
     stream = IndexStream([a.shape for a in arrays], seed)
     per_rep = stream.per_rep * max(1, stat.cost if stat.cost else _pairs(arrays))
     chunk = max(1, chunk_elements // per_rep)
+    if stream.mixed:
+        chunk = max(1, min(chunk, MIXED_WORDS // max(1, stream.words_per_rep)))
     parts = []
     done = 0
     while done < reps:
