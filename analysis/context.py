@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
 import pandas as pd
 
+from analysis.cache import lookup
 from analysis.load import Results
 from analysis.paper import PaperData
 from analysis.scores import DEFAULT_BUDGET, final_scores, learning_curves
@@ -80,7 +82,11 @@ class Context:
         """Every run's learning curve on a common frame grid (budget-independent: kept in ``cache``, which
         the per-claim contexts of analysis.claims share)."""
         if "curves" not in self.cache:
-            self.cache["curves"] = learning_curves(self.results)
+            # reused across commands while the evaluations are the same (analysis/cache.py)
+            ev = self.results.eval
+            key = hashlib.sha1(pd.util.hash_pandas_object(ev, index=False).to_numpy().tobytes()
+                               + repr(list(ev.columns)).encode()).hexdigest()
+            self.cache["curves"] = lookup("curves", key, lambda: learning_curves(self.results), process=False)
         return self.cache["curves"]
 
     @property

@@ -22,6 +22,7 @@ import yaml
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from analysis.cache import file_signature, lookup
 from analysis.identity import algo_key, enabled_objectives, method_label
 from repro.config.compose import ABSENT, get_key
 from repro.config.schema import normalize_dataset
@@ -450,7 +451,7 @@ def load_results(root: Path | str) -> Results:
         raise ResultsRootError(f"results root {root} does not exist or is not a directory")
     rows, evals, problems = [], [], []
     for run_dir in find_run_dirs(root):
-        row, eval_df, probs = load_run(run_dir, root)
+        row, eval_df, probs = _load_run_cached(run_dir, root)
         problems.extend(probs)
         if row is not None:
             rows.append(row)
@@ -474,6 +475,13 @@ def load_results(root: Path | str) -> Results:
     runs["source"] = SOURCE_RUNS
     eval_all["source"] = SOURCE_RUNS
     return Results(root=root, runs=runs, eval=eval_all, problems=problems, benches=benches)
+
+
+def _load_run_cached(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataFrame | None, list[Problem]]:
+    """:func:`load_run`, reused from the command's cache (analysis/cache.py) while none of the run's files changed
+    in size or modification time."""
+    key = (str(root.resolve()), str(run_dir.relative_to(root)), file_signature(run_dir))
+    return lookup("runs", key, lambda: load_run(run_dir, root), process=False)
 
 
 def _published_file(path: Path) -> pd.DataFrame:

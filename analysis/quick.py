@@ -81,7 +81,8 @@ def _train_rows(runs: pd.DataFrame, metric: str) -> tuple[pd.DataFrame, set[str]
 
 
 def tidy_curves(runs: pd.DataFrame, evals: pd.DataFrame, metric: str, by: Sequence[str]) -> pd.DataFrame:
-    """Columns task, seed, label, frame, value (one row per run and evaluation or training episode)."""
+    """Columns task, seed, label, frame, value (one row per run and evaluation or training episode). A curve's
+    label joins its ``by`` values, the algorithm shown by its method's label."""
     if metric in NOT_METRICS:
         raise PlotInputError(f"'{metric}' is the x axis, not a metric")
     if metric in EVAL_COLUMNS:
@@ -95,7 +96,12 @@ def tidy_curves(runs: pd.DataFrame, evals: pd.DataFrame, metric: str, by: Sequen
         raise PlotInputError(f"no values of '{metric}' in the selected runs")
     values = values.assign(value=pd.to_numeric(values["value"], errors="coerce")).dropna(subset=["value"])
     meta = runs[["run_id", "task", "seed", *by]].copy()
-    meta["label"] = meta[list(by)].astype(str).agg(" / ".join, axis=1)
+    named = meta[list(by)].astype(str)
+    if "algo" in by and "method" in runs.columns:
+        # the method's registered label (analysis.identity.method_label, the loader's method column), not the
+        # agent file's name: CQL+TACO for cql_taco, a plugin's own label for its agent
+        named["algo"] = runs["method"].where(runs["method"].notna(), runs["algo"]).astype(str)
+    meta["label"] = named.agg(" / ".join, axis=1)
     out = values.merge(meta[["run_id", "task", "seed", "label"]], on="run_id", how="inner")
     if out.empty:
         raise PlotInputError(f"no values of '{metric}' in the selected runs")

@@ -47,25 +47,29 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
             "update", "last_update"]
     if results.runs.empty:
         return pd.DataFrame(columns=cols)
+    runs, ev = results.runs, results.eval
+    offline = runs["dataset"].notna()
+    # every run's pick at once (one pass over the evaluations per kind of run, not one per run)
+    on_last, on_pick = _picks(ev, runs.loc[~offline, "run_id"], "frame", lambda rows: pd.Series(float(budget),
+                                                                                                 index=rows.index))
+    budgets = runs.loc[offline].set_index("run_id")["offline_updates"]
+    off_last, off_pick = _picks(ev, runs.loc[offline, "run_id"], "update",
+                                lambda rows: pd.to_numeric(rows["run_id"].map(budgets), errors="coerce"))
     out = []
-    grouped = dict(tuple(results.eval.groupby("run_id"))) if not results.eval.empty else {}
-    for run in results.runs.itertuples(index=False):
+    for run in runs.itertuples(index=False):
         row = {k: getattr(run, k) for k in IDENTITY}
-        rows = grouped.get(run.run_id)
         if not pd.isna(run.dataset):
-            row.update(_offline_score(run, rows))
+            row.update(_offline_score(run, off_last.get(run.run_id), off_pick.get(run.run_id)))
             out.append(row)
             continue
         metric = metric_of(run.suite)
-        score, frame, last = math.nan, math.nan, math.nan
-        if rows is not None and not rows.empty:
-            last = float(rows["frame"].max())
-            within = _at_budget(rows, "frame", budget)
-            if not within.empty:
-                pick = within.loc[within["frame"].idxmax()]
-                frame = float(pick["frame"])
-                value = pd.to_numeric(pd.Series([pick[metric]]), errors="coerce").iloc[0]
-                score = float(value) * (100.0 if metric == "success" else 1.0)
+        score, frame = math.nan, math.nan
+        last = on_last.get(run.run_id, math.nan)
+        pick = on_pick.get(run.run_id)
+        if pick is not None:
+            frame = float(pick["frame"])
+            value = pd.to_numeric(pd.Series([pick[metric]]), errors="coerce").iloc[0]
+            score = float(value) * (100.0 if metric == "success" else 1.0)
         train_frames = run.train_frames if run.train_frames is not None else -1
         reached = (not math.isnan(last) and last >= budget) or (
             run.status == "done" and not pd.isna(train_frames) and train_frames >= budget
@@ -76,20 +80,40 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
     return pd.DataFrame(out, columns=cols)
 
 
-def _offline_score(run: Any, rows: pd.DataFrame | None) -> dict[str, Any]:
-    """The score columns of one offline run at its own budget (see :func:`final_scores`)."""
+def _picks(ev: pd.DataFrame, run_ids: pd.Series, x: str,
+           limits: Any) -> tuple[dict[str, float], dict[str, pd.Series]]:
+    """For the runs ``run_ids``: (run -> its largest ``x``, run -> its evaluation row at the largest ``x`` within
+    its budget prefix (:func:`_at_budget`; ``limits(rows)`` gives each row's run budget, NaN: no limit)). A run
+    without evaluations is in neither."""
+    if ev.empty or run_ids.empty:
+        return {}, {}
+    rows = ev[ev["run_id"].isin(set(run_ids))]
+    if rows.empty:
+        return {}, {}
+    last = {str(k): float(v) for k, v in rows.groupby("run_id", sort=False)[x].max().items()}
+    limit = limits(rows)
+    at = rows[x]
+    keep = limit.isna() | ((at <= limit) & (~_budget_end(rows) | (at == limit)))
+    within = rows[keep & at.notna()]
+    if within.empty:
+        return last, {}
+    idx = within.groupby("run_id", sort=False)[x].idxmax()
+    picked = within.loc[idx.to_numpy()]
+    return last, {str(r): row for r, (_, row) in zip(picked["run_id"], picked.iterrows())}
+
+
+def _offline_score(run: Any, last: float | None, pick: pd.Series | None) -> dict[str, Any]:
+    """The score columns of one offline run at its own budget (see :func:`final_scores`): ``last`` its largest
+    evaluated update, ``pick`` its evaluation at the largest update within its budget."""
     out: dict[str, Any] = {"metric": "episode_reward", "score": math.nan, "frame": math.nan, "reached": False,
                            "last_frame": math.nan, "normalized": math.nan, "score_reference": None,
                            "update": math.nan, "last_update": math.nan}
-    if rows is None or rows.empty:
+    if last is None:
         return out
     budget = run.offline_updates
-    last = float(rows["update"].max())
-    within = rows if pd.isna(budget) else _at_budget(rows, "update", budget)
     out["last_update"] = last
-    if within.empty:
+    if pick is None:
         return out
-    pick = within.loc[within["update"].idxmax()]
     reference = pick["score_reference"]
     out.update(score=float(pick["episode_reward"]), update=float(pick["update"]),
                normalized=float(pd.to_numeric(pd.Series([pick["normalized_score"]]), errors="coerce").iloc[0]),

@@ -1,14 +1,16 @@
 """Statistics: mean +- std over seeds, bootstrap CIs and rliable aggregates.
 
 * ``std`` is the sample standard deviation over seeds, ``ddof=1`` (:data:`DDOF`); undefined for n < 2.
-* Every confidence interval is a 95% percentile stratified-bootstrap CI computed by rliable's own
-  ``rliable.library.get_interval_estimates`` (per-cell CIs of a mean over seeds are the one-task case:
-  cells with the same number of seeds are bootstrapped together as the columns of one matrix, so each
-  column is resampled over its own runs).
-* Reproducibility: rliable draws its bootstrap indices from NumPy's *global* generator
-  (``np.random.choice``), so :func:`seeded` seeds that generator (and passes a ``RandomState`` with the
-  same seed, as rliable allows) before each call and restores the previous global state afterwards.
-  Each method / cell group is seeded separately, so adding a method does not change another's CI.
+* Every confidence interval is a 95% percentile stratified-bootstrap CI, rliable's
+  ``rliable.library.get_interval_estimates`` computed as whole-array operations by :mod:`analysis.bootstrap`
+  (equal to rliable's for the same random state: the same indices, the same statistics, the same percentiles;
+  tests/test_bootstrap.py checks it against rliable itself). Per-cell CIs of a mean over seeds are the one-task
+  case: cells with the same number of seeds are bootstrapped together as the columns of one matrix, so each
+  column is resampled over its own runs.
+* Reproducibility: rliable draws its bootstrap indices from NumPy's *global* legacy generator seeded with the
+  random state (:func:`seeded`: how the tests run rliable itself as the reference); the
+  vectorized bootstrap draws the same stream from its own ``RandomState(seed)`` and leaves the global one
+  alone. Each method / cell group is seeded separately, so adding a method does not change another's CI.
 * Aggregates (IQM, mean, optimality gap with gamma = 1) are over normalised scores: DMC returns / 1000
   (the maximum episode return of a DMC task), Meta-world success rates / 100.
 """
@@ -18,22 +20,23 @@ from __future__ import annotations
 import contextlib
 import math
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from rliable import library as rly
-from rliable import metrics
 
+from analysis import bootstrap as bs
 from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
 
 DDOF = 1
 PROFILE_REPS = 2_000  # rliable's default for create_performance_profile
-# rliable's probability of improvement runs scipy's Mann-Whitney U per task per repetition (about 20 ms per
-# repetition for 9 tasks on one CPU core), so its CI uses fewer repetitions.
+# rliable's probability of improvement ran scipy's Mann-Whitney U per task per repetition (about 20 ms per
+# repetition for 9 tasks on one CPU core), so F1's CI of it used fewer repetitions; kept so the figure's numbers
+# stay those it printed.
 POI_REPS = 1_000
-CI_SIZE = 0.95
+CI_SIZE = bs.CI_SIZE
+ESTIMATOR = bs.ESTIMATOR
 SCORE_SCALE = {"episode_reward": 1000.0, "success": 100.0}
 
 
@@ -78,16 +81,12 @@ def mean_std(values: Sequence[float] | np.ndarray) -> tuple[int, float, float]:
     return n, mean, std
 
 
-def _column_mean(x: np.ndarray) -> np.ndarray:
-    return np.mean(x, axis=0)
-
-
 def mean_cis(
     columns: Sequence[np.ndarray], reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
 ) -> list[tuple[float, float]]:
-    """95% bootstrap CI of the mean of each column (values over seeds) using rliable.
+    """95% bootstrap CI of the mean of each column (values over seeds), as rliable computes it.
 
-    Columns are grouped by their number of finite values; each group is one rliable call on a
+    Columns are grouped by their number of finite values; each group is one bootstrap (rliable's) of a
     (n_seeds x n_columns) matrix with a per-column mean as the statistic. Columns with fewer than 2
     values get (NaN, NaN).
     """
@@ -100,20 +99,10 @@ def mean_cis(
     for n in sorted(by_n):
         idx = by_n[n]
         matrix = np.stack([clean[i] for i in idx], axis=1)
-        with seeded(seed) as rs:
-            _, cis = rly.get_interval_estimates(
-                {"cells": matrix}, _column_mean, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
-            )
-        lows, highs = cis["cells"]
+        _, (lows, highs) = bs.interval_estimates(bs.COLUMN_MEAN, [matrix], reps, seed)
         for j, i in enumerate(idx):
             out[i] = (float(lows[j]), float(highs[j]))
     return out
-
-
-def _aggregates(x: np.ndarray) -> np.ndarray:
-    return np.array(
-        [metrics.aggregate_iqm(x), metrics.aggregate_mean(x), metrics.aggregate_optimality_gap(x)]
-    )
 
 
 AGGREGATE_NAMES = ("IQM", "Mean", "Optimality Gap")
@@ -122,25 +111,22 @@ AGGREGATE_NAMES = ("IQM", "Mean", "Optimality Gap")
 def aggregate_estimates(
     score_dict: Mapping[str, np.ndarray], reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
 ) -> pd.DataFrame:
-    """rliable IQM, mean and optimality gap with 95% stratified-bootstrap CIs.
+    """rliable's IQM, mean and optimality gap with 95% stratified-bootstrap CIs (:mod:`analysis.bootstrap`).
 
     ``score_dict`` maps a method to a normalised (n_runs x n_tasks) matrix. Returns a long table:
     method, metric, value, ci_low, ci_high.
     """
     rows = []
     for method, scores in score_dict.items():
-        with seeded(seed) as rs:
-            points, cis = rly.get_interval_estimates(
-                {method: scores}, _aggregates, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
-            )
+        points, cis = bs.interval_estimates(bs.AGGREGATES, [scores], reps, seed)
         for k, name in enumerate(AGGREGATE_NAMES):
             rows.append(
                 {
                     "method": method,
                     "metric": name,
-                    "value": float(points[method][k]),
-                    "ci_low": float(cis[method][0][k]),
-                    "ci_high": float(cis[method][1][k]),
+                    "value": float(points[k]),
+                    "ci_low": float(cis[0][k]),
+                    "ci_high": float(cis[1][k]),
                 }
             )
     return pd.DataFrame(rows, columns=["method", "metric", "value", "ci_low", "ci_high"])
@@ -152,44 +138,39 @@ def performance_profiles(
     reps: int = PROFILE_REPS,
     seed: int = DEFAULT_SEED,
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """rliable run-score performance profiles: method -> (profile over ``taus``, 2 x len(taus) CI)."""
+    """rliable run-score performance profiles (``create_performance_profile``, its global generator seeded with
+    ``seed``): method -> (profile over ``taus``, 2 x len(taus) CI)."""
+    stat = bs.score_distribution(taus)
     out = {}
     for method, scores in score_dict.items():
-        with seeded(seed):
-            profiles, cis = rly.create_performance_profile({method: scores}, taus, reps=reps)
-        out[method] = (np.asarray(profiles[method]), np.asarray(cis[method]))
+        profile, cis = bs.interval_estimates(stat, [scores], reps, seed)
+        out[method] = (np.asarray(profile), np.asarray(cis))
     return out
 
 
-def _interval(scores: np.ndarray | list[np.ndarray], statistic: Callable[..., np.ndarray], reps: int,
+def _interval(scores: np.ndarray | list[np.ndarray], statistic: bs.Statistic, reps: int,
               seed: int) -> tuple[float, float, float]:
     """One scalar ``statistic`` of ``scores`` (a runs x tasks matrix, or a list of them passed as its arguments)
-    with its 95% percentile stratified-bootstrap CI by rliable: (value, ci_low, ci_high).
+    with its 95% percentile stratified-bootstrap CI, as rliable computes it: (value, ci_low, ci_high).
 
-    ``reps`` 0: the value alone, as rliable computes it (``statistic`` of the data), with a NaN CI; the power
-    simulation (analysis.power) reads rules whose verdict is the point estimate this way."""
+    ``reps`` 0: the value alone (``statistic`` of the data), with a NaN CI; the power simulation
+    (analysis.power) reads rules whose verdict is the point estimate this way."""
+    arrays = scores if isinstance(scores, list) else [scores]
     if reps == 0:
-        value = statistic(*scores) if isinstance(scores, list) else statistic(scores)
-        return float(value[0]), math.nan, math.nan
-    with seeded(seed) as rs:
-        points, cis = rly.get_interval_estimates(
-            {"value": scores}, statistic, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
-        )
-    return float(points["value"][0]), float(cis["value"][0][0]), float(cis["value"][1][0])
-
-
-def _poi(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    return np.array([metrics.probability_of_improvement(x, y)])
+        return float(statistic.point(*[np.asarray(a, dtype=float) for a in arrays])[0]), math.nan, math.nan
+    point, cis = bs.interval_estimates(statistic, arrays, reps, seed)
+    return float(point[0]), float(cis[0][0]), float(cis[1][0])
 
 
 def probability_of_improvement(
     x: np.ndarray, y: np.ndarray, reps: int = POI_REPS, seed: int = DEFAULT_SEED
 ) -> tuple[float, float, float]:
-    """P(X > Y) over tasks (rliable) with its 95% CI: (value, ci_low, ci_high).
+    """P(X > Y) over tasks (rliable's probability_of_improvement) with its 95% CI: (value, ci_low, ci_high).
 
-    ``x`` and ``y`` are (n_runs x n_tasks) matrices over the same tasks; runs may differ in number.
+    ``x`` and ``y`` are (n_runs x n_tasks) matrices over the same tasks; runs may differ in number. The same as
+    :func:`poi_interval` (its fewer default repetitions are those F1 has printed).
     """
-    return _interval([x, y], _poi, reps, seed)
+    return _interval([x, y], bs.PROBABILITY_OF_IMPROVEMENT, reps, seed)
 
 
 def pairwise_poi(x: np.ndarray, y: np.ndarray) -> float:
@@ -202,28 +183,20 @@ def pairwise_poi(x: np.ndarray, y: np.ndarray) -> float:
     return float(per_task.mean())
 
 
-def _pairwise_poi(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    return np.array([pairwise_poi(x, y)])
-
-
 def poi_interval(
     x: np.ndarray, y: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
 ) -> tuple[float, float, float]:
-    """:func:`probability_of_improvement` with :func:`pairwise_poi` as the statistic (the same value, fast
-    enough for rliable's default repetitions): (value, ci_low, ci_high) by rliable's stratified bootstrap."""
-    return _interval([x, y], _pairwise_poi, reps, seed)
+    """:func:`probability_of_improvement` at rliable's default repetitions: (value, ci_low, ci_high) by rliable's
+    stratified bootstrap."""
+    return _interval([x, y], bs.PROBABILITY_OF_IMPROVEMENT, reps, seed)
 
 
 def ratio_of_means(
     x: np.ndarray, y: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED
 ) -> tuple[float, float, float]:
-    """mean(x) / mean(y) over all runs and tasks, with a 95% stratified-bootstrap CI (rliable; ``reps`` 0: the
+    """mean(x) / mean(y) over all runs and tasks, with a 95% stratified-bootstrap CI (as rliable; ``reps`` 0: the
     ratio alone)."""
-    return _interval([x, y], _ratio_of_means, reps, seed)
-
-
-def _ratio_of_means(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.array([np.mean(a) / np.mean(b)])
+    return _interval([x, y], bs.RATIO_OF_MEANS, reps, seed)
 
 
 def score_matrix(
@@ -248,13 +221,9 @@ def score_matrix(
     return np.stack([v[:k] for v in per_task], axis=1), note
 
 
-def _grand_mean(x: np.ndarray) -> np.ndarray:
-    return np.array([metrics.aggregate_mean(x)])
-
-
 def grand_mean_ci(matrix: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFAULT_SEED) -> tuple[float, float, float]:
     """Mean over runs and tasks of a (n_runs x n_tasks) matrix with its 95% stratified-bootstrap CI."""
-    return _interval(matrix, _grand_mean, reps, seed)
+    return _interval(matrix, bs.MEAN, reps, seed)
 
 
 def difference_of_means(
@@ -265,15 +234,7 @@ def difference_of_means(
     rliable's stratified independent bootstrap resamples each sample over its own seeds (the one-task case)."""
     a = np.asarray(x, dtype=float).reshape(-1, 1)
     b = np.asarray(y, dtype=float).reshape(-1, 1)
-
-    def diff(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        return np.array([np.mean(u) - np.mean(v)])
-
-    with seeded(seed) as rs:
-        points, cis = rly.get_interval_estimates(
-            {"diff": [a, b]}, diff, reps=reps, confidence_interval_size=CI_SIZE, random_state=rs
-        )
-    return float(points["diff"][0]), float(cis["diff"][0][0]), float(cis["diff"][1][0])
+    return _interval([a, b], bs.DIFFERENCE_OF_MEANS, reps, seed)
 
 
 def ratio_to_task_means(
@@ -287,8 +248,4 @@ def ratio_to_task_means(
     alone."""
     num = np.asarray(x, dtype=float)
     dens = [np.asarray(y, dtype=float).reshape(-1, 1) for y in ys]
-    return _interval([num, *dens], _ratio_to_task_means, reps, seed)
-
-
-def _ratio_to_task_means(a: np.ndarray, *bs: np.ndarray) -> np.ndarray:
-    return np.array([np.mean(a) / np.mean([np.mean(b) for b in bs])])
+    return _interval([num, *dens], bs.RATIO_TO_TASK_MEANS, reps, seed)

@@ -9,6 +9,7 @@ on the 2-D t-SNE embeddings and on the original spaces.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +18,8 @@ from typing import Any
 import numpy as np
 from sklearn.manifold import TSNE
 from sklearn.metrics import silhouette_score
+
+from analysis.cache import lookup
 
 N_CENTROIDS = 4
 CLUSTER_THRESHOLD = 0.5  # silhouette at or above this counts as "forms clusters" (claim tsne_clusters)
@@ -86,11 +89,14 @@ def make_actions(true_dim: int, distracting_dims: int, n: int, seed: int = 0) ->
 
 
 def tsne_2d(x: np.ndarray, seed: int = 0, max_iter: int = 1000) -> np.ndarray:
-    """2-D t-SNE (scikit-learn, PCA init, perplexity 30 or less for small inputs)."""
+    """2-D t-SNE (scikit-learn, PCA init, perplexity 30 or less for small inputs); the same points, seed and
+    iterations reuse the command's cache (analysis/cache.py: the embedding depends on no run but the checkpoint
+    that encoded ``x``)."""
+    x = np.ascontiguousarray(x)
     perplexity = min(30.0, (len(x) - 1) / 3.0)
-    return TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed, max_iter=max_iter).fit_transform(
-        x
-    )
+    key = hashlib.sha1(f"{x.dtype}|{x.shape}|{seed}|{max_iter}|{perplexity!r}".encode() + x.tobytes()).hexdigest()
+    return lookup("tsne", key, lambda: TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed,
+                                            max_iter=max_iter).fit_transform(x))
 
 
 @dataclass

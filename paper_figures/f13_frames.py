@@ -17,6 +17,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+from analysis.cache import current
 from analysis.context import Context
 from analysis.identity import task_display
 from analysis.paper import METAWORLD6
@@ -82,7 +83,16 @@ def all_frames(ctx: Context) -> dict[str, tuple[np.ndarray | None, str]]:
     out = {task: trained_frames(ctx, task) for task in TASKS}
     missing = [t for t, (f, _) in out.items() if f is None]
     if missing and ctx.render_envs:
-        rendered, error = random_action_frames(missing)
+        # random-action frames depend on no run: the report's cache keeps them (analysis/cache.py), and the tasks
+        # it lacks render in one subprocess together
+        cache = current()
+        rendered = {t: f for t in missing if (f := cache.peek("frames", (t, RANDOM_STEPS))) is not None}
+        error = ""
+        if len(rendered) < len(missing):
+            new, error = random_action_frames([t for t in missing if t not in rendered])
+            for task, frames in new.items():
+                cache.put("frames", (task, RANDOM_STEPS), frames)
+            rendered.update(new)
         for task in missing:
             if task in rendered:
                 out[task] = (rendered[task], "random actions (no trained agent's frames found)")

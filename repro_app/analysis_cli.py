@@ -5,8 +5,9 @@ Bad input (unknown artifact id, missing results root, bad option) prints one lin
 
 from __future__ import annotations
 
+import contextlib
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Optional
@@ -39,6 +40,9 @@ RENDER_OPT = typer.Option(
     True, "--render-envs/--no-render-envs",
     help="F13: render random-action frames with make_env when no run saved frames.",
 )
+CACHE_OPT = typer.Option(True, "--cache/--no-cache",
+                         help="Reuse what an earlier command computed from unchanged runs (OUT/.cache; "
+                              "--no-cache recomputes everything and writes no cache).")
 PUBLISHED_OPT = typer.Option(True, "--published/--no-published",
                              help="F4: draw the DrQ-v2 authors' published curve (mean, 95% CI band) beside the runs.")
 
@@ -108,6 +112,18 @@ class ContextOptions:
     render_envs: bool
     indicative: bool
     published: bool
+    cache: bool
+
+    @contextlib.contextmanager
+    def opened_cache(self) -> Iterator[None]:
+        """The command's cache (analysis/cache.py) of ``--out``, or an in-memory one with ``--no-cache``; a line
+        on what it reused."""
+        from analysis.cache import opened
+
+        with opened(self.out if self.cache else None) as cache:
+            yield
+        if self.cache:
+            typer.echo(f"Cache ({self.out / '.cache'}): {cache.summary() or 'nothing computed'}")
 
     def load(self) -> Context:
         """The results root loaded into a Context (or one line and exit 2), and a line on what was loaded."""
@@ -132,6 +148,7 @@ CONTEXT_OPTIONS: dict[str, tuple[Any, Any]] = {
     "render_envs": (bool, RENDER_OPT),
     "indicative": (bool, INDICATIVE_OPT),
     "published": (bool, PUBLISHED_OPT),
+    "cache": (bool, CACHE_OPT),
 }
 
 
@@ -161,7 +178,8 @@ def _context_options(*names: str) -> Callable[[Callable[..., None]], Callable[..
     return wrap
 
 
-@_context_options("results", "out", "frames", "reps", "seed", "experiment_map", "tsne_n", "render_envs", "published")
+@_context_options("results", "out", "frames", "reps", "seed", "experiment_map", "tsne_n", "render_envs", "published",
+                  "cache")
 def figures_cmd(
     ids: Optional[list[str]] = typer.Argument(None, help="Artifact ids, e.g. F8 T1 (F7 = F7a F7b)."),
     all_: bool = typer.Option(False, "--all", help="Render every table and figure."),
@@ -176,8 +194,9 @@ def figures_cmd(
         _list_artifacts()
         return
     arts = _artifacts(ids, all_)
-    ctx = opts.load()
-    done = render_artifacts(ctx, arts, progress=lambda aid: typer.echo(f"  rendering {aid}"))
+    with opts.opened_cache():
+        ctx = opts.load()
+        done = render_artifacts(ctx, arts, progress=lambda aid: typer.echo(f"  rendering {aid}"))
     for r in done:
         files = [p.name for p in r.figures] + [t.files[0].stem + ".{csv,md,tex}" for t in r.tables]
         flag = "" if r.has_runs else " (no run data used)"
@@ -208,13 +227,15 @@ def _artifacts(ids: Optional[list[str]], all_: bool) -> list:
         fail(str(exc))
 
 
-@_context_options("results", "out", "frames", "reps", "seed", "min_seeds", "experiment_map", "tsne_n", "indicative")
+@_context_options("results", "out", "frames", "reps", "seed", "min_seeds", "experiment_map", "tsne_n", "indicative",
+                  "cache")
 def claims_cmd(*, opts: ContextOptions) -> None:
     """A verdict (supported / refuted / not enough data) on each claim of the paper, with its numbers."""
     from analysis.claims import evaluate_claims, write_claims
 
-    ctx = opts.load()
-    verdicts = evaluate_claims(ctx)
+    with opts.opened_cache():
+        ctx = opts.load()
+        verdicts = evaluate_claims(ctx)
     for v in verdicts:
         typer.echo(f"{v.id:<26} {v.shown:<16} {v.evidence}")
     table = write_claims(ctx, verdicts)
@@ -278,13 +299,14 @@ def calibrate_cmd(
 
 
 @_context_options("results", "out", "frames", "reps", "seed", "min_seeds", "experiment_map", "tsne_n", "render_envs",
-                  "indicative", "published")
+                  "indicative", "published", "cache")
 def report_cmd(*, opts: ContextOptions) -> None:
     """Render everything and write REPORT.md and REPORT.html (tables, figures, claims, audit, provenance)."""
     from repro_app.report import build_report
 
-    ctx = opts.load()
-    md, html = build_report(ctx, progress=lambda aid: typer.echo(f"  rendering {aid}"))
+    with opts.opened_cache():
+        ctx = opts.load()
+        md, html = build_report(ctx, progress=lambda aid: typer.echo(f"  rendering {aid}"))
     typer.echo(f"Wrote {md} and {html}")
 
 

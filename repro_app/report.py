@@ -13,6 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.audit import mismatches, published_frame, published_rows, published_summary, run_audit, write_audit
+from analysis.bootstrap import ESTIMATOR
 from analysis.calibration import CalibrationRow, calibrate, calibration_frames, calibration_notes, write_calibration
 from analysis.claims import claims_frame, evaluate_claims, verdict_counts, write_claims
 from analysis.context import Context
@@ -35,6 +36,13 @@ def _git(*args: str) -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip()
+
+
+def _version(pkg: str) -> str:
+    try:
+        return importlib.metadata.version(pkg)
+    except importlib.metadata.PackageNotFoundError:
+        return "not installed"
 
 
 def tool_provenance() -> dict[str, str]:
@@ -98,7 +106,8 @@ def _header(ctx: Context, verdicts, findings) -> list[str]:
     lines = ["# TACO reproduction report", "",
              f"Generated {dt.datetime.now().astimezone().isoformat(timespec='seconds')} from `{res.root}`; "
              f"scores at {ctx.budget_text()}; bootstrap: {ctx.reps:,} repetitions, random state {ctx.seed}; "
-             "std over seeds with ddof=1."]
+             "std over seeds with ddof=1.",
+             "", f"Interval estimator: {ESTIMATOR} (rliable {_version('rliable')})."]
     if res.empty:
         lines.append("\n**No runs were found under the results root: every table and figure shows the paper's "
                      "reported numbers only, and every claim is 'not enough data'.**")

@@ -112,6 +112,7 @@ def write_run(
     resolved: bool = True,
     resolved_values: dict[str, Any] | None = None,
     curve: Sequence[float] | None = None,
+    train_rows: int = 3,
 ) -> Path:
     """Write one run directory and return it. Arguments left None keep the composed config's value; the
     config goes through the training schema, and resolved.json through the code training uses
@@ -123,7 +124,8 @@ def write_run(
     evaluation return ramps from 0 to ``final`` over the updates, normalised by ``reference`` (default: the
     return repro.data.reference falls back to, the paper's TACO return of the task), and ``done`` writes
     DONE as the offline trainer does; ``cql_alpha`` None leaves CQL's alpha to the config (Table 6).
-    ``curve``: an online run's evaluation returns at frames 0, eval_every, ... (instead of the ramp to ``final``)."""
+    ``curve``: an online run's evaluation returns at frames 0, eval_every, ... (instead of the ramp to ``final``).
+    ``train_rows``: train.csv rows of an online run (one per episode at the paper's scale, benchmarks/)."""
     cfg = run_config(
         algo, task, seed, root, experiment=experiment, variant=variant, **{
             "agent.K": K, "agent.batch_size": batch_size, "agent.latent_action_dim": latent_action_dim,
@@ -162,7 +164,7 @@ def write_run(
     (run / runformat.EVAL).write_text("".join(lines))
     columns = runformat.train_columns(METRICS)
     train = [header_line(columns)]
-    for i in range(1, 4):
+    for i in range(1, train_rows + 1):
         loss = None if i == 1 else 0.5
         train.append(format_row(columns, {
             "frame": i * 1000, "step": i * 500, "episode": i, "episode_reward": 1.0, "episode_length": 500,
@@ -216,8 +218,26 @@ def _seeds(root: Path, n: int, spread: float = 1.0, **kw) -> None:
         write_run(root, seed=s, **{**kw, "final": kw["final"] + spread * OFFSETS[s % 3]})
 
 
-def full_coverage_root(root: Path, seeds: int = 2) -> Path:
-    """Runs for every artifact; returns ``root``. Values are chosen so that the claims hold."""
+_ONLINE_SCALE = ("frames", "eval_every", "train_rows")
+_OFFLINE_SCALE = ("updates", "eval_every_updates")
+
+
+def _scaled_run(scale: dict[str, Any], root: Path, **kw: Any) -> Path:
+    keys = _OFFLINE_SCALE if kw.get("dataset") is not None else _ONLINE_SCALE
+    return write_run(root, **{**{k: v for k, v in scale.items() if k in keys}, **kw})
+
+
+def _scaled_seeds(scale: dict[str, Any], root: Path, n: int, spread: float = 1.0, **kw: Any) -> None:
+    for s in range(n):
+        _scaled_run(scale, root, seed=s, **{**kw, "final": kw["final"] + spread * OFFSETS[s % 3]})
+
+
+def full_coverage_root(root: Path, seeds: int = 2, **scale: Any) -> Path:
+    """Runs for every artifact; returns ``root``. Values are chosen so that the claims hold. ``scale``: write_run's
+    budget and log-size arguments (``frames``, ``eval_every``, ``train_rows``, ``updates``, ``eval_every_updates``)
+    for every run, e.g. the paper's scale in benchmarks/report_speed.py."""
+    _seeds = functools.partial(_scaled_seeds, scale)
+    write_run = functools.partial(_scaled_run, scale)
     main = {"TACO": 1.4, "DrQ-v2": 1.0, "A-LIX": 0.9}
     for i, task in enumerate(DMC9):
         base = 300 + 40 * i

@@ -156,6 +156,17 @@ def test_each_offline_learner_reads_only_its_own_section_and_the_online_agent_no
     assert "agent.cql" in unread_keys("actor_critic") and "agent.cql" not in unread_keys("cql")
 
 
+def test_profile_tiny_makes_an_offline_run_tiny_too():
+    """profile=tiny is CI-sized for offline learners as for online ones: a few updates, evaluated and saved within
+    them (without it, an offline run under profile=tiny trained the default 100,000 updates)."""
+    tiny = compose(["agent=td3bc", "task=cheetah_run", "profile=tiny", "offline.dataset=medium"]).offline
+    full = compose(["agent=td3bc", "task=cheetah_run", "offline.dataset=medium"]).offline
+    assert tiny.updates <= 100 < full.updates
+    assert tiny.eval_episodes == 1
+    for key in ("eval_every_updates", "checkpoint_every_updates", "log_every_updates"):
+        assert tiny[key] <= tiny.updates, key
+
+
 # ------------------------------------------------------------------------------------------ offline extension
 OFFLINE = ["agent=td3bc", "task=cheetah_run", "profile=tiny", "env.image_size=32", "agent.feature_dim=16",
            "agent.hidden_dim=16", "runtime.threads=1", "offline.dataset=medium", "offline.eval_every_updates=3",

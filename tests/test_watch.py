@@ -215,6 +215,15 @@ def test_wandb_without_the_package_is_one_line_before_anything_is_written(tmp_pa
     assert not (tmp_path / "r").exists()
 
 
+@pytest.mark.parametrize("mode", ["", "bogus"])
+def test_an_invalid_wandb_mode_in_the_environment_is_one_line_before_anything_is_written(tmp_path: Path, monkeypatch,
+                                                                                         mode: str):
+    monkeypatch.setenv("WANDB_MODE", mode)  # wandb itself would fail with a traceback at the run's first write
+    code, _, err = cli("train", "profile=tiny", "runtime.wandb=true", f"runtime.results_root={tmp_path}")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and f"WANDB_MODE={mode!r}" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 # ----------------------------------------------------------------------------- videos
 def test_video_decodes_to_the_frames_written(tmp_path: Path):
     frames = np.random.default_rng(0).integers(0, 255, size=(23, 32, 48, 3), dtype=np.uint8)
@@ -351,8 +360,9 @@ def test_plot_curves_are_the_seed_means_of_the_runs(plot_root: Path):
     runs, evals, _ = load_runs([plot_root, plot_root / "main/taco/base/cheetah_run/seed_0"])  # a run twice
     curves = tidy_curves(runs, evals, "episode_reward", by_columns("agent,variant"))
     last = curves[curves["frame"] == FRAMES].groupby(["task", "label"])["value"].agg(["mean", "count"])
-    assert last.loc[("cheetah_run", "taco / base")].tolist() == [600.0, 3]
-    assert last.loc[("hopper_hop", "drqv2 / base")].tolist() == [300.0, 3]
+    # labelled by the methods' registered labels, not the agent files' names
+    assert last.loc[("cheetah_run", "TACO / base")].tolist() == [600.0, 3]
+    assert last.loc[("hopper_hop", "DrQ-v2 / base")].tolist() == [300.0, 3]
     train = tidy_curves(runs, evals, "critic_loss", by_columns("method"))
     assert set(train["value"]) == {0.5} and set(train["frame"]) == {2000, 3000}  # empty first-episode cells
 

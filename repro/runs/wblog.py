@@ -52,8 +52,18 @@ class WandbError(ValueError):
     """runtime.wandb=true cannot be honoured: no wandb package, or the W&B run cannot start (one line)."""
 
 
+# wandb.Settings.mode's values: wandb reads WANDB_MODE from the environment at every run it starts, even when
+# the run's mode is passed, and an invalid value is a pydantic traceback at the first write.
+WANDB_MODES = ("online", "offline", "shared", "disabled", "dryrun", "run")
+
+
 def check_wandb() -> None:
-    """Raise :class:`WandbError` (one line) unless the wandb package imports; call before anything is written."""
+    """Raise :class:`WandbError` (one line) unless the wandb package imports and the environment's WANDB_MODE, if
+    set, is one wandb accepts; call before anything is written."""
+    mode = os.environ.get("WANDB_MODE")
+    if mode is not None and mode not in WANDB_MODES:
+        raise WandbError(f"WANDB_MODE={mode!r} in the environment is not a W&B mode ({', '.join(WANDB_MODES)}); "
+                         "unset it (runtime.wandb_mode decides) or train with runtime.wandb=false")
     try:
         import wandb  # noqa: F401
     except ImportError as exc:

@@ -1,0 +1,117 @@
+"""The analysis commands at the paper's scale: writes the full-coverage tree of tests/analysis_fixtures.py with
+the paper's budgets (6 seeds, 1M frames, an evaluation every 10K frames, a train.csv row per 1000-frame episode;
+offline runs of 100K updates evaluated every 10K) and times ``repro report`` (with an empty cache, then again on
+the unchanged tree: the incremental report), ``repro figures --all``, ``repro claims`` and ``repro plan --claims``
+on it, each in its own process, with its CPU seconds and peak memory (the largest resident set of the process and
+the children it waited for). An existing output folder is emptied first, except for ``report-again``.
+
+    python benchmarks/report_speed.py --root /tmp/paper-scale            # writes the tree once, then times all
+    python benchmarks/report_speed.py --root /tmp/paper-scale --only report --json /tmp/t.json
+
+Not a test: the numbers go to docs/performance.md ("The report at the paper's scale"). Run it on a quiet
+machine (``uptime``), or say what the load was. Each command runs with the Python that runs this script and the
+inherited environment (PYTHONPATH picks the code timed); ``OMP_NUM_THREADS=1`` is set for one core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+PAPER_SCALE = {"frames": 1_000_000, "eval_every": 10_000, "train_rows": 1000, "updates": 100_000,
+               "eval_every_updates": 10_000}
+# name: (arguments, output folder). ``report-again`` reruns the report into the same folder: the incremental report
+# on an unchanged tree (analysis/cache.py); the others start without a cache (their own folders).
+COMMANDS = {
+    "report": (["report"], "report"),
+    "report-again": (["report"], "report"),
+    "figures": (["figures", "--all"], "figures"),
+    "claims": (["claims"], "claims"),
+    "plan": (["plan", "--claims"], "plan"),
+}
+
+
+def write_tree(root: Path, seeds: int) -> int:
+    """The paper-scale tree under ``root`` (skipped when its marker says it is complete); returns its runs."""
+    marker = root / ".paper_scale.json"
+    if marker.exists():
+        return int(json.loads(marker.read_text())["runs"])
+    if root.exists():
+        shutil.rmtree(root)
+    sys.path.insert(0, str(REPO))
+    from tests.analysis_fixtures import full_coverage_root
+
+    full_coverage_root(root, seeds=seeds, **PAPER_SCALE)
+    runs = sum(1 for _ in root.rglob("config.yaml"))
+    marker.write_text(json.dumps({"runs": runs, "seeds": seeds, **PAPER_SCALE}))
+    return runs
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def time_command(name: str, args: list[str], folder: str, root: Path, out: Path, extra: list[str]) -> dict:
+    """Run ``repro <args>`` on the tree; wall and CPU seconds and peak resident memory (MB)."""
+    cmd = [sys.executable, "-m", "repro", *args, "--results", str(root), "--out", str(out / folder), *extra]
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    load = os.getloadavg()[0]
+    log = out / f"{name}.log"
+    log.parent.mkdir(parents=True, exist_ok=True)
+    if name != "report-again" and (out / folder).exists():
+        shutil.rmtree(out / folder)  # no cache from an earlier timing
+    start = time.perf_counter()
+    with log.open("w") as f:
+        proc = subprocess.Popen(cmd, env=env, stdout=f, stderr=subprocess.STDOUT)
+        _, status, usage = os.wait4(proc.pid, 0)  # this child's own usage (its peak), not the session's
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    wall = time.perf_counter() - start
+    output = log.read_text()
+    return {"name": name, "command": "repro " + " ".join(args), "rc": proc.returncode, "wall_s": round(wall, 2),
+            "cpu_s": round(usage.ru_utime + usage.ru_stime, 2), "peak_mb": round(usage.ru_maxrss / 1024, 1),
+            "load_before": round(load, 2), "tail": output.strip().splitlines()[-3:]}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--root", type=Path, default=Path("/tmp/paper-scale"), help="where the tree is written")
+    parser.add_argument("--out", type=Path, default=None, help="report folders (default: <root>-out)")
+    parser.add_argument("--seeds", type=int, default=6)
+    parser.add_argument("--only", action="append", choices=sorted(COMMANDS), help="time only these (repeatable)")
+    parser.add_argument("--json", type=Path, default=None, help="also write the numbers here")
+    parser.add_argument("extra", nargs="*", help="options passed to every command after --")
+    a = parser.parse_args()
+    t0 = time.perf_counter()
+    runs = write_tree(a.root, a.seeds)
+    print(f"tree: {runs} runs under {a.root} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    out = a.out or a.root.with_name(a.root.name + "-out")
+    timed: list[dict] = []
+    results = {"cpu": cpu_model(), "cores": os.cpu_count(), "runs": runs, "scale": PAPER_SCALE, "commands": timed}
+    for name in a.only or list(COMMANDS):
+        args, folder = COMMANDS[name]
+        r = time_command(name, args, folder, a.root, out, a.extra)
+        timed.append(r)
+        print(f"{name:<14} {r['command']:<22} rc={r['rc']} wall {r['wall_s']:7.1f} s  cpu {r['cpu_s']:7.1f} s  "
+              f"peak {r['peak_mb']:7.1f} MB  (load {r['load_before']})", flush=True)
+        if r["rc"]:
+            print("\n".join(r["tail"]), flush=True)
+    if a.json:
+        a.json.write_text(json.dumps(results, indent=1))
+
+
+if __name__ == "__main__":
+    main()
