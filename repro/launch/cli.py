@@ -14,7 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from repro.launch import spec as specs
-from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
+from repro.launch.spec import PlannedRun, SweepError, SweepSpec
 from repro.launch.spec.sharing import SweepFrames, shared_frames
 from repro.runs.console import console, fail
 
@@ -175,8 +175,7 @@ def sweep_cmd(
     packing = _gpu_packing(gpus, runs_per_gpu, launcher, max_parallel, warm_start)
     try:
         spec = specs.load(name)
-        task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
-        sel = Selection(tasks=task_list, seeds=seeds, frames=frames, sets=_with_results_root(sets, results_root))
+        sel = specs.selection(tasks, seeds, frames, sets, results_root)
         planned = specs.plan(specs.expand(spec, sel))
         root = specs.results_root_of(planned)
         if dry_run:
@@ -306,16 +305,6 @@ def _launched_names(name: Optional[str], root: Path) -> list[str]:
         raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, sorted(known)))
     console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
     return []
-
-
-def _with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) -> tuple[str, ...]:
-    """The --set overrides, plus ``runtime.results_root`` when --results is given (not both)."""
-    out = tuple(sets or ())
-    if results_root is None:
-        return out
-    if any(specs.override_key(s) == "runtime.results_root" for s in out):
-        raise SweepError("give the results root once: --results ROOT or --set runtime.results_root=ROOT, not both.")
-    return (*out, f"runtime.results_root={specs.hydra_quote(str(results_root.expanduser()))}")
 
 
 def _default_results_root() -> Path:
