@@ -208,9 +208,9 @@ def _judge_published_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
 
 def _judge_offline_average(ctx: Context, cells: Cells) -> tuple[str, str]:
     pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
-    cl.require(ctx, means_table(cells), [(t, d, m) for t, d in pairs for m in cl.OFFLINE_PRINTED])
+    cl.require(ctx, means_table(cells), [(t, d, m) for t, d in pairs for m in cl.OFFLINE_AVERAGED])
     return cl.offline_average_rule(ctx, {m: stacked(cells, [(t, d, m) for t, d in pairs])
-                                         for m in cl.OFFLINE_PRINTED})
+                                         for m in cl.OFFLINE_AVERAGED})
 
 
 def _judge_seeds(ctx: Context, cells: Cells) -> tuple[str, str]:
