@@ -1,4 +1,4 @@
-"""`repro bench --roofline`: where one agent update stands against this machine's own convolution peak.
+"""`repro bench roofline`: where one agent update stands against this machine's own convolution peak.
 
 Everything is measured in this one process (docs/performance.md, "Roofline"):
 
