@@ -393,7 +393,8 @@ def _objectives(ctx: Context) -> tuple[str, str]:
                                             + ", ".join(f"{k} {v:.0f}" for k, v in drops.items()))
 
 
-@check("vs_repr_objectives", "TACO mean > SPR, ATC and DRIML (where the paper has DRIML) on each of the 5 tasks")
+@check("vs_repr_objectives", "TACO mean > each other objective of Table 2 (SPR, ATC, DRIML; where the paper has its "
+       "value) on each of the 5 tasks")
 def _vs_repr(ctx: Context) -> tuple[str, str]:
     return vs_repr_rule(ctx, means(labelled(select.repr_objectives(ctx.scores, ctx.experiment_map)),
                                    ["task", "method"]))
@@ -401,8 +402,8 @@ def _vs_repr(ctx: Context) -> tuple[str, str]:
 
 def vs_repr_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
     """vs_repr_objectives on a (task, method) ``means`` table."""
-    pairs = [((t, "TACO"), (t, m), f"{t} vs {m}") for t in REPR_TASKS for m in ("SPR", "ATC", "DRIML")
-             if m != "DRIML" or ctx.paper.repr_value(t, "DRIML") is not None]
+    pairs = [((t, "TACO"), (t, m), f"{t} vs {m}") for t in REPR_TASKS for m in ctx.paper.repr_others
+             if ctx.paper.repr_value(t, m) is not None]
     return universal(ctx, table, pairs)
 
 

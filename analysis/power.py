@@ -261,7 +261,7 @@ def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = N
                             source=f"published DrQ-v2 curves at {frames_text(b1)}, as published") for t in DMC9]
     repr_cells = [taco(t) for t in cl.REPR_TASKS]
     for t in cl.REPR_TASKS:
-        for m in ("SPR", "ATC", "DRIML"):
+        for m in ctx.paper.repr_others:
             v = ctx.paper.repr_value(t, m)
             if v is not None:
                 repr_cells.append(paper_normal((t, m), v[0], v[1], "Table 2"))
