@@ -119,3 +119,25 @@ def test_the_newest_online_file_names_the_device(tmp_path):
     os.utime(cpu, (0, 0))
     assert br.newest_device(folder) == "cuda" and br.files(folder, br.ONLINE, "cpu") == [cpu]
     assert [p.name for p in br.files(folder, br.OFFLINE)] == ["bench-offline-h-cpu.json"]
+
+
+def test_a_run_is_labelled_with_the_path_it_trained_with(tmp_path):
+    """The speed tables labelled every run 'plain': a run with agent.fast is now its own source ('[fast]'), and the
+    claim `speed`, which keeps the plain path only, no longer mixes it in."""
+    import yaml
+
+    from analysis.load import load_results
+    from analysis.speed import speed_measurements
+    from tests.analysis_fixtures import write_run
+
+    plain = write_run(tmp_path, experiment="speed", algo="taco", task="cheetah_run", seed=1, final=1.0, fps=10.0)
+    fast = write_run(tmp_path, experiment="speed", algo="taco", task="cheetah_run", seed=2, final=1.0, fps=30.0)
+    cfg = yaml.safe_load((fast / "config.yaml").read_text())
+    cfg["agent"]["fast"] = True
+    (fast / "config.yaml").write_text(yaml.safe_dump(cfg))
+    results = load_results(tmp_path)
+    by_seed = dict(zip(results.runs["seed"], results.runs["speedup"]))
+    assert by_seed == {1: "plain", 2: "fast"} and plain.exists()
+    meas = speed_measurements(results)
+    assert sorted(zip(meas["fps"], meas["speedup"], meas["source"])) == [
+        (10.0, "plain", "runs (speed)"), (30.0, "fast", "runs (speed) [fast]")]
