@@ -55,7 +55,8 @@ def test_files_of_earlier_versions_read_as_typed_entries(tmp_path):
     assert offline.kind == br.OFFLINE and [e.agent for e in offline.offline] == ["drqv2", "cql"]
     assert br.offline_seconds(offline, "cql", 256) == 0.8 and br.offline_seconds(offline, "iql", 256) is None
     assert br.read(_write(tmp_path, "bench-roofline-h-cpu.json", OLD_ROOFLINE)).kind == br.ROOFLINE
-    assert br.read(_write(tmp_path, "bench-offline-data-h.json", OLD_DATA)).kind == br.DATA
+    data = br.read(_write(tmp_path, "bench-offline-data-h.json", OLD_DATA))
+    assert data.kind == br.DATA and data.data == br.DataEntry(100, offline_batches_per_s=5.0)
 
 
 def test_todays_files_round_trip_and_say_their_kind(tmp_path):

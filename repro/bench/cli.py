@@ -282,7 +282,9 @@ def data_cmd(transitions: int = typer.Option(100_000, "--transitions", help="Dat
     if transitions < 1 or sample_batches < 1 or episode_length < 3:
         fail("--transitions and --sample-batches must be >= 1, --episode-length >= 3")
     data = run_data_bench(transitions, (batch or [256])[0], sample_batches, episode_length, echo=typer.echo)
-    _write(results_root / "bench", _new_file(results_file.DATA, "cpu", data), typer.echo)
+    bench = _new_file(results_file.DATA, "cpu", {k: v for k, v in data.items() if k not in results_file.DATA_KEYS})
+    bench.data = results_file.DataEntry.read({k: v for k, v in data.items() if k in results_file.DATA_KEYS})
+    _write(results_root / "bench", bench, typer.echo)
 
 
 def roofline_cmd(algo: Optional[list[str]] = typer.Option(None, "--algo", help="Online agent files (default taco)."),

@@ -6,9 +6,10 @@ docs/performance.md.
 Files, under ``{results_root}/bench/``: ``bench-<host>-<device>.json`` (the online update entries, ``results``, and
 the end-to-end entries, ``e2e``), ``bench-offline-<host>-<device>.json`` (one update of each offline learner),
 ``bench-offline-data-<host>.json`` (a dataset's load and sampling) and ``bench-roofline-<host>-<device>.json``.
-Each file written now says its ``kind`` and ``format`` (:data:`FORMAT`) and names the agent of every entry ``agent``;
-the files of earlier versions (no ``kind``, the online agent under ``algo``, no ``speedup``, ``fps`` or
-``fps_estimate`` instead of the frames per update, ``hardware`` as an object) are read as they are.
+Each file written now says its ``kind`` and ``format`` (:data:`FORMAT`) and names the agent of every entry ``agent``
+(typed: :class:`UpdateEntry`, :class:`E2EEntry`, :class:`OfflineEntry`, :class:`DataEntry`); the files of earlier
+versions (no ``kind``, the online agent under ``algo``, no ``speedup``, ``fps`` or ``fps_estimate`` instead of the
+frames per update, ``hardware`` as an object) are read as they are.
 
 One FPS (:func:`rate`): frames / seconds of the end-to-end entry of the agent, batch size and path (the one timed as
 the loop trains, ``phase_sync`` false, where there is one: it is what a run sees), else update-bound, frames per
@@ -193,6 +194,36 @@ class OfflineEntry:
                 **self.extra}
 
 
+DATA_KEYS = ("transitions", "batch_size", "load_seconds", "offline_batches_per_s", "online_batches_per_s")
+
+
+@dataclass(frozen=True)
+class DataEntry:
+    """A dataset's load and sampling timed (``repro bench data``): its size, load seconds and batches per second of
+    the offline and the online buffer at one batch size (``extra``: the rest, its ratios and memory)."""
+
+    transitions: int
+    batch_size: int | None = None
+    load_seconds: float | None = None
+    offline_batches_per_s: float | None = None
+    online_batches_per_s: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    @classmethod
+    def read(cls, r: Mapping[str, Any]) -> DataEntry:
+        def num(key: str) -> float | None:
+            return None if r.get(key) is None else float(r[key])
+
+        return cls(int(r["transitions"]), _optional_int(r.get("batch_size")), num("load_seconds"),
+                   num("offline_batches_per_s"), num("online_batches_per_s"),
+                   {k: v for k, v in r.items() if k not in DATA_KEYS})
+
+    def to_json(self) -> dict[str, Any]:
+        fields = dict(zip(DATA_KEYS, (self.transitions, self.batch_size, self.load_seconds,
+                                       self.offline_batches_per_s, self.online_batches_per_s)))
+        return {**{k: v for k, v in fields.items() if v is not None}, **self.extra}
+
+
 @dataclass
 class BenchFile:
     """One bench file: its kind, device and hardware, and its typed entries (``rest``: what else it holds, kept as
@@ -206,6 +237,7 @@ class BenchFile:
     updates: list[UpdateEntry] = field(default_factory=list)
     e2e: list[E2EEntry] = field(default_factory=list)
     offline: list[OfflineEntry] = field(default_factory=list)
+    data: DataEntry | None = None
     rest: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -223,6 +255,8 @@ class BenchFile:
                 out["e2e"] = [e.to_json() for e in self.e2e]
         elif self.kind == OFFLINE:
             out["results"] = [e.to_json() for e in self.offline]
+        elif self.data is not None:
+            out.update(self.data.to_json())
         return out
 
     def put_e2e(self, entries: Iterable[E2EEntry]) -> None:
@@ -287,8 +321,10 @@ def parse(data: Any, path: Path | None = None) -> BenchFile:
             bench.e2e = [E2EEntry.read(r) for r in e2e]
         elif kind == OFFLINE:
             bench.offline = [OfflineEntry.read(r) for r in results]
+        elif kind == DATA:
+            bench.data = DataEntry.read({k: v for k, v in data.items() if k in DATA_KEYS})
         skip = {"kind", "format", "device", "hardware", "device_memory_bytes", "path", *(
-            ("results", "e2e") if kind in (ONLINE, OFFLINE) else ())}
+            ("results", "e2e") if kind in (ONLINE, OFFLINE) else DATA_KEYS if kind == DATA else ())}
         bench.rest = {k: v for k, v in data.items() if k not in skip}
     except (KeyError, TypeError, ValueError) as exc:
         raise BenchFormatError(f"{where}: bad entry ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
