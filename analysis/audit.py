@@ -1,157 +1,51 @@
 """Recompute every number the paper derives from other numbers and list each mismatch with both values.
 
 Inputs are only the paper's own files (``repro_data/paper``): the CSV transcriptions of its tables,
-claims.csv and the LaTeX source. Checks: printed averages vs the mean of their column, relative gains
-(the 1.4x / 40% claim, the 3.6x speed ratio, the action-representation percentages), entries repeated
+claims.csv and the LaTeX source (read by analysis/paper_tex.py). Checks: printed averages vs the mean of their column,
+relative gains (the 1.4x / 40% claim, the 3.6x speed ratio, the action-representation percentages), entries repeated
 across tables (Table 1 vs Table 2, Table 4 vs Table 5), bold/shaded "best" marks, textual statements
-that follow from a table, and the CSV transcription against the LaTeX tables.
+that follow from a table, and the CSV transcription against the LaTeX tables; plus the paper's DrQ-v2 baseline
+against the published curves (analysis/published_audit.py).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
-from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-from analysis.calibration import SOURCE_TEXT, packaged_published, published_values
-from analysis.load import Results
+from analysis.calibration import SOURCE_TEXT
+from analysis.findings import Finding, agree, pm_text, result_text
 from analysis.paper import DMC9, PaperData
-from analysis.stats import DEFAULT_SEED, mean_cis, ratio_to_task_means
+from analysis.paper_tex import (
+    T1_COLUMNS,
+    T2_COLUMNS,
+    parse_cql_table,
+    parse_offline_table,
+    parse_row_table,
+    parse_single_row,
+)
+from analysis.published_audit import (
+    PUBLISHED_REPS,
+    check_published_baseline,
+    published_baseline,
+    published_frame,
+    published_rows,
+    published_summary,
+)
+from analysis.stats import DEFAULT_SEED
 from analysis.tables import write_table
-from repro.config.schema import normalize_dataset
 
-T1_COLUMNS = ["TACO", "DrQ-v2", "A-LIX", "DrQ", "CURL", "DreamerV3", "TD-MPC"]
-T2_COLUMNS = ["TACO", "SPR", "ATC", "DRIML", "DrQ-v2"]
-T3_COLUMNS = ["TD3+BC+TACO", "TD3+BC", "CQL+TACO", "CQL", "DT", "IQL", "BC"]
+# the published-baseline part, for the report and calibration (analysis/published_audit.py)
+__all__ = ["CHECK_FUNCS", "Finding", "mismatches", "published_baseline", "published_frame", "published_rows",
+           "published_summary", "run_audit", "write_audit"]
+
 MODEL_FREE = ["TACO", "DrQ-v2", "A-LIX", "DrQ", "CURL"]
-_PM = re.compile(r"(-?\d+(?:\.\d+)?)\s*\\pm\s*(-?\d+(?:\.\d+)?)")
-_NUM = re.compile(r"-?\d+(?:\.\d+)?")
-
-
-@dataclass
-class Finding:
-    """One recomputed number: ``match`` False is a mismatch; ``kind`` "info" rows are context, not checks;
-    ``kind`` "published" rows hold the paper's DrQ-v2 baseline against the DrQ-v2 authors' published curves
-    (``match`` False: outside the published 95% CI), a comparison with outside data, not counted as mismatches
-    of the paper's own numbers."""
-
-    check: str
-    where: str
-    description: str
-    printed: str
-    recomputed: str
-    match: bool
-    kind: str = "check"
-
-
-# ---------------------------------------------------------------- LaTeX table parsing
-def _tabular(tex: str, label: str) -> str:
-    """The tabular body of the table environment holding ``\\label{label}``."""
-    pos = tex.index(f"\\label{{{label}}}")
-    start = tex.rfind("\\begin{table}", 0, pos)
-    body_start = tex.index("\\begin{tabular}", start)
-    return tex[body_start: tex.index("\\end{tabular}", body_start)]
-
-
-def _rows(body: str) -> list[list[str]]:
-    rows = []
-    for raw in body.split("\\\\"):
-        lines = [ln for ln in raw.splitlines() if not ln.strip().startswith("%")]
-        text = " ".join(lines)
-        text = re.sub(r"\\(toprule|midrule|bottomrule)", "", text).strip()
-        if "&" not in text:
-            continue
-        rows.append([c.strip() for c in text.split("&")])
-    return rows
-
-
-def _cell(text: str) -> tuple[float | None, float | None, bool]:
-    """(mean, std, bold) of a LaTeX cell like ``$\\mathbf{{541\\pm 38}}$``; (None, None, False) for N/A."""
-    bold = "\\mathbf" in text or "\\textbf" in text
-    m = _PM.search(text)
-    if m:
-        return float(m.group(1)), float(m.group(2)), bold
-    if "N/A" in text:
-        return None, None, bold
-    nums = _NUM.findall(re.sub(r"\\[a-zA-Z]+\{?\*?\}?|\{\d\}", " ", text))
-    return (float(nums[-1]) if nums else None), None, bold
-
-
-def _task_key(text: str) -> str:
-    name = re.sub(r"\\multirow\{\d+\}\{\*\}\{([^}]*)\}", r"\1", text)
-    name = re.sub(r"[${}]|\\textbf|\\mathbf", "", name).strip()
-    return name.lower().replace(" ", "_")
-
-
-def parse_row_table(tex: str, label: str, columns: list[str]) -> pd.DataFrame:
-    """A task-per-row LaTeX table (Tables 1 and 2) as rows: task, method, mean, std, bold."""
-    out = []
-    for cells in _rows(_tabular(tex, label)):
-        task = _task_key(cells[0])
-        if task not in DMC9 or len(cells) != len(columns) + 1:
-            continue
-        for method, text in zip(columns, cells[1:]):
-            mean, std, bold = _cell(text)
-            out.append({"task": task, "method": method, "mean": mean, "std": std, "bold": bold})
-    return pd.DataFrame(out)
-
-
-def parse_offline_table(tex: str) -> tuple[pd.DataFrame, dict[str, float | None]]:
-    """Table 3 as rows (task, dataset, method, mean, std, bold) and its printed average row."""
-    out, average, task = [], {}, None
-    for cells in _rows(_tabular(tex, "tab:offline_table")):
-        if "Average" in cells[0]:
-            average = {m: _cell(c)[0] for m, c in zip(T3_COLUMNS, cells[1:])}
-            continue
-        if len(cells) != len(T3_COLUMNS) + 2 or not cells[1] or "Dataset" in cells[0]:
-            continue
-        task = _task_key(cells[0]) or task
-        dataset = normalize_dataset(cells[1])
-        for method, text in zip(T3_COLUMNS, cells[2:]):
-            mean, std, bold = _cell(text)
-            out.append({"task": task, "dataset": dataset, "method": method, "mean": mean, "std": std, "bold": bold})
-    return pd.DataFrame(out), average
-
-
-def parse_single_row(tex: str, label: str) -> list[float]:
-    """The numbers of a one-row table (Tables 4 and 5)."""
-    rows = _rows(_tabular(tex, label))
-    return [float(_NUM.findall(c)[0]) for c in rows[-1]]
-
-
-def parse_cql_table(tex: str) -> pd.DataFrame:
-    out, task = [], None
-    for cells in _rows(_tabular(tex, "tab:cql_hyper")):
-        if len(cells) != 3 or "Dataset" in cells[0] or "alpha" in cells[2]:
-            continue
-        task = _task_key(cells[0]) or task
-        out.append({"task": task, "dataset": normalize_dataset(cells[1]), "alpha": _cell(cells[2])[0]})
-    return pd.DataFrame(out)
 
 
 # ---------------------------------------------------------------- checks
-def _eq(a: float | None, b: float | None, tol: float = 1e-9) -> bool:
-    if a is None or b is None or (isinstance(a, float) and math.isnan(a)) or (isinstance(b, float) and math.isnan(b)):
-        return (a is None or (isinstance(a, float) and math.isnan(a))) and (
-            b is None or (isinstance(b, float) and math.isnan(b))
-        )
-    return abs(float(a) - float(b)) <= tol
-
-
-def _pm(mean, std) -> str:
-    if mean is None or (isinstance(mean, float) and math.isnan(mean)):
-        return "N/A"
-    return (
-        f"{mean:g} ± {std:g}" if std is not None and not (isinstance(std, float) and math.isnan(std)) else f"{mean:g}"
-    )
-
-
 def check_offline_average(p: PaperData) -> Iterable[Finding]:
     recomputed = p.offline.groupby("method")["normalized_mean"].mean()
     printed = dict(zip(p.offline_average["method"], p.offline_average["average_normalized"]))
@@ -174,7 +68,7 @@ def check_claim_text_numbers(p: PaperData) -> Iterable[Finding]:
         val = float(m.group(1)) if m else None
         yield Finding("claim_offline_average", "claims.csv vs T3", f"claim offline_average quotes {method}",
                       f"{val:g}" if val is not None else "absent", f"{printed[method]:.1f} (offline_average.csv)",
-                      val is not None and _eq(val, printed[method]))
+                      val is not None and agree(val, printed[method]))
     speed = p.claims.set_index("id").loc["speed", "claim"]
     te = p.time_efficiency.set_index(["method", "batch_size"])["fps"]
     quoted = {("TACO", 1024): r"(\d+) vs", ("DrQ-v2", 256): r"vs (\d+) FPS", ("TACO", 512): r"(\d+) FPS at 512",
@@ -188,7 +82,7 @@ def check_claim_text_numbers(p: PaperData) -> Iterable[Finding]:
             f"claim speed quotes {key[0]} B{key[1]} FPS",
             f"{val:g}" if val is not None else "absent",
             f"{te[key]:g}",
-            val is not None and _eq(val, te[key]),
+            val is not None and agree(val, te[key]),
         )
 
 
@@ -230,14 +124,16 @@ def check_t1_vs_t2(p: PaperData) -> Iterable[Finding]:
         if r.method not in ("TACO", "DrQ-v2"):
             continue
         a = t1.loc[(r.task, r.method)]
-        ok = _eq(a["mean"], r.mean) and _eq(a["std"], r.std)
+        ok = agree(a["mean"], r.mean) and agree(a["std"], r.std)
         desc = f"{r.task} {r.method}: Table 2 repeats Table 1's entry"
         if not ok:
             same = t1.loc[r.task]
-            twins = [m for m in same.index if _eq(same.loc[m, "mean"], r.mean) and _eq(same.loc[m, "std"], r.std)]
+            twins = [m for m in same.index
+                     if agree(same.loc[m, "mean"], r.mean) and agree(same.loc[m, "std"], r.std)]
             if twins:
                 desc += f" (Table 2's value is Table 1's {', '.join(twins)} entry)"
-        yield Finding("t1_vs_t2", "T1 vs T2", desc, f"T2: {_pm(r.mean, r.std)}", f"T1: {_pm(a['mean'], a['std'])}", ok)
+        yield Finding("t1_vs_t2", "T1 vs T2", desc, f"T2: {pm_text(r.mean, r.std)}",
+                      f"T1: {pm_text(a['mean'], a['std'])}", ok)
 
 
 def check_t4_vs_t5(p: PaperData) -> Iterable[Finding]:
@@ -245,7 +141,7 @@ def check_t4_vs_t5(p: PaperData) -> Iterable[Finding]:
     t4 = parse_single_row(tex, "tab:time_efficiency")
     t5 = parse_single_row(tex, "tab:time_efficiency_taco")
     yield Finding(
-        "t4_vs_t5", "T4 vs T5", "TACO B1024 FPS in both tables", f"T5: {t5[0]:g}", f"T4: {t4[0]:g}", _eq(t4[0], t5[0])
+        "t4_vs_t5", "T4 vs T5", "TACO B1024 FPS in both tables", f"T5: {t5[0]:g}", f"T4: {t4[0]:g}", agree(t4[0], t5[0])
     )
     te = p.time_efficiency.set_index(["method", "batch_size"])["fps"]
     ratio = te[("DrQ-v2", 256)] / te[("TACO", 1024)]
@@ -286,16 +182,17 @@ def check_t2_text(p: PaperData) -> Iterable[Finding]:
     below = [
         f"{m} on {t} ({t2.loc[t, m]:g} < {t2.loc[t, 'DrQ-v2']:g})"
         for t in t2.index
-        for m in ("SPR", "ATC", "DRIML")
+        for m in p.repr_others
         if not math.isnan(t2.loc[t, m]) and t2.loc[t, m] < t2.loc[t, "DrQ-v2"]
     ]
     yield Finding("t2_objectives_beat_drqv2", "§5.1 text vs T2",
                   "'previous representation learning objectives ... surpass the DrQ-v2 baseline'", "all above DrQ-v2",
                   "below DrQ-v2: " + ("; ".join(below) if below else "none"), not below)
-    losses = [f"{m} on {t}" for t in t2.index for m in ("SPR", "ATC", "DRIML")
+    losses = [f"{m} on {t}" for t in t2.index for m in p.repr_others
               if not math.isnan(t2.loc[t, m]) and not t2.loc[t, "TACO"] > t2.loc[t, m]]
-    yield Finding("t2_taco_best", "claim vs_repr_objectives vs T2", "TACO above SPR, ATC and DRIML on all five tasks",
-                  "all five", "exceptions: " + (", ".join(losses) if losses else "none"), not losses)
+    yield Finding("t2_taco_best", "claim vs_repr_objectives vs T2",
+                  f"TACO above {', '.join(p.repr_others)} on all five tasks", "all five",
+                  "exceptions: " + (", ".join(losses) if losses else "none"), not losses)
 
 
 def check_offline_gain(p: PaperData) -> Iterable[Finding]:
@@ -364,19 +261,20 @@ def check_transcription(p: PaperData) -> Iterable[Finding]:
         for d in merged.to_dict("records"):
             ok = (
                 d["_merge"] == "both"
-                and _eq(d[f"{mcol}_tex"], d[f"{mcol}_csv"])
-                and _eq(d[f"{scol}_tex"], d[f"{scol}_csv"])
+                and agree(d[f"{mcol}_tex"], d[f"{mcol}_csv"])
+                and agree(d[f"{scol}_tex"], d[f"{scol}_csv"])
             )
             if not ok:
                 bad += 1
                 yield Finding("csv_vs_tex", f"{name} CSV vs LaTeX", " ".join(str(d[k]) for k in keys),
-                              _pm(d[f"{mcol}_csv"], d[f"{scol}_csv"]), _pm(d[f"{mcol}_tex"], d[f"{scol}_tex"]), False)
+                              pm_text(d[f"{mcol}_csv"], d[f"{scol}_csv"]), pm_text(d[f"{mcol}_tex"], d[f"{scol}_tex"]),
+                              False)
         if not bad:
             yield Finding("csv_vs_tex", f"{name} CSV vs LaTeX", f"all {len(merged)} cells", "CSV", "LaTeX", True)
     _, avg_tex = parse_offline_table(tex)
     for m, v in avg_tex.items():
         csv_v = float(p.offline_average.set_index("method").loc[m, "average_normalized"])
-        if not _eq(v, csv_v):
+        if not agree(v, csv_v):
             yield Finding("csv_vs_tex", "T3 average CSV vs LaTeX", m, f"{csv_v:g}", f"{v:g}", False)
     t4 = parse_single_row(tex, "tab:time_efficiency")
     t4_csv = [
@@ -413,88 +311,6 @@ def check_cql_alpha(p: PaperData) -> Iterable[Finding]:
     )
 
 
-PUBLISHED_FRAME = 1_000_000  # Table 1's budget
-# Bootstrap repetitions of the published-baseline rows (fewer than rliable's 50,000 so that `repro audit` stays
-# a few seconds: the 9-task ratio resamples ten arrays per repetition).
-PUBLISHED_REPS = 10_000
-
-
-def published_baseline(p: PaperData, published: Results | None = None, reps: int = PUBLISHED_REPS,
-                       seed: int = DEFAULT_SEED) -> list[Finding]:
-    """The paper's DrQ-v2 cells of Table 1 against the published DrQ-v2 curves at 1M frames (one row per
-    task: inside or outside the 95% CI of the published mean, by how much), and the abstract's TACO / DrQ-v2
-    ratio recomputed with the published baseline beside Table 1's own."""
-    published = packaged_published() if published is None else published
-    t1 = p.online.set_index(["task", "method"])
-    vals = {t: published_values(published, t, PUBLISHED_FRAME) for t in DMC9}
-    cis = dict(zip(DMC9, mean_cis([vals[t] for t in DMC9], reps=reps, seed=seed)))
-    out = []
-    where = "T1 DrQ-v2 vs published curves"
-    for t in DMC9:
-        paper_mean, paper_std = float(t1.loc[(t, "DrQ-v2"), "mean"]), float(t1.loc[(t, "DrQ-v2"), "std"])
-        v = vals[t]
-        if len(v) == 0:
-            out.append(Finding("drqv2_vs_published", where, f"{t}: no published DrQ-v2 curve reaching 1M frames",
-                               _pm(paper_mean, paper_std), "—", True, kind="published"))
-            continue
-        lo, hi = cis[t]
-        pub = float(np.mean(v))
-        inside = lo <= paper_mean <= hi
-        gap = paper_mean - hi if paper_mean > hi else paper_mean - lo if paper_mean < lo else 0.0
-        side = "inside" if inside else ("above" if gap > 0 else "below")
-        text = (f"published {pub:.1f} [{lo:.1f}, {hi:.1f}] (n={len(v)}); paper {side} the CI"
-                + ("" if inside else f" by {abs(gap):.1f}") + f"; paper − published mean {paper_mean - pub:+.1f} "
-                f"({100 * (paper_mean / pub - 1):+.1f}%)")
-        out.append(Finding("drqv2_vs_published", where,
-                           f"{t}: Table 1's DrQ-v2 (1M) inside the 95% CI of the published mean at 1M",
-                           _pm(paper_mean, paper_std), text, inside, kind="published"))
-    if all(len(vals[t]) for t in DMC9):
-        piv = p.online.pivot(index="task", columns="method", values="mean").loc[list(DMC9)]
-        taco = piv["TACO"].to_numpy(dtype=float).reshape(1, -1)
-        paper_ratio = float(piv["TACO"].mean() / piv["DrQ-v2"].mean())
-        r, lo, hi = ratio_to_task_means(taco, [vals[t] for t in DMC9], reps, seed)
-        pub_mean = float(np.mean([np.mean(vals[t]) for t in DMC9]))
-        out.append(Finding(
-            "online_gain_vs_published", "abstract '1.4x' with the published DrQ-v2",
-            "TACO / DrQ-v2 ratio of the 9-task means: Table 1's TACO over the published DrQ-v2 at 1M (9-task mean "
-            f"{pub_mean:.1f}; Table 1's DrQ-v2: {piv['DrQ-v2'].mean():.1f}); the paper's own ratio inside its CI?",
-            f"{paper_ratio:.3f}x (Table 1's own DrQ-v2)", f"{r:.3f}x (95% CI [{lo:.3f}, {hi:.3f}])",
-            lo <= paper_ratio <= hi, kind="published"))
-    return out
-
-
-@functools.cache
-def _published_baseline_of(root: Path) -> tuple[Finding, ...]:
-    return tuple(published_baseline(PaperData(root)))
-
-
-def check_published_baseline(p: PaperData) -> Iterable[Finding]:
-    """:func:`published_baseline` of the packaged curves, computed once per process and paper folder (the
-    bootstrap of the 9-task ratio takes seconds)."""
-    return [replace(f) for f in _published_baseline_of(Path(p.root))]
-
-
-def published_rows(findings: Iterable[Finding]) -> list[Finding]:
-    """The findings that compare the paper's baseline with the published DrQ-v2 curves."""
-    return [f for f in findings if f.kind == "published"]
-
-
-def published_frame(findings: Iterable[Finding]) -> pd.DataFrame:
-    """The display table of :func:`published_rows`."""
-    rows = published_rows(findings)
-    return pd.DataFrame({"Result": [_result(f) for f in rows], "What": [f.description for f in rows],
-                         "Paper prints": [f.printed for f in rows], "Published curves": [f.recomputed for f in rows]})
-
-
-def published_summary(findings: Iterable[Finding]) -> str:
-    """'3 of 9 of the paper's DrQ-v2 cells (Table 1, 1M) lie outside ...'."""
-    cells = [f for f in published_rows(findings) if f.check == "drqv2_vs_published"]
-    out = [f.description.split(":")[0] for f in cells if not f.match]
-    names = f" ({', '.join(out)})" if out else ""
-    return (f"{len(out)} of {len(cells)} of the paper's DrQ-v2 cells (Table 1, 1M frames) lie outside the 95% CI of "
-            f"the published DrQ-v2 mean at 1M{names}; published: {SOURCE_TEXT}.")
-
-
 CHECK_FUNCS = (
     check_offline_average,
     check_claim_text_numbers,
@@ -529,7 +345,7 @@ def write_audit(out_dir, findings: list[Finding]):
     raw = pd.DataFrame([f.__dict__ for f in order])
     disp = pd.DataFrame(
         {
-            "Result": [_result(f) for f in order],
+            "Result": [result_text(f) for f in order],
             "Where": [f.where for f in order],
             "What": [f.description for f in order],
             "Paper prints": [f.printed for f in order],
@@ -545,9 +361,3 @@ def write_audit(out_dir, findings: list[Finding]):
              + published_summary(findings) + " The CI is the published mean's alone (the paper's own seed spread is "
              "not part of it)."] if published_rows(findings) else []
     return write_table(out_dir, "audit", raw, caption, disp, notes)
-
-
-def _result(f: Finding) -> str:
-    if f.kind == "published":
-        return "inside published CI" if f.match else "OUTSIDE published CI"
-    return "MISMATCH" if (f.kind == "check" and not f.match) else ("ok" if f.kind == "check" else "info")

@@ -24,6 +24,8 @@ from omegaconf.errors import OmegaConfBaseException
 
 from analysis.cache import file_signature, lookup
 from analysis.identity import algo_key, enabled_objectives, method_label
+from repro.bench.results import BenchFile, BenchFormatError, path_of
+from repro.bench.results import read as read_bench
 from repro.config.compose import ABSENT, get_key
 from repro.config.schema import normalize_dataset
 from repro.runs.migrate import migrate_config
@@ -115,14 +117,14 @@ class Results:
             versions).
         eval: one row per evaluation: identity columns + the eval.csv columns (EVAL_TABLE_COLUMNS).
         problems: every file that was skipped or is suspicious.
-        benches: parsed ``{root}/bench/*.json`` files, each with its ``path``.
+        benches: the ``{root}/bench/*.json`` files (repro/bench/results.py's :class:`BenchFile`, with its ``path``).
     """
 
     root: Path
     runs: pd.DataFrame
     eval: pd.DataFrame
     problems: list[Problem] = field(default_factory=list)
-    benches: list[dict[str, Any]] = field(default_factory=list)
+    benches: list[BenchFile] = field(default_factory=list)
 
     @property
     def empty(self) -> bool:
@@ -365,6 +367,8 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
 
     row: dict[str, Any] = dict(ident)
     row["resolved_from"] = source
+    # the speed-up path it trained with (repro/bench/results.py: the bench's vocabulary, agent.fast's FastPlan first)
+    row["speedup"] = path_of(_get(cfg, "agent") or {}, values.get("fast"))
     row.update(_provenance(_read_meta(run_dir / META, problems)))
 
     eval_df = _read_eval(run_dir / EVAL, offline, problems)
@@ -428,19 +432,14 @@ def _read_eval(path: Path, offline: bool, problems: list[Problem]) -> pd.DataFra
     return df[list(EVAL_TABLE_COLUMNS)]
 
 
-def load_benches(root: Path) -> tuple[list[dict[str, Any]], list[Problem]]:
-    """Parse ``{root}/bench/*.json`` speed benchmarks."""
+def load_benches(root: Path) -> tuple[list[BenchFile], list[Problem]]:
+    """Read ``{root}/bench/*.json`` speed benchmarks of any version (repro/bench/results.py, their one reader)."""
     out, problems = [], []
     for path in sorted((root / "bench").glob("*.json")):
         try:
-            data = _read_json(path)
-            if not isinstance(data.get("results"), list):
-                raise ValueError("no 'results' list")
-        except (ValueError, OSError, UnicodeDecodeError) as exc:
+            out.append(read_bench(path))
+        except BenchFormatError as exc:
             problems.append(Problem(str(path), f"malformed benchmark JSON ({exc}); skipped"))
-            continue
-        data["path"] = str(path)
-        out.append(data)
     return out, problems
 
 
@@ -461,8 +460,8 @@ def load_results(root: Path | str) -> Results:
     problems.extend(bench_problems)
     runs = pd.DataFrame(rows)
     if runs.empty:
-        runs = pd.DataFrame(columns=[*IDENTITY, "resolved_from", "eval_rows", "last_frame", "last_update", "fps",
-                                     "updates_per_s"])
+        runs = pd.DataFrame(columns=[*IDENTITY, "resolved_from", "speedup", "eval_rows", "last_frame", "last_update",
+                                     "fps", "updates_per_s"])
     else:
         dup = runs.duplicated(["experiment", "algo", "variant", "task", "dataset", "seed"], keep=False)
         for run_id in runs.loc[dup, "run_id"]:

@@ -51,6 +51,12 @@ class PaperData:
         """Table 2: task, method, mean, std (DRIML empty where N/A)."""
         return self._csv("representation_objectives_table.csv")
 
+    @property
+    def repr_others(self) -> tuple[str, ...]:
+        """The representation objectives Table 2 sets against TACO (all but TACO and the DrQ-v2 baseline), in its
+        order: read from the table, never listed in the code."""
+        return tuple(m for m in dict.fromkeys(self.repr_objectives["method"]) if m not in ("TACO", "DrQ-v2"))
+
     @cached_property
     def offline(self) -> pd.DataFrame:
         """Table 3: task, dataset, method, normalized_mean, normalized_std."""

@@ -208,9 +208,9 @@ def _judge_published_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
 
 def _judge_offline_average(ctx: Context, cells: Cells) -> tuple[str, str]:
     pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
-    cl.require(ctx, means_table(cells), [(t, d, m) for t, d in pairs for m in cl.OFFLINE_PRINTED])
+    cl.require(ctx, means_table(cells), [(t, d, m) for t, d in pairs for m in cl.OFFLINE_AVERAGED])
     return cl.offline_average_rule(ctx, {m: stacked(cells, [(t, d, m) for t, d in pairs])
-                                         for m in cl.OFFLINE_PRINTED})
+                                         for m in cl.OFFLINE_AVERAGED})
 
 
 def _judge_seeds(ctx: Context, cells: Cells) -> tuple[str, str]:
@@ -261,7 +261,7 @@ def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = N
                             source=f"published DrQ-v2 curves at {frames_text(b1)}, as published") for t in DMC9]
     repr_cells = [taco(t) for t in cl.REPR_TASKS]
     for t in cl.REPR_TASKS:
-        for m in ("SPR", "ATC", "DRIML"):
+        for m in ctx.paper.repr_others:
             v = ctx.paper.repr_value(t, m)
             if v is not None:
                 repr_cells.append(paper_normal((t, m), v[0], v[1], "Table 2"))

@@ -9,6 +9,7 @@ import pandas as pd
 
 from analysis.identity import algo_label
 from analysis.load import Results
+from repro.bench.results import ONLINE, rate, settings
 
 
 def hardware_label(device: Any, cpu: Any = None, host: Any = None) -> str:
@@ -25,12 +26,14 @@ def hardware_label(device: Any, cpu: Any = None, host: Any = None) -> str:
 
 def speed_measurements(results: Results, experiments: tuple[str, ...] = ("speed",),
                        fallback: bool = True) -> pd.DataFrame:
-    """One row per measurement: method, batch_size, fps, hardware, source, speedup.
+    """One row per measurement: method, batch_size, fps, hardware, source, task, speedup.
 
     Runs of the ``speed`` experiment are used if there are any, otherwise (if ``fallback``) every run
-    with an FPS (each run's FPS is the median over training episodes once updates started). Benchmark rows are added as
-    they are; ``speedup`` is the benchmark's code path ("plain", or e.g. "amp", "compile", shown in the
-    source) and "plain" for runs.
+    with an FPS (each run's FPS is the median over training episodes once updates started), each with the speed-up
+    path it trained with (the runs table's ``speedup``). Each online bench file gives one row per agent, batch size and
+    path it times, at the one FPS `repro plan` prices a run with (repro/bench/results.py ``rate``: the end-to-end
+    entry where there is one, else update-bound); ``source`` names the file, the FPS's kind and a path other than
+    plain.
     """
     rows: list[dict[str, Any]] = []
     runs = results.runs
@@ -39,42 +42,23 @@ def speed_measurements(results: Results, experiments: tuple[str, ...] = ("speed"
         chosen = runs[runs["experiment"].isin(experiments)]
         if chosen.empty and fallback:
             chosen = runs
-        for r in chosen.itertuples(index=False):
-            rows.append(
-                {
-                    "method": r.method,
-                    "batch_size": r.batch_size,
-                    "fps": float(r.fps),
-                    "hardware": hardware_label(r.device, r.cpu, r.host),
-                    "source": f"runs ({r.experiment})",
-                    "task": r.task,
-                    "speedup": "plain",
-                }
-            )
+        for r in chosen.to_dict("records"):
+            path = str(r.get("speedup") or "plain")
+            source = f"runs ({r['experiment']})"
+            rows.append({"method": r["method"], "batch_size": r["batch_size"], "fps": float(r["fps"]),
+                         "hardware": hardware_label(r.get("device"), r.get("cpu"), r.get("host")),
+                         "source": source if path == "plain" else f"{source} [{path}]", "task": r["task"],
+                         "speedup": path})
     for bench in results.benches:
-        hw = bench.get("hardware")
-        hw_text = (
-            hw
-            if isinstance(hw, str)
-            else (hardware_label(hw.get("device"), hw.get("cpu")) if isinstance(hw, dict) else "unknown hardware")
-        )
-        for res in bench.get("results", []):
-            if not isinstance(res, dict) or "algo" not in res:
+        if bench.kind != ONLINE:
+            continue
+        hw = bench.hardware or hardware_label(bench.device)
+        for agent, batch, path in settings(bench):
+            found = rate(bench, agent, batch, path)
+            if found is None:
                 continue
-            fps = res.get("fps_estimate", res.get("fps"))
-            if fps is None:
-                continue
-            speedup = str(res.get("speedup") or "plain")
-            source = "bench " + str(bench.get("path", "")).rsplit("/", 1)[-1]
-            rows.append(
-                {
-                    "method": algo_label(res["algo"]),
-                    "batch_size": res.get("batch_size"),
-                    "fps": float(fps),
-                    "hardware": hw_text,
-                    "source": source if speedup == "plain" else f"{source} [{speedup}]",
-                    "task": res.get("task"),
-                    "speedup": speedup,
-                }
-            )
+            source = f"bench {bench.name} ({found.source})"
+            rows.append({"method": algo_label(agent), "batch_size": batch, "fps": found.fps, "hardware": hw,
+                         "source": source if path == "plain" else f"{source} [{path}]", "task": None,
+                         "speedup": path})
     return pd.DataFrame(rows, columns=["method", "batch_size", "fps", "hardware", "source", "task", "speedup"])

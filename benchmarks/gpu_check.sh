@@ -88,8 +88,8 @@ pack_sweep() {  # pack_sweep N: write a sweep of N runs (seeds), to be run all a
 
 # in order of what matters most, as a step that finds the budget spent is skipped: the update and loop rates, the
 # CUDA graph's and the fast path's agreement, packing, then the loop timed as it trains and the compile path
-step bench 150 "${REPRO[@]}" bench --device "$DEVICE" --amp --fast "${BATCH[@]}" "${UPD[@]}" --results "$WORK/r"
-step e2e 260 "${REPRO[@]}" bench --e2e --device "$DEVICE" --fast "${E2E[@]}" --results "$WORK/r"
+step bench 150 "${REPRO[@]}" bench update --device "$DEVICE" --amp --fast "${BATCH[@]}" "${UPD[@]}" --results "$WORK/r"
+step e2e 260 "${REPRO[@]}" bench e2e --device "$DEVICE" --fast "${E2E[@]}" --results "$WORK/r"
 cp "$WORK"/r/bench/bench-*.json "$OUT/bench.json" 2>/dev/null
 if [ "$DEVICE" = cpu ]; then
   echo '{"step": "graphs", "status": "skipped", "why": "CUDA graphs need a CUDA device"}' >>"$STEPS"
@@ -104,12 +104,12 @@ for n in 2 4; do
   step "pack$n" $((50 + 15 * n)) "${REPRO[@]}" sweep "$WORK/pack$n.yaml" --gpus 0 --runs-per-gpu "$n" \
     --results "$WORK/pack"
 done
-step e2e_overlap 200 "${REPRO[@]}" bench --e2e --overlap --device "$DEVICE" --fast "${E2E[@]}" --results "$WORK/r"
+step e2e_overlap 200 "${REPRO[@]}" bench e2e --overlap --device "$DEVICE" --fast "${E2E[@]}" --results "$WORK/r"
 cp "$WORK"/r/bench/bench-*.json "$OUT/bench.json" 2>/dev/null
 if [ "$QUICK" = 1 ]; then
   echo '{"step": "compile", "status": "skipped", "why": "GPU_CHECK_QUICK=1"}' >>"$STEPS"
 else
-  step compile 240 "${REPRO[@]}" bench --device "$DEVICE" --compile "${BATCH[@]}" "${UPD[@]}" --results "$WORK/c"
+  step compile 240 "${REPRO[@]}" bench update --device "$DEVICE" --compile "${BATCH[@]}" "${UPD[@]}" --results "$WORK/c"
   cp "$WORK"/c/bench/bench-*.json "$OUT/bench-compile.json" 2>/dev/null
 fi
 

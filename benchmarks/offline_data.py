@@ -1,7 +1,7 @@
 """Benchmark (not a test): offline dataset load time, memory and sampling batches/s against the online buffer.
 
 Usage: `python benchmarks/offline_data.py [--transitions N] [--batch B] [--sample-batches I]`, the same as
-`repro bench --offline-data ...` (docs/performance.md). Prints only ratios measured in this one run.
+`repro bench data ...` (docs/performance.md). Prints only ratios measured in this one run.
 """
 
 import sys
@@ -9,4 +9,4 @@ import sys
 from repro_app.cli import app
 
 if __name__ == "__main__":
-    app(["bench", "--offline-data", *sys.argv[1:]])
+    app(["bench", "data", *sys.argv[1:]])

@@ -1,5 +1,6 @@
-"""``repro plan``: what sweeps cost on your hardware (repro_app/plan.py) and each claim's statistical power if the
-paper's numbers are the truth (analysis/power.py). Bad input: one line, exit 2. Documented in docs/plan.md."""
+"""``repro plan``: what sweeps cost on your hardware (the cost model repro/launch/cost.py, its tables
+repro_app/plan.py) and each claim's statistical power if the paper's numbers are the truth (analysis/power.py). Bad
+input: one line, exit 2. Documented in docs/plan.md."""
 
 from __future__ import annotations
 
@@ -41,7 +42,14 @@ def plan_cmd(
                              "plan_power*.{csv,md,tex}."),
     bench_file: Optional[Path] = typer.Option(None, "--bench", help="A `repro bench` JSON (default: the newest "
                                               "RESULTS/bench/bench-*-DEVICE.json)."),
-    device: str = typer.Option("cuda", "--device", help="The device the bench timed: cuda or cpu."),
+    device: Optional[str] = typer.Option(None, "--device", help="The device the bench timed: cuda or cpu (default: "
+                                         "the device of the newest bench file; the notes say which)."),
+    tasks: Optional[str] = typer.Option(None, "--tasks", help="As `repro sweep`: comma-separated tasks instead of "
+                                        "the sweep's."),
+    seeds_n: Optional[int] = typer.Option(None, "--seeds", help="As `repro sweep`: seeds 1..N."),
+    frames: Optional[int] = typer.Option(None, "--frames", help="As `repro sweep`: the frame budget of every run."),
+    sets: Optional[list[str]] = typer.Option(None, "--set", help="As `repro sweep`: a config override key=value "
+                                             "(repeatable), e.g. --set agent.fast=true."),
     devices: int = typer.Option(1, "--devices", help="Devices the runs share (the local wall-clock)."),
     cluster_config: Optional[Path] = typer.Option(None, "--cluster-config", help="SLURM launcher YAML (default: "
                                                   "$REPRO_SLURM_CONFIG or ~/.config/taco-repro/slurm.yaml)."),
@@ -55,8 +63,8 @@ def plan_cmd(
 ) -> None:
     """Plan a reproduction before paying for it: each sweep's runs, frames, memory, device-hours and wall-clock
     on your hardware (from your `repro bench` JSON); with --claims each claim's power and the seeds it needs."""
+    from repro.launch.cost import PlanError
     from repro.launch.spec import SweepError
-    from repro_app.plan import PlanError
 
     if not sweeps and not all_ and not claims:
         fail("name sweeps (e.g. 'repro plan main'), or pass --all or --claims")
@@ -64,12 +72,19 @@ def plan_cmd(
             device_memory_gb is not None and device_memory_gb <= 0):
         fail("--devices must be >= 1, --sims >= 10, --max-seeds >= 2, --reps and --min-seeds >= 1, "
               "--device-memory-gb > 0")
-    if device not in ("cuda", "cpu"):
+    if device is not None and device not in ("cuda", "cpu"):
         fail(f"--device must be cuda or cpu (got {device!r})")
+    if (seeds_n is not None and seeds_n < 1) or (frames is not None and frames < 1):
+        fail("--seeds and --frames must be >= 1")
+    if (tasks or seeds_n or frames or sets) and not (sweeps or all_):
+        fail("--tasks, --seeds, --frames and --set narrow the sweeps named: name sweeps or pass --all")
     try:
         if sweeps or all_:
+            from repro.launch import spec as specs
+
+            selection = specs.selection(tasks, seeds_n, frames, sets, results.expanduser().absolute())
             _plan_sweeps(sweeps or [], all_, results, out, bench_file, device, devices, cluster_config,
-                         device_memory_gb)
+                         device_memory_gb, selection)
         if claims:
             _plan_claims(results, out, bench_file, device, sims, max_seeds, seed, reps, min_seeds)
     except (PlanError, SweepError) as exc:
@@ -83,16 +98,17 @@ def _cluster(cluster_config: Optional[Path]):
     return load_cluster_config(path), (f"launcher config {path}" if path else "no launcher config: SLURM defaults")
 
 
-def _plan_sweeps(names: list[str], all_: bool, results: Path, out: Path, bench_file: Optional[Path], device: str,
-                 devices: int, cluster_config: Optional[Path], device_memory_gb: Optional[float]) -> None:
+def _plan_sweeps(names: list[str], all_: bool, results: Path, out: Path, bench_file: Optional[Path],
+                 device: Optional[str], devices: int, cluster_config: Optional[Path], device_memory_gb: Optional[float],
+                 selection) -> None:
     from repro.launch import spec as specs
-    from repro_app.plan import GB, find_bench, plan_notes, plan_sweeps, totals, write_plan
+    from repro.launch.cost import GB, find_bench, plan_sweeps, totals
+    from repro_app.plan import plan_notes, write_plan
 
     bench = find_bench(results, device, bench_file)  # PlanError (one line naming `repro bench`) without one
     cluster, where = _cluster(cluster_config)
     chosen = specs.sweep_names() if all_ else names
-    root = results.expanduser().absolute()
-    costs = plan_sweeps(chosen, bench, results_root=root)
+    costs = plan_sweeps(chosen, bench, selection)
     slots, limit = cluster.array_parallelism, cluster.time_min
     rows = [totals(n, [c for c in costs if c.sweep == specs.load(n).name], devices, slots, limit) for n in chosen]
     rows.append(totals("Total", costs, devices, slots, limit))
@@ -105,13 +121,14 @@ def _plan_sweeps(names: list[str], all_: bool, results: Path, out: Path, bench_f
     typer.echo(f"Wrote {', '.join(str(p) for p in table.files)}")
 
 
-def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: str, sims: int, max_seeds: int,
+def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: Optional[str], sims: int, max_seeds: int,
                  seed: int, reps: int, min_seeds: int) -> None:
     from analysis.claims import evaluate_claims
     from analysis.power import power_rows, write_power
     from repro.launch import spec as specs
+    from repro.launch.cost import PlanError, find_bench, plan_sweeps
     from repro_app.analysis_cli import make_context
-    from repro_app.plan import PlanError, find_bench, plan_sweeps, seeds_cost
+    from repro_app.plan import seeds_cost
 
     ctx = make_context(results, out, 1_000_000, reps, seed, min_seeds)
     conditioned = not ctx.no_runs

@@ -14,7 +14,6 @@ from repro.launch.cli import (
     LaunchOptions,
     default_results_root,
     launch_sweep,
-    with_results_root,
 )
 from repro.launch.spec import Selection, SweepError
 from repro.runs.console import console, fail
@@ -76,7 +75,7 @@ def verify_cmd(
 
     try:
         spec = specs.load(SWEEP)
-        root_sets = with_results_root(profile_wins(sets), results_root)
+        root_sets = specs.selection(None, None, None, profile_wins(sets), results_root).sets
     except SweepError as exc:
         fail(str(exc))
     say = console().print

@@ -15,7 +15,8 @@ from helpers import bench_app
 from repro.bench.cli import same_run_ratios
 from repro.bench.data import episode_lengths, synthetic_episode
 from repro.bench.offline_update import available, run_offline_bench
-from repro.config.compose import offline_agents
+from repro.bench.online_update import build_agent
+from repro.config.compose import offline_agents, online_agents
 
 
 def _app() -> typer.Typer:
@@ -44,7 +45,7 @@ def test_bench_prints_same_run_ratios_and_no_constant(tmp_path):
     assert ratio_lines and all("measured in this run" in ln for ln in ratio_lines if " / " in ln)
     assert "upstream" not in out.lower() and "paper" not in out.lower()
     report = json.loads(next((tmp_path / "bench").glob("bench-*.json")).read_text())
-    secs = {(r["algo"], r["batch_size"]): r["update_seconds"] for r in report["results"] if r["speedup"] == "plain"}
+    secs = {(r["agent"], r["batch_size"]): r["update_seconds"] for r in report["results"] if r["speedup"] == "plain"}
     assert report["ratios"] == same_run_ratios(secs)
     assert all(r["warmup"] == 0 and r["repeats"] == 2 and len(r["seconds_each"]) == 2 for r in report["results"])
     # --fast: timed beside the plain path of the same batch (alternated), as a ratio to it
@@ -54,6 +55,27 @@ def test_bench_prints_same_run_ratios_and_no_constant(tmp_path):
         assert row["speedup_vs_plain"] == round(secs[("drqv2", b)] / row["update_seconds"], 3)
         assert f"drqv2 batch     {b} fast: " in out and "x the plain path (measured in this run" in out
     assert not any("upstream" in key for r in report["results"] for key in r)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_every_online_agent_is_timed_on_a_batch_drawn_as_training_draws_it(tmp_path):
+    """Every registered online agent, built-in or a plugin's (the offline ones: the --offline test below), is timed by
+    `repro bench` at a tiny size, on a batch sampled from a ReplayBuffer with what its objectives ask for: a batch
+    made by hand had no future_obs_seq and `repro bench --algo spr` failed."""
+    from repro.bench.online_update import replay_batch
+
+    agents = online_agents()
+    assert {"taco", "drqv2", "spr", "curl", "atc", "driml"} <= set(agents)
+    args = ["bench", *(x for a in agents for x in ("--algo", a)), "--batch", "2", "--repeats", "1", "--warmup", "0",
+            "--results", str(tmp_path)]
+    result = CliRunner().invoke(_app(), args)
+    assert result.exit_code == 0, result.output
+    report = json.loads(next((tmp_path / "bench").glob("bench-*.json")).read_text())
+    assert [r["agent"] for r in report["results"]] == list(agents)
+    assert all(r["update_seconds"] > 0 and r["frames_per_update"] == 4 for r in report["results"])
+    agent, rc = build_agent("spr", 2, "cheetah_run", "cpu", ["profile=tiny"])
+    batch = replay_batch(agent, rc, 2, "cpu")
+    assert agent.sample_options == {"future_seq": True} and batch["future_obs_seq"].shape[:2] == (2, rc.agent.K)
 
 
 @pytest.mark.parametrize("args, needle", [(["--batch", "0"], "--batch must be >= 1"),
@@ -226,3 +248,30 @@ def test_roofline_counts_the_updates_flops_and_names_the_kernels(tmp_path):
 def test_roofline_with_another_mode_is_one_line(tmp_path):
     result = CliRunner().invoke(_app(), ["bench", "--roofline", "--e2e", "--results", str(tmp_path)])
     assert result.exit_code == 2 and "--roofline times the online update" in result.output
+
+
+# ------------------------------------------------------------------------------------------ subcommands
+def test_each_mode_is_a_subcommand_and_the_old_flags_point_to_it(tmp_path):
+    data = ["--transitions", "300", "--episode-length", "100", "--batch", "8", "--sample-batches", "2"]
+    new = CliRunner().invoke(_app(), ["bench", "data", *data, "--results", str(tmp_path / "new")])
+    assert new.exit_code == 0, new.output
+    assert "note:" not in new.output
+    old = CliRunner().invoke(_app(), ["bench", "--offline-data", *data, "--results", str(tmp_path / "old")])
+    assert old.exit_code == 0, old.output
+    last = old.output.strip().splitlines()[-1]
+    assert last == (f"note: the new form of this command is `repro bench data --transitions 300 --episode-length 100 "
+                    f"--sample-batches 2 --batch 8 --results {tmp_path / 'old'}` (`repro bench --help`)")
+    for root in ("new", "old"):
+        written = json.loads(next((tmp_path / root / "bench").glob("bench-offline-data-*.json")).read_text())
+        assert written["kind"] == "data" and written["transitions"] == 300
+    # each subcommand has its own options and help; bad input stays one line
+    helps = CliRunner().invoke(_app(), ["bench", "--help"]).output
+    assert all(sub in helps for sub in ("update", "e2e", "offline", "data", "roofline"))
+    assert "--overlap" in CliRunner().invoke(_app(), ["bench", "e2e", "--help"]).output
+    assert "--overlap" not in CliRunner().invoke(_app(), ["bench", "update", "--help"]).output
+    for args, needle in ((["--offline-data", "--frames", "5"], "--frames is not an option of `repro bench data`"),
+                         (["--algo", "taco", "update"], "options go after the subcommand: `repro bench update --algo"),
+                         (["update", "--batch", "0"], "--batch must be >= 1"),
+                         (["e2e", "--task", "nope"], "unknown task 'nope'")):
+        bad = CliRunner().invoke(_app(), ["bench", *args])
+        assert bad.exit_code == 2 and len(bad.output.strip().splitlines()) == 1 and needle in bad.output, bad.output

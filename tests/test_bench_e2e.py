@@ -10,8 +10,8 @@ import typer
 from typer.testing import CliRunner
 
 from helpers import bench_app
+from repro.bench import results as bench_results
 from repro.bench.e2e import PHASES
-from repro_app.plan import parse_bench
 
 # The phases are timed one by one and the wall clock around the whole loop: what they leave out is the loop's own
 # bookkeeping (a few microseconds a step), so their sum is within this fraction of the wall clock.
@@ -25,14 +25,15 @@ def _app() -> typer.Typer:
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_e2e_json_has_every_phase_summing_to_the_wall_clock(tmp_path):
     bench_dir = tmp_path / "bench"
-    args = ["bench", "--e2e", "--algo", "drqv2", "--amp", "--frames", "100", "--seed-frames", "20",
+    args = ["bench", "e2e", "--algo", "drqv2", "--amp", "--frames", "100", "--seed-frames", "20",
             "--results", str(tmp_path)]
     result = CliRunner().invoke(_app(), args)
     assert result.exit_code == 0, result.output
     path = next(p for p in bench_dir.glob("bench-*-cpu.json"))
     report = json.loads(path.read_text())
     entries = report["e2e"]
-    assert [(e["algo"], e["speedup"], e["profile"], e["batch_size"]) for e in entries] == [
+    assert report["kind"] == "online" and report["format"] == bench_results.FORMAT
+    assert [(e["agent"], e["speedup"], e["profile"], e["batch_size"]) for e in entries] == [
         ("drqv2", "plain", "tiny", 8), ("drqv2", "amp", "tiny", 8)]
     for e in entries:
         assert set(e["phases"]) == set(PHASES)
@@ -44,7 +45,8 @@ def test_e2e_json_has_every_phase_summing_to_the_wall_clock(tmp_path):
         assert e["fps"] == pytest.approx(e["frames"] / e["seconds"], rel=1e-3)
     assert all(e["phase_sync"] for e in entries)
     # a second run, timed as it trains (--overlap: phases not synchronized), keeps the entries timed phase by phase
-    # and `results`; it replaces only an entry of the same algo, batch, profile, path and timing
+    # and `results` (here an update entry as an earlier version wrote it); it replaces only an entry of the same agent,
+    # batch, profile, path and timing
     report["results"] = [{"algo": "drqv2", "batch_size": 8, "speedup": "plain", "update_seconds": 0.5}]
     stale = {**entries[0], "phase_sync": False, "seconds": 99.0}  # an earlier --overlap entry: replaced
     path.write_text(json.dumps({**report, "e2e": [*entries, stale]}))
@@ -54,10 +56,15 @@ def test_e2e_json_has_every_phase_summing_to_the_wall_clock(tmp_path):
     again = json.loads(path.read_text())
     assert [(e["speedup"], e["phase_sync"]) for e in again["e2e"]] == [("plain", True), ("amp", True),
                                                                       ("plain", False)]
-    assert again["results"] == report["results"] and again["e2e"][:2] == entries and again["e2e"][2]["seconds"] != 99.0
+    bench = bench_results.read(path)
+    (update,) = bench.updates
+    assert (update.agent, update.batch_size, update.path, update.update_seconds) == ("drqv2", 8, "plain", 0.5)
+    assert again["e2e"][:2] == entries and again["e2e"][2]["seconds"] != 99.0
     assert "as it trains" in result.output and set(again["e2e"][2]["phases"]) == set(PHASES)
-    bench = parse_bench(again, path, "cpu")  # `repro plan` takes the loop as it trains where there is one
-    assert bench.e2e[("drqv2", 8, "plain")] == again["e2e"][2] and bench.e2e[("drqv2", 8, "amp")] == entries[1]
+    assert "the new form of this command is `repro bench e2e --algo drqv2 --frames 20" in result.output  # old flags
+    # the one FPS (`repro plan`, T4/T5) takes the loop as it trains where there is one
+    assert bench_results.rate(bench, "drqv2", 8, "plain").fps == pytest.approx(again["e2e"][2]["fps"], rel=1e-3)
+    assert bench_results.rate(bench, "drqv2", 8, "amp").fps == pytest.approx(entries[1]["fps"], rel=1e-3)
 
 
 @pytest.mark.parametrize("args, needle", [(["--frames", "0"], "--frames must be >= 1"),

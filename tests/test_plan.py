@@ -1,5 +1,5 @@
 """`repro plan`: the claims' power by simulation through their own rules (analysis/power.py) and the sweeps' cost
-from a bench file (repro_app/plan.py)."""
+from a bench file (repro/launch/cost.py, its tables repro_app/plan.py)."""
 
 from __future__ import annotations
 
@@ -20,8 +20,8 @@ from analysis import power
 from analysis.claim_budget import ClaimBudget
 from analysis.context import Context
 from analysis.load import Results
+from repro.launch.cost import RunBudget, find_bench, frames_to_train, makespan, plan_sweeps, totals
 from repro_app.cli import app
-from repro_app.plan import RunBudget, find_bench, frames_to_train, makespan, plan_sweeps, totals
 
 SPEC = ClaimBudget("toy", "frames", 1_000_000, 1, 6, ("main",), "", "", "test")
 
@@ -152,7 +152,7 @@ def test_plan_without_a_bench_file_is_one_line_and_exit_2(tmp_path):
     res = CliRunner().invoke(app, ["plan", "tiny", "--results", str(tmp_path), "--out", str(tmp_path / "out")])
     assert res.exit_code == 2
     lines = res.output.strip().splitlines()
-    assert len(lines) == 1 and "repro bench --device cuda" in lines[0] and "Traceback" not in res.output
+    assert len(lines) == 1 and "repro bench update --device cuda" in lines[0] and "Traceback" not in res.output
     for args in (["plan"], ["plan", "nosuchsweep"], ["plan", "tiny", "--devices", "0"]):
         bad = CliRunner().invoke(app, [*args, "--results", str(tmp_path)])
         assert bad.exit_code == 2 and len(bad.output.strip().splitlines()) == 1, (args, bad.output)
@@ -191,3 +191,100 @@ def test_power_given_the_runs_done_keeps_their_values(tmp_path):
     power.condition_row(ctx, claim, row, sims=200, max_seeds=10)
     assert row.done_seeds == 2 and row.now is not None
     assert row.now.supported == 1.0 and row.more_80 == 1  # TACO far ahead in the seeds done: one more seed decides
+
+
+# ---------------------------------------------------------------- one FPS, every path, the grid of `repro sweep`
+def _bench_file(folder: Path, device: str, results: list[dict], e2e: list[dict] | None = None) -> Path:
+    from repro.bench.results import FORMAT
+
+    path = folder / "bench" / f"bench-host-{device}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"kind": "online", "format": FORMAT, "hardware": f"Test {device}", "device": device,
+                                "results": results, "e2e": e2e or []}))
+    return path
+
+
+def _upd(agent: str, path: str, seconds: float, batch: int = 8) -> dict:
+    return {"agent": agent, "batch_size": batch, "speedup": path, "update_seconds": seconds, "frames_per_update": 4}
+
+
+def test_a_fast_run_is_priced_from_the_fast_entry(tmp_path):
+    """`repro plan tiny --set agent.fast=true`: each run's device-hours are its frames over the fast entry's FPS (a
+    plan that priced it from the plain entry, as `_speedup` did, is 4x off here)."""
+    from repro.launch.spec import Selection
+
+    _bench_file(tmp_path, "cpu", [_upd(a, p, s) for a in ("taco", "drqv2") for p, s in (("plain", 2.0),
+                                                                                      ("fast", 0.5))])
+    bench = find_bench(tmp_path)
+    assert bench.device == "cpu" and "newest bench file" in bench.chosen
+    fast = plan_sweeps(["tiny"], bench, Selection(sets=("agent.fast=true",)), results_root=tmp_path, memory=False)
+    assert {c.path for c in fast} == {"fast"} and {c.fps_source for c in fast} == {"update-bound"}
+    frames = sum(c.frames for c in fast)
+    assert totals("tiny", fast, 1, 1).hours == pytest.approx(frames / (4 / 0.5) / 3600)
+    plain = plan_sweeps(["tiny"], bench, results_root=tmp_path, memory=False)
+    assert {c.path for c in plain} == {"plain"}
+    assert totals("tiny", plain, 1, 1).hours == pytest.approx(4 * totals("tiny", fast, 1, 1).hours)
+    # the same through the command line: the grid options of `repro sweep`, the device of the newest bench file
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["plan", "tiny", "--set", "agent.fast=true", "--seeds", "1", "--tasks",
+                                   "cheetah_run", "--results", str(tmp_path), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    row = pd.read_csv(out / "plan.csv").iloc[0]
+    one = [c for c in fast if c.task == "cheetah_run" and c.run_dir.name == "seed_1"]
+    assert row["runs"] == len(one) == 2 and row["hours"] == pytest.approx(sum(c.frames for c in one) / 8 / 3600)
+    assert "device cpu: the device of the newest bench file" in " ".join(res.output.split())
+
+
+def test_a_run_the_bench_does_not_time_names_the_command_that_would(tmp_path):
+    _bench_file(tmp_path, "cuda", [_upd("taco", "plain", 1.0)])
+    costs = plan_sweeps(["tiny"], find_bench(tmp_path, "cuda"), results_root=tmp_path, memory=False)
+    missing = {c.missing for c in costs if c.missing}
+    assert missing == {"repro bench update --device cuda --algo drqv2 --batch 8"}
+    amp = plan_sweeps(["tiny"], find_bench(tmp_path, "cuda"), specs_selection(("agent.amp=true",)),
+                      results_root=tmp_path, memory=False)
+    assert {c.missing for c in amp} == {f"repro bench update --device cuda --algo {a} --batch 8 --amp"
+                                        for a in ("taco", "drqv2")}
+
+
+def specs_selection(sets: tuple[str, ...]):
+    from repro.launch.spec import Selection
+
+    return Selection(sets=sets)
+
+
+def test_a_plugin_online_agent_is_priced(tmp_path):
+    """An online agent of a plugin (tests/plugin_example's toy_utd) is priced like a built-in one: `repro bench
+    --algo` times it, so the plan reads its entry (there was a hand list of the agents `repro bench` times)."""
+    from repro.config.compose import online_agents
+
+    if "toy_utd" not in online_agents():
+        pytest.skip("the example plugin is not installed (pip install -e tests/plugin_example)")
+    sweep = tmp_path / "toy.yaml"
+    sweep.write_text("name: toy\ndescription: a plugin agent\nartifacts: []\nexperiment: toy\ntasks: [cheetah_run]\n"
+                     "agents: [toy_utd]\nseeds: 1\nframes: 400\neval: {every_frames: 200, episodes: 1}\n"
+                     "common: [profile=tiny]\nvariants: {base: []}\n")
+    _bench_file(tmp_path, "cpu", [_upd("toy_utd", "plain", 0.25)])
+    (cost,) = plan_sweeps([str(sweep)], find_bench(tmp_path, "cpu"), results_root=tmp_path, memory=False)
+    assert cost.algo == "toy_utd" and not cost.missing
+    assert cost.fps == pytest.approx(cost.frames_per_update / 0.25)
+
+
+def test_t4_and_plan_read_one_fps_from_one_bench_file(tmp_path):
+    """The speed tables (T4/T5, the claim `speed`, `repro report`) and `repro plan` give the same FPS for an agent,
+    batch size and path of one bench file: the end-to-end entry where there is one, else update-bound."""
+    from analysis.load import load_results
+    from analysis.speed import speed_measurements
+
+    _bench_file(tmp_path, "cpu", [_upd(a, p, s) for a in ("taco", "drqv2") for p, s in (("plain", 2.0),
+                                                                                      ("fast", 0.5))],
+                [{"agent": "taco", "batch_size": 8, "speedup": "plain", "frames": 100, "seconds": 40.0}])
+    meas = speed_measurements(load_results(tmp_path))
+    table = {(m, p): f for m, p, f in zip(meas["method"], meas["speedup"], meas["fps"])}
+    assert table == {("TACO", "plain"): 2.5, ("TACO", "fast"): 8.0, ("DrQ-v2", "plain"): 2.0,
+                     ("DrQ-v2", "fast"): 8.0}
+    assert all(("[fast]" in s) == (p == "fast") for s, p in zip(meas["source"], meas["speedup"]))  # labelled
+    bench = find_bench(tmp_path, "cpu")
+    for sets in ((), ("agent.fast=true",)):
+        for c in plan_sweeps(["tiny"], bench, specs_selection(sets), results_root=tmp_path, memory=False):
+            assert c.frames_per_update == 4  # the tiny runs' own frames per update, as the bench's config
+            assert c.fps == pytest.approx(table[({"taco": "TACO", "drqv2": "DrQ-v2"}[c.algo], c.path)])

@@ -159,7 +159,7 @@ def test_the_update_bench_times_the_online_plugin_learner(tmp_path):
     assert result.exit_code == 0, result.output
     assert "toy_utd batch     2: " in result.output and "s/update" in result.output
     report = yaml.safe_load(next((tmp_path / "bench").glob("bench-*-cpu.json")).read_text())
-    assert [(r["algo"], r["batch_size"]) for r in report["results"]] == [("toy_utd", 2)]
+    assert [(r["agent"], r["batch_size"]) for r in report["results"]] == [("toy_utd", 2)]
 
 
 def test_the_light_agent_file_reading_agrees_with_hydra():

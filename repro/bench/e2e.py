@@ -1,19 +1,21 @@
-"""`repro bench --e2e`: a short real training loop, timed per phase (docs/performance.md).
+"""`repro bench --e2e`: a short real training run, timed per phase (docs/performance.md).
 
-The loop is the online loop's (repro/train/online_loop.py) without evaluation, logging, checkpoints and the episode
-files: the environment, agent and replay are built as a run builds them (repro/train/build.py, api.py), the seed
-frames are stepped untimed, then ``frames`` frames are timed phase by phase. The phases:
+The run is built as ``repro train`` builds one (repro/train/build.py: environment, agent, replay) and trained by the
+online loop itself, :class:`repro.train.online_loop.OnlineLoop`, without evaluation or checkpoints (its logs and
+episode files go to a temporary folder): no copy of the loop to drift from what training does. The loop is
+instrumented in place (:func:`instrument`, as tests/helpers.watch_loop watches one): the seed frames run untimed,
+then ``frames`` frames are timed phase by phase. The phases:
 
 * ``act``: ``agent.act`` (one observation to one action).
 * ``replay_sample``: ``buffer.sample`` of one batch.
 * ``update``: ``agent.update`` on that batch.
 * ``env_step``: ``env.step`` and the episode resets, less the rendering inside them.
 * ``render``: the observation camera's render (the suite env's ``_render``, timed in place).
-* ``other``: ``buffer.add`` and the episode bookkeeping (``end_episode``/``start_episode``).
+* ``other``: ``buffer.add``, ``start_episode``/``end_episode``, the episode file and the train.csv row.
 
 On CUDA the device is synchronized before each clock reading (here only: training never waits), so a phase owns
 the device work it queued. The phases are timed one by one and the loop's wall clock separately; their sum falls
-short of the wall clock only by the loop's own overhead (tests/test_bench.py bounds it).
+short of the wall clock only by the loop's own overhead (tests/test_bench_e2e.py bounds it).
 
 ``phase_sync=False`` (``--e2e --overlap``) times the loop as it trains: the phases' clocks no longer wait for the device
 (an update's phase is then the time to queue it, and its kernels run on while the environment steps and renders),
@@ -23,7 +25,7 @@ environment with the queued update gains (nothing on the CPU, where every kernel
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -84,75 +86,102 @@ def _time_render(env: Any, timer: PhaseTimer) -> list[float]:
     return spent
 
 
+def _timed(timer: PhaseTimer, name: str, fn: Callable[..., Any], calls: list[int] | None = None) -> Callable[..., Any]:
+    """``fn`` charged to phase ``name`` (and counted in ``calls`` while the timer is on)."""
+
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        if calls is not None and timer.on:
+            calls[0] += 1
+        with timer.phase(name):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+def instrument(loop: Any, timer: PhaseTimer) -> list[int]:
+    """Time the phases of one :class:`repro.train.online_loop.OnlineLoop` in place, on this loop's objects only (as
+    tests/helpers.watch_loop watches a loop): its agent's ``act`` and ``update``, its replay's ``sample``, its
+    environment's ``step`` and ``reset``, and the bookkeeping (``buffer.add``, ``start_episode``, ``end_episode``, the
+    episode file, the train.csv row). Returns the list whose one item counts the timed updates."""
+    updates = [0]
+    loop.agent.act = _timed(timer, "act", loop.agent.act)
+    loop.agent.update = _timed(timer, "update", loop.agent.update, updates)
+    loop.buffer.sample = _timed(timer, "replay_sample", loop.buffer.sample)
+    loop.env.step = _timed(timer, "env_step", loop.env.step)
+    loop.env.reset = _timed(timer, "env_step", loop.env.reset)
+    for name in ("add", "start_episode", "end_episode"):
+        setattr(loop.buffer, name, _timed(timer, "other", getattr(loop.buffer, name)))
+    loop.episodes.save = _timed(timer, "other", loop.episodes.save)
+    loop.logger.log_train = _timed(timer, "other", loop.logger.log_train)
+    return updates
+
+
 def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plain", frames: int = 100,
             task: str = "cheetah_run", warmup: int = 1, seed_frames: int | None = None,
             phase_sync: bool = True) -> dict[str, Any]:
     """Build a run of ``algo`` on ``task`` (the tiny profile when ``batch_size`` is None, else the agent's own
-    settings at that batch), step its seed frames untimed, run ``warmup`` untimed updates, then time ``frames``
-    frames of training (``phase_sync``: see the module docstring). Returns the e2e entry (docs/plan.md, "The bench
-    JSON `repro plan` reads")."""
+    settings at that batch) as ``repro train`` builds it, and train it with the online loop itself
+    (:class:`repro.train.online_loop.OnlineLoop`, instrumented by :func:`instrument`; no evaluation, no checkpoint):
+    its seed frames untimed, ``warmup`` untimed updates, then ``frames`` frames timed (``phase_sync``: see the module
+    docstring). Returns the e2e entry (docs/plan.md, "The bench files `repro plan` reads")."""
+    import tempfile
+    from pathlib import Path
+
     import numpy as np
     import torch
 
     from repro.config.compose import compose, typed
+    from repro.data.episodes import EpisodeStore
     from repro.data.replay import ReplayBuffer
     from repro.learners import OnlineLearner
+    from repro.runs.logger import RunLogger
     from repro.runs.rundir import _cpu_model
     from repro.train.build import build_agent, build_env
-    from repro.train.common import episode_seed
+    from repro.train.online_loop import OnlineLoop
 
     overrides = [f"agent={algo}", f"task={task}", *SPEEDUP_FLAGS[speedup]]
     overrides += [f"profile={TINY}"] if batch_size is None else [f"agent.batch_size={batch_size}"]
     rc = typed(compose(overrides))
+    repeat = rc.env.action_repeat
+    seed_steps = (rc.train.seed_frames if seed_frames is None else seed_frames) // repeat
+    seed_steps = max(seed_steps, rc.agent.nstep + rc.agent.K + 1)  # enough steps ahead to sample from
+    timed_steps = max(1, frames // repeat)
+    # the loop trains to train.frames after train.seed_frames; no evaluation, no checkpoint
+    rc = typed(compose([*overrides, f"train.seed_frames={seed_steps * repeat}",
+                        f"train.frames={(seed_steps + timed_steps) * repeat}", "train.eval_episodes=0",
+                        "train.checkpoint_every_episodes=1000000000", "train.save_frames=false"]))
     cuda = device.startswith("cuda")
     timer = PhaseTimer(device if phase_sync else "cpu")  # "cpu": the phases' clocks do not wait for the device
     env = build_env(rc, rc.seed)
     try:
-        spec = env.spec
-        agent = build_agent(rc, spec.obs_shape, spec.action_dim, device)
-        assert isinstance(agent, OnlineLearner)
-        buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
-                              rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device="cpu",
-                              sample_device=device)
-        renders = _time_render(env, timer)
-        repeat, every = rc.env.action_repeat, rc.train.update_every_steps
-        seed_steps = (rc.train.seed_frames if seed_frames is None else seed_frames) // repeat
-        seed_steps = max(seed_steps, rc.agent.nstep + rc.agent.K + 1)  # enough steps ahead to sample from
-        timed_steps = max(1, frames // repeat)
-        episode = 0
-        ts = env.reset(seed=episode_seed(rc.seed, 0, episode))
-        buffer.start_episode(ts.observation[-3:])
-        updates, wall0 = 0, 0.0
-        if cuda:
-            torch.cuda.reset_peak_memory_stats()
-        for step in range(seed_steps + timed_steps):
-            if step == seed_steps:
+        with tempfile.TemporaryDirectory(prefix="repro-bench-e2e-") as tmp:
+            spec = env.spec
+            agent = build_agent(rc, spec.obs_shape, spec.action_dim, device)
+            assert isinstance(agent, OnlineLearner)
+            buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
+                                  rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device="cpu",
+                                  sample_device=device)
+            logger = RunLogger(Path(tmp), agent.metric_names(), echo=lambda line: None)
+            started: list[float] = []
+
+            def start_timing(frame: int, last_eval: float | None) -> None:
+                """At the first step past the seed frames: the warm-up updates, then the clocks start."""
+                if started or loop.counters.step < seed_steps:
+                    return
                 for _ in range(warmup):  # untimed: the first update allocates optimizer state (and compiles)
-                    agent.update(buffer.sample(rc.agent.batch_size, **agent.sample_options), step)
-                timer.on = True
+                    loop.agent.update(loop.buffer.sample(loop.batch_size, **agent.sample_options), loop.counters.step)
                 renders.clear()
-                wall0 = now(device)
-            with timer.phase("act"):
-                action = agent.act(ts.observation, step, eval_mode=False)
-            if step >= seed_steps and step % every == 0:
-                with timer.phase("replay_sample"):
-                    batch = buffer.sample(rc.agent.batch_size, **agent.sample_options)
-                with timer.phase("update"):
-                    agent.update(batch, step)
-                updates += 1
-            with timer.phase("env_step"):
-                ts = env.step(action)
-            with timer.phase("other"):
-                buffer.add(action, ts.reward, ts.discount, ts.observation[-3:])
-                if ts.last:
-                    buffer.end_episode()
-                    episode += 1
-            if ts.last:
-                with timer.phase("env_step"):
-                    ts = env.reset(seed=episode_seed(rc.seed, 0, episode))
-                with timer.phase("other"):
-                    buffer.start_episode(ts.observation[-3:])
-        wall = now(device) - wall0
+                timer.on = True
+                started.append(now(device))
+
+            loop = OnlineLoop(rc.train, rc.seed, repeat, env, env, agent, buffer, logger,
+                              EpisodeStore(Path(tmp) / "replay"), lambda state: None, progress=start_timing)
+            renders = _time_render(env, timer)
+            updates = instrument(loop, timer)
+            if cuda:
+                torch.cuda.reset_peak_memory_stats()
+            loop.run()
+            wall = now(device) - started[0]
     finally:
         env.close()
     seconds = dict(timer.seconds)
@@ -160,10 +189,10 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
     seconds["env_step"] -= seconds["render"]  # the renders ran inside env.step / env.reset
     timed_frames = timed_steps * repeat
     entry: dict[str, Any] = {
-        "algo": algo, "batch_size": rc.agent.batch_size, "profile": TINY if batch_size is None else None,
+        "agent": algo, "batch_size": rc.agent.batch_size, "profile": TINY if batch_size is None else None,
         "speedup": speedup, "phase_sync": phase_sync, "device": device, "task": task, "frames": timed_frames,
         "seed_frames": seed_steps * repeat,
-        "updates": updates, "warmup": warmup, "seconds": round(wall, 4),
+        "updates": updates[0], "warmup": warmup, "seconds": round(wall, 4),
         "phases": {k: round(v, 4) for k, v in seconds.items()}, "fps": round(timed_frames / wall, 3),
         "cpu": f"{_cpu_model()} ({torch.get_num_threads()} threads)"}
     if cuda:

@@ -18,39 +18,15 @@ import numpy as np
 import torch
 
 from repro.agent.protocol import SequenceLearner
+from repro.bench.batches import FRAME_SHAPE, synthetic_episodes, training_batch
 from repro.bench.clock import timed
 from repro.config.compose import ConfigError, compose, config_groups, offline_agents, typed
-from repro.config.schema import AgentConfig
-from repro.data.replay import ReplayBuffer
 from repro.envs import get_task
 from repro.learners.registry import LEARNERS, build_learner
 
 REFERENCE = "drqv2"  # the online update every ratio is taken against
-FRAME_SHAPE = (3, 84, 84)
 DATASET_KIND = "medium"  # offline.dataset of the timed offline learners (not read: the batches are synthetic)
 STEP = 10**6  # update step passed to learners (past every schedule's warm-up, as repro.bench.cli does online)
-
-
-def synthetic_episodes(n_episodes: int = 4, length: int = 100, action_dim: int = 6,
-                       seed: int = 0) -> list[dict[str, np.ndarray]]:
-    """Episodes in the dataset contract's arrays (random frames, actions in [-1, 1], rewards in [0, 1])."""
-    rng = np.random.default_rng(seed)
-    return [{"frames": rng.integers(0, 256, (length + 1, *FRAME_SHAPE), dtype=np.uint8),
-             "actions": rng.uniform(-1, 1, (length, action_dim)).astype(np.float32),
-             "rewards": rng.uniform(0, 1, length).astype(np.float32),
-             "discounts": np.ones(length, dtype=np.float32), "ep_id": np.array(i)} for i in range(n_episodes)]
-
-
-def fill_buffer(episodes: Sequence[Mapping[str, np.ndarray]], cfg: AgentConfig, frame_stack: int, seed: int,
-                device: str) -> ReplayBuffer:
-    """A ReplayBuffer holding ``episodes``, filled as the online loop fills it."""
-    capacity = sum(len(ep["frames"]) for ep in episodes)
-    action_dim = int(episodes[0]["actions"].shape[1])
-    buf = ReplayBuffer(capacity, FRAME_SHAPE, action_dim, frame_stack, cfg.nstep, cfg.K, cfg.discount,
-                       seed=seed, device=device)
-    for ep in episodes:
-        buf.add_episode(ep)
-    return buf
 
 
 def available(agent: str) -> str | None:
@@ -82,12 +58,8 @@ def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapp
     # a sequence learner samples its own windows at its own batch size (DT: agent.dt.batch_size whatever
     # agent.batch_size says); ``own_batch`` replaces that one
     own = isinstance(learner, SequenceLearner)
-    size = own_batch if own and own_batch is not None else learner.batch_size
-    if isinstance(learner, SequenceLearner):
-        batch: Any = learner.make_sampler(episodes, seed=0).sample(size)
-    else:
-        buf = fill_buffer(episodes, rc.agent, frame_stack, seed=0, device=device)
-        batch = buf.sample(size, **learner.sample_options)
+    batch, size = training_batch(learner, rc.agent, frame_stack, episodes, device,
+                                 own_batch if own and own_batch is not None else None)
     learner.train(True)
     for _ in range(warmup):
         learner.update(batch, STEP)

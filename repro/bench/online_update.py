@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import functools
 import statistics
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from repro.bench import SPEEDUP_FLAGS
@@ -62,24 +63,37 @@ def alternated_times(agents: dict[str, Any], batch: dict[str, torch.Tensor], war
     return times
 
 
+def replay_batch(agent: Any, rc: Any, batch_size: int, device: str, image: int = 84) -> dict[str, torch.Tensor]:
+    """A batch of ``batch_size`` drawn as training draws the agent's batches (repro/bench/batches.py): from a
+    ReplayBuffer of synthetic episodes, with what its objectives need (``agent.sample_options``)."""
+    from repro.bench.batches import synthetic_episodes, training_batch
+
+    episodes = synthetic_episodes(action_dim=agent.action_dim, frame_shape=(3, image, image))
+    return training_batch(agent, rc.agent, rc.env.frame_stack, episodes, device, batch_size)[0]
+
+
 def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
-                device: str = "cpu", speedups: tuple[str, ...] = (), warmup: int = 1) -> list[dict]:
+                device: str = "cpu", speedups: tuple[str, ...] = (), warmup: int = 1,
+                overrides: Sequence[str] = ()) -> list[dict]:
     """Median wall-clock seconds of one full agent update on the plain path and on each of ``speedups``, over
-    ``repeats`` timed updates after ``warmup`` untimed ones (same batch every time). The paths' agents live side
-    by side and their timed updates alternate (plain, path 1, ..., plain, path 1, ...), so background load falls
-    on every path alike. One row per path, plain first."""
+    ``repeats`` timed updates after ``warmup`` untimed ones (same batch every time, drawn as training draws it:
+    :func:`replay_batch`). The paths' agents live side by side and their timed updates alternate (plain, path 1,
+    ..., plain, path 1, ...), so background load falls on every path alike. One row per path, plain first.
+    ``overrides``: more config overrides (a test's ``profile=tiny``)."""
     paths = ("plain", *speedups)
     agents = {}
     for path in paths:
-        agents[path], rc = build_agent(algo, batch_size, task, device, SPEEDUP_FLAGS[path])
-    batch = synthetic_batch(batch_size, rc.agent.K, agents["plain"].action_dim, device)
+        agents[path], rc = build_agent(algo, batch_size, task, device, [*overrides, *SPEEDUP_FLAGS[path]])
+    batch = replay_batch(agents["plain"], rc, batch_size, device)
     times = alternated_times(agents, batch, warmup, repeats, device)
     rows = []
     for path in paths:
         seconds = statistics.median(times[path])
         # one update every 2 agent steps at action repeat 2 = 4 frames per update (update-bound estimate)
-        fps = rc.train.update_every_steps * rc.env.action_repeat / seconds
-        rows.append({"algo": algo, "batch_size": batch_size, "speedup": path, "update_seconds": round(seconds, 4),
-                     "fps_estimate": round(fps, 3), "repeats": repeats, "warmup": warmup, "alternated": True,
+        per_update = rc.train.update_every_steps * rc.env.action_repeat
+        fps = per_update / seconds
+        rows.append({"agent": algo, "batch_size": batch_size, "speedup": path, "update_seconds": round(seconds, 4),
+                     "frames_per_update": per_update, "fps_estimate": round(fps, 3), "repeats": repeats,
+                     "warmup": warmup, "alternated": True,
                      "seconds_each": [round(t, 4) for t in times[path]]})
     return rows

@@ -1,4 +1,4 @@
-"""`repro bench --roofline`: where one agent update stands against this machine's own convolution peak.
+"""`repro bench roofline`: where one agent update stands against this machine's own convolution peak.
 
 Everything is measured in this one process (docs/performance.md, "Roofline"):
 
@@ -109,14 +109,13 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     the kernel table per path."""
     import torch
 
-    from repro.bench.online_update import alternated_times, build_agent, synthetic_batch
+    from repro.bench.online_update import alternated_times, build_agent, replay_batch
 
     agents = {}
     for path in ("plain", *speedups):
         agent, rc = build_agent(algo, batch_size, task, device, SPEEDUP_FLAGS[path])
         agents[path] = agent
-    A, K = agents["plain"].action_dim, rc.agent.K
-    batch = synthetic_batch(batch_size, K, A, device)
+    batch = replay_batch(agents["plain"], rc, batch_size, device)
 
     def update(path: str) -> Any:
         return lambda: agents[path].update(batch, step=10**6)
@@ -137,7 +136,7 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
              f"({peaks[dtype]['gflops_per_s']:.1f} GFLOP/s)")
     echo(f"{algo} B{batch_size}: {flops / 1e9:.1f} GFLOP per update ({flops / batch_size / 1e9:.3f} per sample), "
          "counted by torch's FLOP counter")
-    return {"algo": algo, "batch_size": batch_size, "device": device, "threads": torch.get_num_threads(),
+    return {"agent": algo, "batch_size": batch_size, "device": device, "threads": torch.get_num_threads(),
             "flops": flops, "flops_per_sample": flops // batch_size,
             "flops_by_op": dict(sorted(per_op.items(), key=lambda kv: -kv[1])), "peaks": peaks, "paths": paths,
             "repeats": repeats, "warmup": warmup}

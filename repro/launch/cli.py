@@ -172,9 +172,8 @@ def sweep_cmd(
 ) -> None:
     """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
     options = LaunchOptions(launcher, max_parallel, force, cluster_config, warm_start, gpus, runs_per_gpu)
-    task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
     try:
-        sel = Selection(tasks=task_list, seeds=seeds, frames=frames, sets=with_results_root(sets, results_root))
+        sel = specs.selection(tasks, seeds, frames, sets, results_root)
     except SweepError as exc:
         fail(str(exc))
     report = launch_sweep(name, sel, options, dry_run)
@@ -338,16 +337,6 @@ def _launched_names(name: Optional[str], root: Path) -> list[str]:
         raise SweepError(f"unknown sweep '{name}'." + specs.close_matches(name, sorted(known)))
     console().print(f"sweep '{name}' has not been launched under {root}", highlight=False)
     return []
-
-
-def with_results_root(sets: Optional[list[str]], results_root: Optional[Path]) -> tuple[str, ...]:
-    """The --set overrides, plus ``runtime.results_root`` when --results is given (not both)."""
-    out = tuple(sets or ())
-    if results_root is None:
-        return out
-    if any(specs.override_key(s) == "runtime.results_root" for s in out):
-        raise SweepError("give the results root once: --results ROOT or --set runtime.results_root=ROOT, not both.")
-    return (*out, f"runtime.results_root={specs.hydra_quote(str(results_root.expanduser()))}")
 
 
 def default_results_root() -> Path:

@@ -16,7 +16,7 @@ from __future__ import annotations
 from repro.config.compose import close_matches, config_groups
 from repro.launch.spec.catalog import ENV_SWEEPS_DIR, load, load_all, sweep_names, sweeps_dir
 from repro.launch.spec.errors import SweepError
-from repro.launch.spec.grid import Run, Selection, excluded, expand
+from repro.launch.spec.grid import Run, Selection, excluded, expand, selection
 from repro.launch.spec.groups import check_sets, check_tasks, missing_options, unavailable_reason
 from repro.launch.spec.overrides import hydra_quote, merge_overrides, override_key, override_value
 from repro.launch.spec.plan import PlannedRun, compose_runs, plan, results_root_of, run_key
@@ -26,6 +26,6 @@ __all__ = [
     "ENV_SWEEPS_DIR", "EXCLUDE_FIELDS", "FIELDS", "REQUIRED", "Exclusion", "PlannedRun", "Run", "Selection",
     "SweepError", "SweepSpec", "check_sets", "check_tasks", "close_matches", "compose_runs", "config_groups",
     "excluded", "expand", "hydra_quote", "load", "load_all", "load_file", "merge_overrides", "missing_options",
-    "override_key", "override_value", "plan", "results_root_of", "run_key", "sweep_names", "sweeps_dir",
-    "unavailable_reason",
+    "override_key", "override_value", "plan", "results_root_of", "run_key", "selection", "sweep_names",
+    "sweeps_dir", "unavailable_reason",
 ]

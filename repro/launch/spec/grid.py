@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 from repro.launch.spec.errors import SweepError
 from repro.launch.spec.groups import check_sets, check_tasks, unavailable_reason
@@ -19,6 +21,21 @@ class Selection:
     seeds: int | None = None
     frames: int | None = None
     sets: tuple[str, ...] = ()
+
+
+def selection(tasks: str | None = None, seeds: int | None = None, frames: int | None = None,
+              sets: Sequence[str] | None = None, results_root: Path | None = None) -> Selection:
+    """The Selection of the grid options ``repro sweep`` and ``repro plan`` share: ``--tasks`` (comma-separated),
+    ``--seeds``, ``--frames``, ``--set`` (repeatable) and the results root (``runtime.results_root``, given once:
+    SweepError when ``--set`` gives it too)."""
+    task_list = tuple(t.strip() for t in tasks.split(",") if t.strip()) if tasks else None
+    out = tuple(sets or ())
+    if results_root is not None:
+        if any(override_key(s) == "runtime.results_root" for s in out):
+            raise SweepError("give the results root once: --results ROOT or --set runtime.results_root=ROOT, not "
+                             "both.")
+        out = (*out, f"runtime.results_root={hydra_quote(str(results_root.expanduser()))}")
+    return Selection(tasks=task_list, seeds=seeds, frames=frames, sets=out)
 
 
 @dataclass(frozen=True)

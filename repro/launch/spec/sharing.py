@@ -9,7 +9,7 @@ sweep then pays only the frames beyond what another sweep's smaller (or equal, e
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from repro.launch.spec.grid import Run, expand
@@ -46,6 +46,19 @@ def run_frames(run: Run) -> int | None:
     return int(value) if value is not None and value.isdigit() else None
 
 
+def split_budget(entries: Iterable[tuple[int, str]]) -> dict[str, int]:
+    """The budgets that sweeps (by name) give one shared run directory -> what each sweep trains of it: the run is
+    trained once, to the smaller budget and extended to the larger, so ordered by budget (then sweep name) each sweep
+    pays its budget minus the largest before it; together they pay the largest budget. Also `repro plan`'s rule
+    (repro/launch/cost.py)."""
+    before = 0
+    paid: dict[str, int] = defaultdict(int)
+    for frames, name in sorted(entries):
+        paid[name] += max(0, frames - before)
+        before = max(before, frames)
+    return dict(paid)
+
+
 def shared_frames(specs: Sequence[SweepSpec]) -> dict[str, SweepFrames]:
     """Each available sweep's online frames, total and to train after sharing run directories with the others.
     A shared run is trained once: ordered by budget (then sweep name), each sweep pays its budget minus the largest
@@ -62,11 +75,10 @@ def shared_frames(specs: Sequence[SweepSpec]) -> dict[str, SweepFrames]:
     to_train: dict[str, int] = defaultdict(int)
     shared: dict[str, set[str]] = defaultdict(set)
     for entries in budgets.values():
-        before = 0
         names = {name for _, name in entries}
-        for frames, name in sorted(entries):
+        for frames, name in entries:
             total[name] += frames
-            to_train[name] += max(0, frames - before)
-            before = max(before, frames)
             shared[name] |= names - {name}
+        for name, paid in split_budget(entries).items():
+            to_train[name] += paid
     return {name: SweepFrames(total[name], to_train[name], tuple(sorted(shared[name]))) for name in total}
