@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any, Optional, TypeVar
 
+from repro.config import alix
 from repro.config.plugins import LEARNER_GROUP, OBJECTIVE_GROUP, LearnerSpec, ObjectiveSpec, PluginError, discover
 
 
@@ -48,6 +49,7 @@ class LearnerName(Choice):
     cql = "cql"  # CQL on the DrQ-v2 backbone (offline)
     iql = "iql"  # IQL on the DrQ-v2 backbone (offline)
     dt = "dt"  # Decision Transformer on pixels (offline)
+    alix = "alix"  # A-LIX: DrQ-v2 with adaptive local signal mixing in the encoder (online; repro/config/alix.py)
 
 
 def is_offline(learner: str) -> bool:
@@ -441,6 +443,7 @@ BUILTIN_LEARNERS = (
     LearnerSpec(LearnerName.cql.value, offline=True, label="CQL", section=CQLConfig),
     LearnerSpec(LearnerName.iql.value, offline=True, label="IQL", section=IQLConfig),
     LearnerSpec(LearnerName.dt.value, offline=True, label="DT", section=DTConfig),
+    alix.SPEC,  # A-LIX (online; issue 38): its own section agent.alix and factory, declared as a plugin's
 )
 BUILTIN_OBJECTIVES = (
     ObjectiveSpec(ObjectiveName.taco.value, label="TACO"),
