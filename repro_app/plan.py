@@ -35,7 +35,7 @@ from analysis.tables import TableOutput, write_table
 
 GB = 1024**3
 ADAM_BYTES_PER_PARAM = 16  # fp32 weights, gradients and Adam's two moments
-TIMED_ALGOS = ("taco", "drqv2")  # the online agents `repro bench` times
+TIMED_ALGOS = ("taco", "drqv2", "alix")  # the online agents of the paper's sweeps that `repro bench --algo` times
 
 
 class PlanError(Exception):
