@@ -206,3 +206,47 @@ def test_the_critic_init_switch():
     eye = torch.eye(w_unit.shape[0])
     torch.testing.assert_close(w_unit @ w_unit.T, eye, atol=1e-5, rtol=0)
     torch.testing.assert_close(w_relu @ w_relu.T, 2 * eye, atol=1e-5, rtol=0)  # orthogonal with gain sqrt(2)
+
+
+def test_table_1_figures_1_4_5_and_the_metaworld_claim_show_reproduced_alix(tmp_path):
+    """A-LIX runs (agent=alix, the sweeps' run directories) sit beside the paper's A-LIX numbers in Table 1 and
+    Figure 1, as curves in Figures 4 and 5, and the Meta-world claim checks TACO against them."""
+    import pandas as pd
+
+    from analysis import select
+    from analysis.claims import evaluate_claims
+    from analysis.context import Context
+    from analysis.load import load_results
+    from analysis.paper import DMC9, METAWORLD6
+    from analysis_fixtures import write_run
+    from paper_figures import f1_average, f4_curves_dmc, f5_curves_metaworld, t1_online
+
+    runs = tmp_path / "runs"
+    for task in DMC9:
+        for algo, final in (("taco", 700.0), ("drqv2", 600.0), ("alix", 500.0)):
+            for s in range(3):
+                write_run(runs, experiment="main", algo=algo, task=task, seed=s, final=final + 10 * (s - 1),
+                          frames=1_000_000, eval_every=500_000)
+    for task in METAWORLD6:
+        for algo, final in (("taco", 0.8), ("drqv2", 0.5), ("alix", 0.4)):
+            for s in range(3):
+                write_run(runs, experiment="metaworld", algo=algo, task=task, seed=s, final=final, success=True,
+                          frames=1_000_000, eval_every=500_000)
+    ctx = Context(results=load_results(runs), out_dir=tmp_path / "out", reps=50, curve_reps=20, render_envs=False)
+    t1_online.render(ctx)
+    t1 = pd.read_csv(ctx.out_dir / "T1.csv").set_index(["task", "method"])
+    row = t1.loc[("cheetah_run", "A-LIX")]
+    assert row["n"] == 3 and row["repro_mean"] == pytest.approx(500.0)
+    assert row["paper_mean"] == pytest.approx(676.0)  # the paper's A-LIX cell beside it (online_rl_table.csv)
+    f1_average.render(ctx)
+    f1 = pd.read_csv(ctx.out_dir / "F1.csv").set_index("method")
+    assert f1.loc["A-LIX", "n"] == 3 and f1.loc["A-LIX", "repro_mean"] == pytest.approx(500.0)
+    assert f1.loc["A-LIX", "paper_mean"] == pytest.approx(379.4, abs=0.1)  # the mean of Table 1's nine A-LIX cells
+    for module, curves in ((f4_curves_dmc, select.online_main(ctx.curves, ctx.experiment_map)),
+                           (f5_curves_metaworld, select.metaworld(ctx.curves, ctx.experiment_map))):
+        assert "A-LIX" in module.LABELS and "A-LIX" in set(curves["label"])
+        assert module.render(ctx).has_runs
+    verdicts = {v.id: v for v in evaluate_claims(ctx)}
+    metaworld = verdicts["metaworld"]
+    assert metaworld.verdict == "supported", metaworld.evidence
+    assert "hammer vs A-LIX: 80.0 vs 40.0" in metaworld.evidence and "A-LIX not run" not in metaworld.evidence
