@@ -208,6 +208,18 @@ def test_the_critic_init_switch():
     torch.testing.assert_close(w_relu @ w_relu.T, 2 * eye, atol=1e-5, rtol=0)  # orthogonal with gain sqrt(2)
 
 
+def test_an_alix_agent_file_may_add_latent_actions_and_objectives():
+    """Not A-LIX's settings, but the backbone's switches still work on it: TACO's action encoder and objectives
+    (the strength stays out of the auxiliary step)."""
+    torch.manual_seed(0)
+    learner = _tiny("agent.action_encoder=true", "+agent.objectives.curl=1.0")
+    bb = learner.backbone
+    assert bb.action_encoder is not None and bb.aux_opt is not None
+    assert all(p is not bb.encoder.strength for g in bb.aux_opt.param_groups for p in g["params"])
+    out = learner.update(_batch(0), 1000)
+    assert "curl_loss" in out and 0.0 <= float(out[STRENGTH_METRIC]) <= 1.0
+
+
 def test_table_1_figures_1_4_5_and_the_metaworld_claim_show_reproduced_alix(tmp_path):
     """A-LIX runs (agent=alix, the sweeps' run directories) sit beside the paper's A-LIX numbers in Table 1 and
     Figure 1, as curves in Figures 4 and 5, and the Meta-world claim checks TACO against them."""

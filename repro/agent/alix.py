@@ -40,7 +40,7 @@ from repro.agent import fast
 from repro.agent.aug import RandomShift
 from repro.agent.backbone import BackboneLearner, DrQV2Backbone, _unique
 from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics, critic_metrics
-from repro.agent.networks import Actor, orthogonal_init, trunk
+from repro.agent.networks import ActionEncoder, Actor, default_latent_action_dim, orthogonal_init, trunk
 from repro.config.alix import ALIXConfig
 from repro.config.schema import AgentConfig, learner_section
 
@@ -196,10 +196,12 @@ class ALIXBackbone(DrQV2Backbone):
         self._encode = torch.compile(self.encoder, dynamic=False) if cfg.compile or self.fast.compile \
             else self.encoder
         self.repr_dim = self.encoder.repr_dim
-        if cfg.action_encoder:
-            raise ValueError("agent.alix: A-LIX takes raw actions (agent.action_encoder=false)")
         self.action_encoder = None
         self.step_dim = self.action_dim
+        if cfg.action_encoder:  # not A-LIX's (its agent file: false): TACO's latent actions, as the backbone's
+            latent = cfg.latent_action_dim or default_latent_action_dim(self.action_dim, cfg.latent_action_rounding)
+            self.action_encoder = ActionEncoder(self.action_dim, latent, cfg.K, cfg.action_hidden_dim).to(self.device)
+            self.step_dim = latent
         self.actor = Actor(self.repr_dim, self.action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
         self.critic = ParallelCritic(self.repr_dim, self.step_dim, cfg.feature_dim, cfg.hidden_dim,  # type: ignore[assignment]
                                      own.critic_relu_gain).to(self.device)
@@ -218,10 +220,11 @@ class ALIXBackbone(DrQV2Backbone):
                                  {"params": [strength], "lr": own.strength_lr,
                                   "betas": (own.strength_beta1, own.strength_beta2)}], lr=lr)
         self.actor_opt = adam(self.actor.parameters(), lr=lr)
-        self.critic_opt = adam(self.critic.parameters(), lr=lr)
+        encoded = list(self.action_encoder.parameters()) if self.action_encoder is not None else []
+        self.critic_opt = adam(list(self.critic.parameters()) + encoded, lr=lr)
         self.aux_opt = None
         if self.objectives:
-            aux = convs + list(self.objectives.parameters())
+            aux = convs + list(self.objectives.parameters()) + encoded
             if self.shared is not None:
                 aux += list(self.shared.parameters())
             self.aux_opt = adam(_unique(aux), lr=lr)
@@ -236,9 +239,9 @@ class ALIXBackbone(DrQV2Backbone):
             with torch.no_grad():
                 dist = self.actor(next_h, self.stddev(step))
                 next_action = dist.sample(clip=self.cfg.stddev_clip)
-                target_v = target.values(next_h, next_action).amin(dim=1, keepdim=True)
+                target_v = target.values(next_h, self.encode_action(next_action)).amin(dim=1, keepdim=True)
                 target_q = (reward + discount * target_v).float()
-            qs = critic.values(h, action).float()
+            qs = critic.values(h, self.encode_action(action)).float()
             loss = (qs - target_q).square().sum(1).mean()
         q1, q2 = qs[:, 0:1], qs[:, 1:2]
         return loss, (q1, q2), critic_metrics(loss, q1, q2, target_q)
