@@ -208,6 +208,25 @@ def test_the_critic_init_switch():
     torch.testing.assert_close(w_relu @ w_relu.T, 2 * eye, atol=1e-5, rtol=0)  # orthogonal with gain sqrt(2)
 
 
+def test_the_alix_section_is_typed_held_by_alix_runs_only_and_range_checked(tmp_path):
+    from typer.testing import CliRunner
+
+    from repro.config.compose import ConfigError, run_keys
+    from repro.config.schema import unread_keys
+    from repro_app.cli import app
+
+    assert run_keys(compose(["agent=alix"]))["agent"]["alix"]["target"] == 0.535
+    for other in ("taco", "drqv2"):  # the other online runs' config.yaml and identity are unchanged
+        assert "alix" not in run_keys(compose([f"agent={other}"]))["agent"]
+    assert "agent.alix" in unread_keys("actor_critic") and "agent.cql" in unread_keys("alix")
+    with pytest.raises(ConfigError, match=r"^agent\.alix\.max_shift must be > 0\.0 \(got 0\.0\)\.$"):
+        compose(["agent=alix", "agent.alix.max_shift=0"])
+    out = CliRunner().invoke(app, ["train", "agent=alix", "agent.alix.kernel=1",
+                                   f"runtime.results_root={tmp_path}", "--no-progress"])
+    assert out.exit_code == 2 and "agent.alix.kernel must be >= 3 (got 1)." in out.output
+    assert not any(tmp_path.iterdir())  # refused before the run directory exists
+
+
 def test_an_alix_agent_file_may_add_latent_actions_and_objectives():
     """Not A-LIX's settings, but the backbone's switches still work on it: TACO's action encoder and objectives
     (the strength stays out of the auxiliary step)."""
