@@ -185,7 +185,7 @@ def test_a_plugin_learner_s_section_is_typed_and_held_by_its_runs_only():
 
 @pytest.mark.parametrize("override, message", [
     ("agent.learner=toy_rwbcc",
-     "agent.learner=toy_rwbcc is not one of actor_critic, bc, td3bc, cql, iql, dt, toy_rwbc, toy_utd."),
+     "agent.learner=toy_rwbcc is not one of actor_critic, bc, td3bc, cql, iql, dt, alix, toy_rwbc, toy_utd."),
     ("+agent.objectives.toy_invv=1", "unknown objective 'toy_invv'. Did you mean: toy_inv?"),
 ])
 def test_a_misspelled_registered_name_is_one_line_and_exit_2(tmp_path, override: str, message: str):

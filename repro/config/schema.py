@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any, Optional, TypeVar
 
+from repro.config import alix
 from repro.config.plugins import (
     LEARNER_GROUP,
     OBJECTIVE_GROUP,
@@ -57,6 +58,7 @@ class LearnerName(Choice):
     cql = "cql"  # CQL on the DrQ-v2 backbone (offline)
     iql = "iql"  # IQL on the DrQ-v2 backbone (offline)
     dt = "dt"  # Decision Transformer on pixels (offline)
+    alix = "alix"  # A-LIX: DrQ-v2 with adaptive local signal mixing in the encoder (online; repro/config/alix.py)
 
 
 def is_offline(learner: str) -> bool:
@@ -455,6 +457,7 @@ BUILTIN_LEARNERS = (
                         "n_heads": _AT_LEAST_1, "dropout": (0.0, True, 1.0, False), "lr": _POSITIVE,
                         "weight_decay": _NON_NEGATIVE, "warmup_steps": _AT_LEAST_1, "grad_clip": _POSITIVE,
                         "batch_size": _AT_LEAST_1, "rtg_scale": _POSITIVE, "max_timestep": _AT_LEAST_1}),
+    alix.SPEC,  # A-LIX (online; issue 38): its own section agent.alix and factory, declared as a plugin's
 )
 _WITH_CURL_AND_REWARD = (ObjectiveName.curl.value, ObjectiveName.reward.value)  # TACO's loss: TACO + CURL + reward;
 # the Table 2 objectives replace TACO's term and keep the other two

@@ -1,0 +1,300 @@
+"""A-LIX (Cetin et al., ICML 2022, "Stabilizing Off-Policy Deep RL from Pixels"): DrQ-v2 whose encoder mixes each
+feature map with its neighbours after every convolution (local signal mixing, LIX), by a strength S learned through
+its own gradient rule and its own optimizer settings. Online learner ``alix`` (``repro/config/alix.py``), built on the
+DrQ-v2 backbone (``backbone.py``) as the online agent is.
+
+Written from the paper's equations and the facts of the authors' code (Aladoro/Stabilizing-Off-Policy-RL @ 34665c8:
+``analysis_layers.py``, ``analysis_custom_autograd_functions.py``, ``analysis_modules.py``, ``analysis_optimizers.py``,
+``drqv2.py``, ``cfgs/algo/ALIX.yaml``); ``tests/test_alix.py`` checks the update against recorded values of that code.
+
+* **Local signal mixing** (:func:`local_signal_mixing`), in training mode only: with d = max_shift and p = ceil(d) + 1,
+  the feature map is replicate-padded by p and resampled bilinearly (``grid_sample``, zeros outside, corners not
+  aligned) at every cell moved by one random offset per axis, uniform in [-(d + 1/2) S, (d + 1/2) S]; with
+  ``fixed_batch`` one offset for the whole batch (per layer and pass), else one per sample. The grid is computed in
+  the authors' order of operations, so the same uniform draws give the same features bit for bit.
+* **The encoder** (:class:`ALIXEncoder`): DrQ-v2's four convolutions, LIX after each ReLU, one strength S for the four
+  (clamped to [0, 1] before every pass, as the authors' ``ParameterizedReg``); only the last LIX passes the gradient
+  rule (``AllFeatTiedRegularizedEncoder``). Acting never mixes (the authors act in eval mode).
+* **The strength's rule** (:class:`StrengthRule`): identity forward; backward passes the features' gradient on and
+  gives S the gradient  target - mean log(1 + ND),  ND = noise / (signal + eps) per channel and cell of the
+  batch-mean gradient g: with the N x N neighbourhood (replicate-padded) of g, signal = (sum of the squares over the
+  neighbourhood - g^2) / (N^2 - 1) and noise = sum of (neighbour - g)^2 / (N^2 - 1). High discontinuity (ND above
+  the target) gives a negative gradient, so S grows.
+* **Its optimizer**: S is a parameter group of the encoder's Adam with its own lr and betas.
+* **The critic** (:class:`ParallelCritic`): the authors' twin Q heads as batched (2, in, out) weights, orthogonal
+  with the ReLU gain (``utils.DenseParallel``), and their loss form sum over the two heads then mean.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any, cast
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from repro.agent import fast
+from repro.agent.aug import RandomShift
+from repro.agent.backbone import BackboneLearner, DrQV2Backbone, _unique
+from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics, critic_metrics
+from repro.agent.networks import ActionEncoder, Actor, default_latent_action_dim, orthogonal_init, trunk
+from repro.config.alix import ALIXConfig
+from repro.config.schema import AgentConfig, learner_section
+
+STRENGTH_METRIC = "lix_strength"  # train.csv column: S after the update, as the next pass uses it (clamped)
+
+
+def local_signal_mixing(x: torch.Tensor, strength: torch.Tensor, max_shift: float, fixed_batch: bool = True
+                        ) -> torch.Tensor:
+    """LIX of the feature maps ``x`` (N, C, H, H) at ``strength`` S in [0, 1] (a 0-d tensor without gradient); draws
+    one ``torch.rand`` of shape (1, 1, 1, 2) (``fixed_batch``) or (N, 1, 1, 2)."""
+    n, _, h, w = x.shape
+    if h != w:
+        raise ValueError(f"local signal mixing needs square feature maps (got {h} x {w})")
+    pad = int(math.ceil(max_shift)) + 1  # +1: the sampled cells never reach the zeros outside the padding
+    s = strength * ((2 * max_shift + 1) / (2 * pad + 1))  # S as a fraction of the padded window
+    padded = F.pad(x, (pad,) * 4, mode="replicate")
+    u = torch.rand(size=(1 if fixed_batch else n, 1, 1, 2), device=x.device, dtype=x.dtype)
+    shift = (u * s + (1 - s) / 2) * (2 * pad + 1)  # the window's start in padded cells, centred at pad + 1/2
+    cells = torch.arange(h, device=x.device, dtype=x.dtype)
+    base = torch.stack([cells.expand(h, h), cells[:, None].expand(h, h)], dim=-1).expand(n, h, h, 2)  # (x, y)
+    grid = (base + shift) * 2.0 / (h + 2 * pad) - 1  # in grid_sample's [-1, 1] (corners not aligned)
+    return F.grid_sample(padded, grid, padding_mode="zeros", align_corners=False)
+
+
+class StrengthRule(torch.autograd.Function):
+    """Identity on the features; the gradient of the strength S is ``target - mean log(1 + ND)`` of the features'
+    incoming gradient (the module docstring)."""
+
+    @staticmethod
+    def forward(ctx: Any, features: torch.Tensor, strength: torch.Tensor, kernel: int, target: float,
+                eps: float) -> torch.Tensor:
+        ctx.kernel, ctx.target, ctx.eps = kernel, target, eps
+        ctx.strength_shape = strength.shape
+        return features.view_as(features)
+
+    @staticmethod
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor | None, ...]:
+        return grad, strength_gradient(grad, ctx.kernel, ctx.target, ctx.eps).reshape(ctx.strength_shape), \
+            None, None, None
+
+
+def discontinuity(grad: torch.Tensor, kernel: int, eps: float) -> torch.Tensor:
+    """ND per channel and cell of the batch mean of ``grad`` (N, C, H, W): noise / (signal + eps), shape (C, H, W)."""
+    g = grad.mean(0)  # (C, H, W)
+    c, h, w = g.shape
+    left = (kernel - 1) // 2
+    padded = F.pad(g[:, None], (left, kernel - 1 - left, left, kernel - 1 - left), mode="replicate")
+    patches = F.unfold(padded, kernel).view(c, kernel * kernel, h, w)  # each cell's neighbourhood, itself included
+    others = kernel * kernel - 1
+    signal = (patches.square().sum(1) - g.square()) / others  # mean square of the neighbours
+    noise = (patches - g[:, None]).square().sum(1) / others  # mean square difference neighbour - cell
+    return noise / (signal + eps)
+
+
+def strength_gradient(grad: torch.Tensor, kernel: int, target: float, eps: float) -> torch.Tensor:
+    """The rule's gradient of S: ``target - mean log(1 + ND)`` (0-d)."""
+    return target - torch.log1p(discontinuity(grad, kernel, eps)).mean()
+
+
+class ALIXEncoder(nn.Module):
+    """DrQ-v2's encoder (same convolutions, initialisation and ``repr_dim``) with LIX after each convolution's ReLU,
+    in training mode, at the shared strength ``strength`` (a parameter, trained by :class:`StrengthRule` through the
+    last LIX only)."""
+
+    def __init__(self, obs_shape: tuple[int, int, int], own: ALIXConfig):
+        super().__init__()
+        channels, height, width = obs_shape
+        self.convnet = nn.Sequential(
+            nn.Conv2d(channels, 32, 3, stride=2), nn.ReLU(),
+            nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
+            nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
+            nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
+        )
+        self.repr_dim = 32 * ((height - 3) // 2 + 1 - 6) * ((width - 3) // 2 + 1 - 6)
+        self.apply(orthogonal_init)
+        self.strength = nn.Parameter(torch.tensor(float(own.strength_init)))
+        self.own = own
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            self.strength.clamp_(0.0, 1.0)  # S in [0, 1] wherever it is read (the authors clamp before each use)
+        own, h = self.own, obs / 255.0 - 0.5
+        relus = [i for i, layer in enumerate(self.convnet) if isinstance(layer, nn.ReLU)]
+        for i, layer in enumerate(self.convnet):
+            h = layer(h)
+            if i in relus and self.training:
+                h = local_signal_mixing(h, self.strength.detach(), own.max_shift, own.fixed_batch)
+        h = StrengthRule.apply(h, self.strength, own.kernel, own.target, own.eps)
+        return h.flatten(1)
+
+
+class ParallelLinear(nn.Module):
+    """``n`` linear layers applied to one input at once: weight (n, in, out), bias (n, 1, out); x @ W + b gives
+    (n, B, out) (the authors' ``utils.DenseParallel``)."""
+
+    def __init__(self, in_features: int, out_features: int, n: int):
+        super().__init__()
+        self.weight = nn.Parameter(torch.empty(n, in_features, out_features))
+        self.bias = nn.Parameter(torch.zeros(n, 1, out_features))
+
+    def reset(self, gain: float) -> None:
+        """Each layer's weight orthogonal (times ``gain``), biases zero."""
+        with torch.no_grad():
+            for w in self.weight:
+                nn.init.orthogonal_(w, gain)
+            self.bias.zero_()
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.matmul(x, self.weight) + self.bias
+
+
+class ParallelCritic(nn.Module):
+    """Twin Q over (state feature, action): DrQ-v2's trunk, then both heads' MLPs as :class:`ParallelLinear` layers.
+    ``values`` gives (B, 2); calling it gives (Q1, Q2), each (B, 1), as :class:`repro.agent.networks.Critic`."""
+
+    def __init__(self, repr_dim: int, action_in_dim: int, feature_dim: int, hidden_dim: int, relu_gain: bool):
+        super().__init__()
+        self.trunk = trunk(repr_dim, feature_dim)
+        self.heads = nn.Sequential(
+            ParallelLinear(feature_dim + action_in_dim, hidden_dim, 2), nn.ReLU(inplace=True),
+            ParallelLinear(hidden_dim, hidden_dim, 2), nn.ReLU(inplace=True),
+            ParallelLinear(hidden_dim, 1, 2))
+        self.trunk.apply(orthogonal_init)
+        gain = nn.init.calculate_gain("relu") if relu_gain else 1.0
+        for layer in self.heads:
+            if isinstance(layer, ParallelLinear):
+                layer.reset(gain)
+
+    def values(self, h: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        qs = self.heads(torch.cat([self.trunk(h), action], dim=-1))  # (2, B, 1)
+        return qs.transpose(0, 1).squeeze(-1)
+
+    def forward(self, h: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        qs = self.values(h, action)
+        return qs[:, 0:1], qs[:, 1:2]
+
+
+class ALIXBackbone(DrQV2Backbone):
+    """The DrQ-v2 backbone with A-LIX's encoder, critic, encoder optimizer, input augmentation and critic loss form."""
+
+    def __init__(self, cfg: AgentConfig, own: ALIXConfig, obs_shape: tuple[int, int, int], action_dim: int,
+                 device: torch.device | str = "cpu"):
+        self.own = own
+        super().__init__(cfg, obs_shape, action_dim, device, graphs=False)
+
+    def _build_networks(self, obs_shape: tuple[int, int, int]) -> None:
+        cfg, own = self.cfg, self.own
+        # the frames as float (the authors' NoShiftAug), or DrQ-v2's random shift with agent.alix.input_shift > 0
+        self.aug: Callable[[torch.Tensor], torch.Tensor] = (
+            RandomShift(pad=own.input_shift) if own.input_shift > 0 else _as_float)
+        # the backbone's attributes hold A-LIX's encoder and critic (the backbone types them as DrQ-v2's)
+        self.encoder = fast.prepare_encoder(ALIXEncoder(obs_shape, own).to(self.device), self.fast)  # type: ignore[assignment]
+        self._encode = torch.compile(self.encoder, dynamic=False) if cfg.compile or self.fast.compile \
+            else self.encoder
+        self.repr_dim = self.encoder.repr_dim
+        self.action_encoder = None
+        self.step_dim = self.action_dim
+        if cfg.action_encoder:  # not A-LIX's (its agent file: false): TACO's latent actions, as the backbone's
+            latent = cfg.latent_action_dim or default_latent_action_dim(self.action_dim, cfg.latent_action_rounding)
+            self.action_encoder = ActionEncoder(self.action_dim, latent, cfg.K, cfg.action_hidden_dim).to(self.device)
+            self.step_dim = latent
+        self.actor = Actor(self.repr_dim, self.action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
+        self.critic = ParallelCritic(self.repr_dim, self.step_dim, cfg.feature_dim, cfg.hidden_dim,  # type: ignore[assignment]
+                                     own.critic_relu_gain).to(self.device)
+        self.critic_target = ParallelCritic(self.repr_dim, self.step_dim, cfg.feature_dim,  # type: ignore[assignment]
+                                            cfg.hidden_dim, own.critic_relu_gain).to(self.device)
+        self.critic_target.load_state_dict(self.critic.state_dict())
+        self.critic_target.requires_grad_(False)
+
+    def _build_optimizers(self) -> None:
+        """As the backbone's, but S is its own parameter group of the encoder's Adam (lr, betas of agent.alix), and
+        the auxiliary step (objectives, if an agent file names any) leaves S alone."""
+        lr, adam, own = self.cfg.lr, fast.adam(self.fast), self.own
+        strength = cast(ALIXEncoder, self.encoder).strength
+        convs = [p for p in self.encoder.parameters() if p is not strength]
+        self.encoder_opt = adam([{"params": convs},
+                                 {"params": [strength], "lr": own.strength_lr,
+                                  "betas": (own.strength_beta1, own.strength_beta2)}], lr=lr)
+        self.actor_opt = adam(self.actor.parameters(), lr=lr)
+        encoded = list(self.action_encoder.parameters()) if self.action_encoder is not None else []
+        self.critic_opt = adam(list(self.critic.parameters()) + encoded, lr=lr)
+        self.aux_opt = None
+        if self.objectives:
+            aux = convs + list(self.objectives.parameters()) + encoded
+            if self.shared is not None:
+                aux += list(self.shared.parameters())
+            self.aux_opt = adam(_unique(aux), lr=lr)
+
+    def critic_loss(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
+                    next_h: torch.Tensor, step: int, autocast: bool = True
+                    ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], Metrics]:
+        """DrQ-v2's critic loss in the authors' form: sum over the two heads of (Q_i - target)^2, mean over the
+        batch."""
+        critic, target = cast(ParallelCritic, self.critic), cast(ParallelCritic, self.critic_target)
+        with self.autocast(autocast):
+            with torch.no_grad():
+                dist = self.actor(next_h, self.stddev(step))
+                next_action = dist.sample(clip=self.cfg.stddev_clip)
+                target_v = target.values(next_h, self.encode_action(next_action)).amin(dim=1, keepdim=True)
+                target_q = (reward + discount * target_v).float()
+            qs = critic.values(h, self.encode_action(action)).float()
+            loss = (qs - target_q).square().sum(1).mean()
+        q1, q2 = qs[:, 0:1], qs[:, 1:2]
+        return loss, (q1, q2), critic_metrics(loss, q1, q2, target_q)
+
+
+def _as_float(x: torch.Tensor) -> torch.Tensor:
+    return x.float()
+
+
+class ALIX(BackboneLearner):
+    """Online learner ``alix``: DrQ-v2's update (critic with the encoder, actor on sg(h), target critic) on
+    :class:`ALIXBackbone`; S moves in the critic step, through the encoder's optimizer."""
+
+    update_metrics = CRITIC_METRICS + ACTOR_METRICS + (STRENGTH_METRIC,)
+    explores = True  # uniform actions for the first train.explore_steps, then noisy policy samples
+
+    def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
+                 device: torch.device | str = "cpu", explore_steps: int = 0):
+        # BackboneLearner's constructor, with A-LIX's backbone
+        self.cfg = cfg
+        self.own: ALIXConfig = learner_section(cfg, ALIXConfig)
+        self.explore_steps = explore_steps
+        self.backbone = ALIXBackbone(cfg, self.own, obs_shape, action_dim, device)
+        self.sample_options = self.backbone.sample_options
+
+    @property
+    def resolved(self) -> dict[str, object]:
+        """What resolved.json records beyond the config: agent.fast's plan, when it is on."""
+        return fast.resolved(self.backbone.fast, self.cfg.fast)
+
+    @property
+    def strength(self) -> torch.Tensor:
+        """S as the next pass reads it (clamped to [0, 1]), detached."""
+        return cast(ALIXEncoder, self.backbone.encoder).strength.detach().clamp(0.0, 1.0)
+
+    def act(self, obs: np.ndarray, step: int, eval_mode: bool) -> np.ndarray:
+        """The backbone's action, with the encoder in eval mode (no mixing), as the authors act."""
+        encoder = self.backbone.encoder
+        mode = encoder.training
+        encoder.train(False)
+        try:
+            return super().act(obs, step, eval_mode)
+        finally:
+            encoder.train(mode)
+
+    def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
+        """One A-LIX update (the authors' ``DrQV2Agent.update``): critic and encoder (S included), actor on sg(h),
+        target critic; then the auxiliary step, if the agent file names objectives. Detached 0-d metrics."""
+        bb = self.backbone
+        h, next_h, action, reward, discount = bb.encode_batch(batch)
+        metrics = bb.critic_step(h, action, reward, discount, next_h, step)
+        metrics.update(bb.actor_step(h.detach(), step))
+        bb.update_target()
+        metrics.update(bb.aux_step(batch))
+        metrics[STRENGTH_METRIC] = self.strength
+        return metrics
