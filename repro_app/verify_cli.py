@@ -93,7 +93,8 @@ def verify_cmd(
         report = launch_sweep(SWEEP, Selection(seeds=seeds, frames=frames, sets=root_sets), options, dry_run,
                               agents=chosen)
         if report is None:  # --dry-run
-            _print_cost(spec, Selection(seeds=seeds, frames=frames, sets=root_sets), chosen)
+            _print_cost(Selection(seeds=seeds, frames=frames, sets=root_sets), chosen,
+                        results_root if results_root is not None else _root_from(root_sets))
             return
         if report.interrupted:
             raise typer.Exit(130)
@@ -182,10 +183,27 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = Fals
     return 1 if any(r.verdict in (BELOW, ABOVE, NOT_LEARNED) for r in rows) else 0
 
 
-def _print_cost(spec, sel: Selection, agents: tuple[str, ...]) -> None:
-    """What `repro plan` expects the planned runs to take, when a bench file of this machine's device exists."""
+def _print_cost(sel: Selection, agents: tuple[str, ...], root: Path) -> None:
+    """What `repro plan` expects the planned runs to take on the device of the newest bench file under ``root``
+    (``repro/launch/cost.py``), or the command that writes one."""
+    from repro.launch.cost import PlanError, find_bench, makespan, plan_sweeps
+
     con = console()
-    con.print("expected time: see `repro plan verify` (needs a `repro bench` file)", highlight=False)
+    try:
+        bench = find_bench(root)
+    except PlanError as exc:
+        con.print(f"expected time: unknown ({exc})", highlight=False, soft_wrap=True)
+        return
+    costs = [c for c in plan_sweeps([SWEEP], bench, sel, memory=False) if c.algo in agents]
+    hours = [c.hours(c.frames - c.trained) for c in costs if c.frames > c.trained]
+    if any(h is None for h in hours):
+        missing = sorted({c.missing for c in costs if c.fps is None and c.missing})
+        con.print("expected time: the bench file does not time every run; " + "; ".join(missing), highlight=False,
+                  soft_wrap=True)
+        return
+    priced = [h for h in hours if h is not None]
+    con.print(f"expected time on {bench.hardware} ({bench.path}): {sum(priced):.2f} device-hours, "
+              f"{makespan(priced, 1):.2f} h one run at a time (repro plan verify)", highlight=False, soft_wrap=True)
 
 
 def register(app: typer.Typer) -> None:

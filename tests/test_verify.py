@@ -218,3 +218,21 @@ def test_the_kept_cpu_run_is_judged_as_recorded():
     recorded = pd.read_csv(kept / "verify.csv")
     pd.testing.assert_frame_equal(V.verdict_frame(rows).reset_index(drop=True), recorded, check_dtype=False)
     assert list(recorded["verdict"]) == [V.BELOW]
+
+
+def test_verify_dry_run_prices_the_runs_from_a_bench_file(tmp_path):
+    """`repro verify --dry-run` with a bench file: the CPU check's one DrQ-v2 run (60K frames, agent.fast) priced
+    from the fast end-to-end entry (10 frames/s: 60000 / 10 / 3600 = 1.67 h), not the plain one (2 frames/s)."""
+    import json
+
+    from repro.bench.results import FORMAT
+
+    bench = tmp_path / "runs" / "bench" / "bench-host-cpu.json"
+    bench.parent.mkdir(parents=True)
+    e2e = [{"agent": "drqv2", "batch_size": 256, "speedup": path, "phase_sync": True, "frames": 1000,
+            "seconds": seconds} for path, seconds in (("plain", 500.0), ("fast", 100.0))]
+    bench.write_text(json.dumps({"kind": "online", "format": FORMAT, "hardware": "Test cpu", "device": "cpu",
+                                 "results": [], "e2e": e2e}))
+    out = _verify("--dry-run", "--agents", "drqv2", "--seeds", "1", "-r", str(tmp_path / "runs"))
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "expected time on Test cpu" in out.stdout and "1.67 device-hours" in out.stdout, out.stdout
