@@ -196,7 +196,8 @@ def judge(results: Results, min_seeds: int = MIN_SEEDS, published: Results | Non
         else:
             given = (random_returns or {}).get(task)
             rows.append(_learned_verdict(base, rule, frame_rows, min_seeds,
-                                         lambda t=task, g=given: random_return(t) if g is None else g))
+                                         functools.partial(random_return, task) if given is None
+                                         else functools.partial(float, given)))
     return rows
 
 
