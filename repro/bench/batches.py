@@ -14,7 +14,7 @@ import numpy as np
 
 from repro.config.schema import AgentConfig
 from repro.data.replay import ReplayBuffer
-from repro.learners.base import SequenceLearner
+from repro.agent.protocol import SequenceLearner
 
 FRAME_SHAPE = (3, 84, 84)
 
