@@ -4,9 +4,8 @@ Importing the package (or :mod:`paper_figures.catalog`) registers every artifact
 :data:`paper_figures.registry.REGISTRY`.
 """
 
-from paper_figures.catalog import load_artifacts, ordered_ids, resolve
+from paper_figures.catalog import resolve, sorted_ids
 from paper_figures.registry import REGISTRY, ArtifactResult, UnknownArtifactError
 from paper_figures.render import render_artifacts
 
-__all__ = ["REGISTRY", "ArtifactResult", "UnknownArtifactError", "load_artifacts", "ordered_ids", "resolve",
-           "render_artifacts"]
+__all__ = ["REGISTRY", "ArtifactResult", "UnknownArtifactError", "render_artifacts", "resolve", "sorted_ids"]

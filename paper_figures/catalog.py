@@ -32,14 +32,7 @@ from paper_figures import (  # noqa: F401
 )
 from paper_figures.registry import REGISTRY, Artifact, UnknownArtifactError, sorted_ids
 
-
-def load_artifacts() -> dict[str, Artifact]:
-    """:data:`REGISTRY`, complete (importing this module registered every artifact)."""
-    return REGISTRY
-
-
-def ordered_ids() -> list[str]:
-    return sorted_ids()
+__all__ = ["resolve", "sorted_ids"]  # sorted_ids through the catalog: every artifact registered first
 
 
 def resolve(ids: Iterable[str]) -> list[Artifact]:
@@ -51,7 +44,7 @@ def resolve(ids: Iterable[str]) -> list[Artifact]:
         if key in by_lower:
             matches = [by_lower[key]]
         else:
-            matches = [k for k in ordered_ids() if re.fullmatch(re.escape(key) + r"[a-z]", k.lower())]
+            matches = [k for k in sorted_ids() if re.fullmatch(re.escape(key) + r"[a-z]", k.lower())]
         if not matches:
             raise UnknownArtifactError(raw)
         out += [m for m in matches if m not in out]

@@ -206,23 +206,23 @@ def figures_cmd(
 
 def _list_artifacts() -> None:
     """``figures --list``: one line per artifact id."""
-    from paper_figures.catalog import ordered_ids
+    from paper_figures.catalog import sorted_ids
     from paper_figures.registry import REGISTRY
 
-    for aid in ordered_ids():
+    for aid in sorted_ids():
         a = REGISTRY[aid]
         typer.echo(f"{aid:<4} {a.kind:<6} {a.paper_label:<32} {a.title}")
 
 
 def _artifacts(ids: Optional[list[str]], all_: bool) -> list:
     """The artifacts ``figures`` is asked for (every one with --all), or one line and exit 2."""
-    from paper_figures.catalog import ordered_ids, resolve
+    from paper_figures.catalog import resolve, sorted_ids
     from paper_figures.registry import UnknownArtifactError
 
     if not all_ and not ids:
         fail("name artifact ids (e.g. 'repro figures F8 T1'), or pass --all or --list")
     try:
-        return resolve(ordered_ids() if all_ else (ids or []))  # ids is set unless --all
+        return resolve(sorted_ids() if all_ else (ids or []))  # ids is set unless --all
     except UnknownArtifactError as exc:
         fail(str(exc))
 

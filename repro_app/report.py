@@ -21,7 +21,7 @@ from analysis.io import atomic_write_text
 from analysis.power import REPORT_MAX_SEEDS, REPORT_SIMS, next_runs_paragraph, power_rows, write_power
 from analysis.tables import TableOutput, to_markdown
 from analysis.verify import VerdictRow, judge, verdict_frame, verdict_notes, write_verdicts
-from paper_figures.catalog import ordered_ids, resolve
+from paper_figures.catalog import resolve, sorted_ids
 from paper_figures.render import render_artifacts
 from paper_figures.verify_plot import plot_verify
 
@@ -213,7 +213,7 @@ def markdown_to_html(md: str, title: str = "TACO reproduction report") -> str:
 
 def build_report(ctx: Context, progress: Callable[[str], None] | None = None) -> tuple[Path, Path]:
     """Render every artifact, the claims and the audit into ``ctx.out_dir`` and write REPORT.md/.html."""
-    artifacts = render_artifacts(ctx, resolve(ordered_ids()), progress)
+    artifacts = render_artifacts(ctx, resolve(sorted_ids()), progress)
     verdicts = evaluate_claims(ctx)
     write_claims(ctx, verdicts)
     findings = run_audit(ctx.paper)

@@ -52,7 +52,7 @@ def full_report(tmp_path_factory):
 
 
 def test_registry_has_every_artifact():
-    assert paper_figures.ordered_ids() == EXPECTED
+    assert paper_figures.sorted_ids() == EXPECTED
     assert [a.id for a in paper_figures.resolve(["f7", "T1"])] == ["F7a", "F7b", "T1"]
     with pytest.raises(paper_figures.UnknownArtifactError):
         paper_figures.resolve(["F2"])

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from repro.agent.protocol import SequenceLearner
 from repro.config.schema import AgentConfig
 from repro.data.replay import ReplayBuffer
-from repro.agent.protocol import SequenceLearner
 
 FRAME_SHAPE = (3, 84, 84)
 
