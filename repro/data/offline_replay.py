@@ -136,8 +136,8 @@ def load_offline_episodes(directory: str | Path, *, task: str, action_dim: int, 
     directory = Path(directory)
     manifest, lengths = _checked_manifest(directory, task, action_dim, frame_shape)
     if max_length is not None and max(lengths) > max_length:
-        raise DatasetError(f"{directory}: an episode has {max(lengths)} steps, more than the learner's "
-                           f"{max_length} (agent.dt.max_timestep)")
+        raise DatasetError(f"{directory}: an episode has {max(lengths)} steps, more than the learner's maximum "
+                           f"episode length, {max_length} (a setting of its section: `repro train ... --dry-run`)")
     episodes: list[dict[str, np.ndarray]] = []
     with _unreadable_episodes(directory):
         for index, data in enumerate(iter_episodes(directory)):
