@@ -18,12 +18,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import shutil
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from repro.runs.rundir import cpu_model
 
 REPO = Path(__file__).resolve().parents[1]
 PAPER_SCALE = {"frames": 1_000_000, "eval_every": 10_000, "train_rows": 1000, "updates": 100_000,
@@ -53,16 +54,6 @@ def write_tree(root: Path, seeds: int) -> int:
     runs = sum(1 for _ in root.rglob("config.yaml"))
     marker.write_text(json.dumps({"runs": runs, "seeds": seeds, **PAPER_SCALE}))
     return runs
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def time_command(name: str, args: list[str], folder: str, root: Path, out: Path, extra: list[str]) -> dict:

@@ -46,9 +46,9 @@ def hardware(device: str) -> str:
 
     if device.startswith("cuda") and torch.cuda.is_available():
         return torch.cuda.get_device_name(0)
-    from repro.runs.rundir import _cpu_model
+    from repro.runs.rundir import cpu_model
 
-    return f"{_cpu_model()} ({torch.get_num_threads()} threads)"
+    return f"{cpu_model()} ({torch.get_num_threads()} threads)"
 
 
 def same_run_ratios(plain_seconds: dict[tuple[str, int], float]) -> dict[str, float]:

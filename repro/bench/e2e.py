@@ -135,7 +135,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
     from repro.data.replay import ReplayBuffer
     from repro.learners import OnlineLearner
     from repro.runs.logger import RunLogger
-    from repro.runs.rundir import _cpu_model
+    from repro.runs.rundir import cpu_model
     from repro.train.build import build_agent, build_env
     from repro.train.online_loop import OnlineLoop
 
@@ -194,7 +194,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
         "seed_frames": seed_steps * repeat,
         "updates": updates[0], "warmup": warmup, "seconds": round(wall, 4),
         "phases": {k: round(v, 4) for k, v in seconds.items()}, "fps": round(timed_frames / wall, 3),
-        "cpu": f"{_cpu_model()} ({torch.get_num_threads()} threads)"}
+        "cpu": f"{cpu_model()} ({torch.get_num_threads()} threads)"}
     if cuda:
         entry["peak_device_bytes"] = int(torch.cuda.max_memory_allocated())
         entry["gpu"] = torch.cuda.get_device_name(0)

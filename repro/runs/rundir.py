@@ -172,7 +172,7 @@ def _versions() -> dict[str, str | None]:
     return versions
 
 
-def _cpu_model() -> str:
+def cpu_model() -> str:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
@@ -229,7 +229,7 @@ def write_meta(path: Path, device: str, resumed: bool, extension: tuple[int, int
         meta = {"format": migrate.META_FORMAT, "git_sha": sha,
                 "git_dirty": bool(status) if status is not None else None,
                 "versions": _versions(), "host": socket.gethostname(), "user": getpass.getuser(),
-                "device": device_name(device), "cpu": _cpu_model(), "command": sys.argv, "started": now,
+                "device": device_name(device), "cpu": cpu_model(), "command": sys.argv, "started": now,
                 "platform": platform.platform(), "resumes": [], "budgets": [], "extensions": [], "migrations": []}
     if config_from is not None and config_from != migrate.CONFIG_FORMAT:
         meta["migrations"].append({"file": CONFIG, "from": config_from, "to": migrate.CONFIG_FORMAT, "time": now})
