@@ -40,7 +40,7 @@ from repro.agent import fast
 from repro.agent.aug import RandomShift
 from repro.agent.backbone import BackboneLearner, DrQV2Backbone, _unique
 from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics, critic_metrics
-from repro.agent.networks import ActionEncoder, Actor, default_latent_action_dim, orthogonal_init, trunk
+from repro.agent.networks import ActionEncoder, Actor, Encoder, default_latent_action_dim, orthogonal_init, trunk
 from repro.config.alix import ALIXConfig
 from repro.config.schema import AgentConfig, learner_section
 
@@ -100,33 +100,24 @@ def strength_gradient(grad: torch.Tensor, kernel: int, target: float, eps: float
     return target - torch.log1p(discontinuity(grad, kernel, eps)).mean()
 
 
-class ALIXEncoder(nn.Module):
-    """DrQ-v2's encoder (same convolutions, initialisation and ``repr_dim``) with LIX after each convolution's ReLU,
-    in training mode, at the shared strength ``strength`` (a parameter, trained by :class:`StrengthRule` through the
-    last LIX only)."""
+class ALIXEncoder(Encoder):
+    """DrQ-v2's encoder (its convolutions, initialisation and ``repr_dim``: :class:`repro.agent.networks.Encoder`)
+    with LIX after each convolution's ReLU, in training mode, at the shared strength ``strength`` (a parameter,
+    trained by :class:`StrengthRule` through the last LIX only)."""
 
     def __init__(self, obs_shape: tuple[int, int, int], own: ALIXConfig):
-        super().__init__()
-        channels, height, width = obs_shape
-        self.convnet = nn.Sequential(
-            nn.Conv2d(channels, 32, 3, stride=2), nn.ReLU(),
-            nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
-            nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
-            nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
-        )
-        self.repr_dim = 32 * ((height - 3) // 2 + 1 - 6) * ((width - 3) // 2 + 1 - 6)
-        self.apply(orthogonal_init)
+        super().__init__(obs_shape)
         self.strength = nn.Parameter(torch.tensor(float(own.strength_init)))
         self.own = own
+        self.relus = frozenset(i for i, layer in enumerate(self.convnet) if isinstance(layer, nn.ReLU))
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():
             self.strength.clamp_(0.0, 1.0)  # S in [0, 1] wherever it is read (the authors clamp before each use)
         own, h = self.own, obs / 255.0 - 0.5
-        relus = [i for i, layer in enumerate(self.convnet) if isinstance(layer, nn.ReLU)]
         for i, layer in enumerate(self.convnet):
             h = layer(h)
-            if i in relus and self.training:
+            if i in self.relus and self.training:
                 h = local_signal_mixing(h, self.strength.detach(), own.max_shift, own.fixed_batch)
         h = StrengthRule.apply(h, self.strength, own.kernel, own.target, own.eps)
         return h.flatten(1)
@@ -191,8 +182,8 @@ class ALIXBackbone(DrQV2Backbone):
         # the frames as float (the authors' NoShiftAug), or DrQ-v2's random shift with agent.alix.input_shift > 0
         self.aug: Callable[[torch.Tensor], torch.Tensor] = (
             RandomShift(pad=own.input_shift) if own.input_shift > 0 else _as_float)
-        # the backbone's attributes hold A-LIX's encoder and critic (the backbone types them as DrQ-v2's)
-        self.encoder = fast.prepare_encoder(ALIXEncoder(obs_shape, own).to(self.device), self.fast)  # type: ignore[assignment]
+        # an Encoder (the backbone's type) with LIX; the critic below is A-LIX's own (the backbone types it as DrQ-v2's)
+        self.encoder = fast.prepare_encoder(ALIXEncoder(obs_shape, own).to(self.device), self.fast)
         self._encode = torch.compile(self.encoder, dynamic=False) if cfg.compile or self.fast.compile \
             else self.encoder
         self.repr_dim = self.encoder.repr_dim
