@@ -18,7 +18,7 @@ defaults of the optional ones (``weights``, ``action_encoder``, ``batch_size``, 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 import torch
@@ -28,8 +28,8 @@ from repro.agent.modules import LearnerBase, count_parameters
 from repro.agent.networks import ActionEncoder
 from repro.config.schema import AgentConfig
 
-__all__ = ["EpisodicActor", "Learner", "LearnerBase", "Metrics", "OnlineLearner", "ReturnConditioned", "Sampler",
-           "SequenceLearner", "count_parameters"]
+__all__ = ["EpisodeLimit", "EpisodicActor", "Learner", "LearnerBase", "Metrics", "OnlineLearner", "ReturnConditioned",
+           "Sampler", "SequenceLearner", "count_parameters"]
 
 
 @runtime_checkable
@@ -111,6 +111,14 @@ class Sampler(Protocol):
         ...
 
 
+class EpisodeLimit(NamedTuple):
+    """The most steps a dataset episode may have for a learner, and the setting that sets it (named in the
+    refusal, so that the user knows what to raise)."""
+
+    steps: int
+    setting: str
+
+
 @runtime_checkable
 class SequenceLearner(Protocol):
     """An offline learner trained on windows of whole episodes (Decision Transformer): the offline loop
@@ -120,9 +128,10 @@ class SequenceLearner(Protocol):
         ...
 
     @staticmethod
-    def max_episode_length(cfg: AgentConfig) -> int | None:
-        """The most steps a dataset episode may have for this learner's config (DT: the size of its timestep
-        embedding), checked when the dataset loads, before the learner is built; None: any."""
+    def max_episode_length(cfg: AgentConfig) -> EpisodeLimit | None:
+        """The most steps a dataset episode may have for this learner's config and the setting that sets it (DT:
+        the size of its timestep embedding), checked when the dataset loads, before the learner is built;
+        None: any."""
         ...
 
 

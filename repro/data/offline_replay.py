@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 # The one import of the dataset API (repro/data/dataset.py).
+from repro.agent.protocol import EpisodeLimit
 from repro.data.dataset import DatasetError, Manifest, iter_episodes, load_manifest, resolve_dataset
 from repro.data.replay import ReplayBuffer
 
@@ -130,14 +131,16 @@ def load_offline_data(directory: str | Path, *, task: str, action_dim: int, fram
 
 
 def load_offline_episodes(directory: str | Path, *, task: str, action_dim: int, frame_shape: tuple[int, int, int],
-                          max_length: int | None = None) -> OfflineData:
+                          max_length: EpisodeLimit | None = None) -> OfflineData:
     """Check the dataset against the run as ``load_offline_data`` does and keep its episodes (frames held once,
-    no replay); ``max_length``: the most steps an episode may have (DT: its timestep embedding's size)."""
+    no replay); ``max_length``: the most steps an episode may have and the setting that sets it (DT: its
+    timestep embedding's size)."""
     directory = Path(directory)
     manifest, lengths = _checked_manifest(directory, task, action_dim, frame_shape)
-    if max_length is not None and max(lengths) > max_length:
+    if max_length is not None and max(lengths) > max_length.steps:
         raise DatasetError(f"{directory}: an episode has {max(lengths)} steps, more than the learner's maximum "
-                           f"episode length, {max_length} (a setting of its section: `repro train ... --dry-run`)")
+                           f"episode length, {max_length.setting}={max_length.steps}: raise it to at least "
+                           f"{max(lengths)}")
     episodes: list[dict[str, np.ndarray]] = []
     with _unreadable_episodes(directory):
         for index, data in enumerate(iter_episodes(directory)):

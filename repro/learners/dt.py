@@ -20,6 +20,7 @@ from torch import nn
 
 from repro.agent.losses import Metrics
 from repro.agent.modules import LearnerBase, count_parameters
+from repro.agent.protocol import EpisodeLimit
 from repro.config.schema import AgentConfig, DTConfig, learner_section
 from repro.learners.dt_model import DecisionTransformer, EvalContext, SequenceSampler, batch_to_tensors, make_optimizer
 from repro.learners.losses.dt import action_loss
@@ -52,9 +53,9 @@ class DT(LearnerBase):
 
     # ----------------------------------------------------------------- protocol
     @staticmethod
-    def max_episode_length(cfg: AgentConfig) -> int | None:
+    def max_episode_length(cfg: AgentConfig) -> EpisodeLimit | None:
         """``agent.dt.max_timestep``: the timestep embedding's size."""
-        return int(learner_section(cfg, DTConfig).max_timestep)
+        return EpisodeLimit(int(learner_section(cfg, DTConfig).max_timestep), "agent.dt.max_timestep")
 
     @property
     def batch_size(self) -> int:

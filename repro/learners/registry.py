@@ -11,7 +11,7 @@ from typing import cast
 
 import torch
 
-from repro.agent.protocol import Learner, SequenceLearner
+from repro.agent.protocol import EpisodeLimit, Learner, SequenceLearner
 from repro.config.plugins import load_factory
 from repro.config.schema import AgentConfig, learner_specs
 
@@ -28,7 +28,7 @@ def samples_episodes(name: str) -> bool:
     return isinstance(factory, type) and issubclass(factory, SequenceLearner)
 
 
-def max_episode_length(cfg: AgentConfig) -> int | None:
+def max_episode_length(cfg: AgentConfig) -> EpisodeLimit | None:
     """The most steps a dataset episode may have for the learner of ``cfg`` (a :class:`SequenceLearner`'s
     ``max_episode_length``; None: any), known before the learner is built."""
     factory = LEARNERS[cfg.learner]
