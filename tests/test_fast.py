@@ -118,3 +118,30 @@ def test_a_fast_agent_restored_from_its_checkpoint_continues_bit_for_bit(bf16_cp
     for (name, p), q in zip(a.backbone.encoder.named_parameters(), b.backbone.encoder.parameters()):
         assert torch.equal(p, q), name
     assert b.backbone.encoder.convnet[0].weight.is_contiguous(memory_format=torch.channels_last)  # fast layout
+
+
+def test_under_fast_only_the_encoder_runs_in_bf16_the_heads_and_losses_are_float32(bf16_cpu):
+    """Issue 33's bug: with the actor and critic under bf16 autocast the critic's Q values were rounded to 0.125 at
+    Q ~ 27 and the policy's tanh to exactly +-1 from |mu| ~ 3.5, so a saturated policy got an exactly zero gradient
+    and the verification run never left 136 on cartpole_balance. Given the same features, the fast agent's critic
+    loss equals the plain computation bit for bit, and a saturated actor still moves."""
+    agent = tiny_agent(["agent.fast=true"])
+    bb = agent.backbone
+    assert bb.fast.amp
+    batch = make_batch(B=8, seed=1)
+    h, next_h, action, reward, discount = bb.encode_batch(batch)
+    assert h.dtype == next_h.dtype == torch.float32  # the encoder's bf16 output, handed on in float32
+    torch.manual_seed(4)
+    loss, (q1, _), _ = bb.critic_loss(h, action, reward, discount, next_h, step=10)
+    torch.manual_seed(4)
+    with torch.autocast("cpu", enabled=False):  # the same computation outside any autocast
+        want, (want_q1, _), _ = bb.critic_loss(h, action, reward, discount, next_h, step=10)
+    assert torch.equal(loss, want) and torch.equal(q1, want_q1)
+    # a saturated policy: mu ~ 6 (tanh = 0.99999 in float32, exactly 1.0 in bf16, whose gradient would be 0)
+    last = bb.actor.policy[-1]
+    with torch.no_grad():
+        last.weight.zero_()
+        last.bias.fill_(6.0)
+    before = last.bias.detach().clone()
+    bb.actor_step(h.detach(), step=10)
+    assert not torch.equal(last.bias, before)  # Adam moved it: the gradient through tanh was not exactly 0

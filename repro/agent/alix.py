@@ -221,19 +221,18 @@ class ALIXBackbone(DrQV2Backbone):
             self.aux_opt = adam(_unique(aux), lr=lr)
 
     def critic_loss(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
-                    next_h: torch.Tensor, step: int, autocast: bool = True
+                    next_h: torch.Tensor, step: int
                     ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], Metrics]:
         """DrQ-v2's critic loss in the authors' form: sum over the two heads of (Q_i - target)^2, mean over the
         batch."""
         critic, target = cast(ParallelCritic, self.critic), cast(ParallelCritic, self.critic_target)
-        with self.autocast(autocast):
-            with torch.no_grad():
-                dist = self.actor(next_h, self.stddev(step))
-                next_action = dist.sample(clip=self.cfg.stddev_clip)
-                target_v = target.values(next_h, self.encode_action(next_action)).amin(dim=1, keepdim=True)
-                target_q = (reward + discount * target_v).float()
-            qs = critic.values(h, self.encode_action(action)).float()
-            loss = (qs - target_q).square().sum(1).mean()
+        with torch.no_grad():  # float32 always, as the backbone's (its module docstring says why)
+            dist = self.actor(next_h, self.stddev(step))
+            next_action = dist.sample(clip=self.cfg.stddev_clip)
+            target_v = target.values(next_h, self.encode_action(next_action)).amin(dim=1, keepdim=True)
+            target_q = reward + discount * target_v
+        qs = critic.values(h, self.encode_action(action))
+        loss = (qs - target_q).square().sum(1).mean()
         q1, q2 = qs[:, 0:1], qs[:, 1:2]
         return loss, (q1, q2), critic_metrics(loss, q1, q2, target_q)
 

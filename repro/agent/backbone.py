@@ -8,8 +8,13 @@ objectives (``agent.objectives``) and their shared heads, the optimizers (built 
 step, the target update and the auxiliary step. Each learner's ``update()`` calls them in its reference's order.
 The losses are the pure functions of ``repro/agent/losses.py``.
 
-``autocast``: the online agent runs its forward passes under ``agent.amp``'s bfloat16 autocast; the offline
-learners encode and compute the critic loss without it (``autocast=False``), as they always have.
+``autocast``: with ``agent.amp`` (or ``agent.fast`` where bf16 is native) the online agent runs the encoder's
+convolutions under bfloat16 autocast and everything after them in float32: the trunks, the actor's tanh, the Q heads,
+the objectives' heads and every loss (``encode``). Under a wider autocast the actor's tanh rounds to exactly +-1 from
+|mu| ~ 3.5 on (bf16 has 8 bits), so its gradient is exactly 0 and a policy saturated early never recovers, and the Q
+values are rounded to 0.125 at Q ~ 27, coarser than the differences between actions the critic must learn: the
+verification run of issue 33 stayed at 136 on cartpole_balance that way (docs/verification.md). The offline learners
+encode without it (``autocast=False``), as they always have.
 """
 
 from __future__ import annotations
@@ -193,54 +198,60 @@ class DrQV2Backbone:
 
     # ----------------------------------------------------------------- the steps an update is made of
     def autocast(self, enabled: bool = True) -> torch.autocast:
-        """bfloat16 autocast of forward passes when ``enabled`` and ``agent.amp`` is on, or ``agent.fast`` where bf16
-        is native (losses stay float32)."""
+        """bfloat16 autocast when ``enabled`` and ``agent.amp`` is on, or ``agent.fast`` where bf16 is native: used
+        around the encoder's convolutions only (``encode``)."""
         on = enabled and (self.cfg.amp or self.fast.amp)
         # a CUDA graph must not keep autocast's cast weights from its recording (graphs.py): no cache then
         return torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=on,
                               cache_enabled=not self.fast.graphs)
+
+    def encode(self, obs: torch.Tensor, autocast: bool = True) -> torch.Tensor:
+        """The encoder's output for shifted frames, in float32: its convolutions under :meth:`autocast` (bf16 with
+        ``agent.amp`` / ``agent.fast``), nothing after them (see the module docstring)."""
+        with self.autocast(autocast):
+            h = self._encode(obs)
+        return h.float()
 
     def encode_batch(self, batch: dict[str, torch.Tensor], autocast: bool = True) -> EncodedBatch:
         """(h, h', a, r, discount): the shifted frames encoded (h with the encoder's gradient, h' without) and the
         batch's action, reward and discount (gamma^n x not-done). Actions are data: no gradient flows into them."""
         obs = self.aug(batch["obs"])  # the shift converts the uint8 frames (agent.fast: after cropping)
         next_obs = self.aug(batch["next_obs"])
-        with self.autocast(autocast):
-            h = self._encode(obs)
-            with torch.no_grad():
-                next_h = self._encode(next_obs)
+        h = self.encode(obs, autocast)
+        with torch.no_grad():
+            next_h = self.encode(next_obs, autocast)
         return h, next_h, batch["action"].detach(), batch["reward"], batch["discount"]
 
     def critic_loss(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
-                    next_h: torch.Tensor, step: int, autocast: bool = True
+                    next_h: torch.Tensor, step: int
                     ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], Metrics]:
         """DrQ-v2's critic loss sum_i mse(Q_i(h, u(a)), r + discount x min_i Qtarget_i(h', u(a'))), a' a
-        clipped-noise policy sample at h'; returns the loss, (Q1, Q2) at the data actions and the metrics."""
-        with self.autocast(autocast):
-            with torch.no_grad():
-                dist = self.actor(next_h, self.stddev(step))
-                next_action = self.encode_action(dist.sample(clip=self.cfg.stddev_clip))
-                tq1, tq2 = self.critic_target(next_h, next_action)
-                target_q = losses.critic_target(reward, discount, tq1, tq2)
-            q1, q2 = self.critic(h, self.encode_action(action))
-            loss, (q1, q2) = losses.critic_loss(q1, q2, target_q)
+        clipped-noise policy sample at h'; returns the loss, (Q1, Q2) at the data actions and the metrics. In
+        float32 always (the module docstring says why)."""
+        with torch.no_grad():
+            dist = self.actor(next_h, self.stddev(step))
+            next_action = self.encode_action(dist.sample(clip=self.cfg.stddev_clip))
+            tq1, tq2 = self.critic_target(next_h, next_action)
+            target_q = losses.critic_target(reward, discount, tq1, tq2)
+        q1, q2 = self.critic(h, self.encode_action(action))
+        loss, (q1, q2) = losses.critic_loss(q1, q2, target_q)
         return loss, (q1, q2), losses.critic_metrics(loss, q1, q2, target_q)
 
     def critic_step(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
-                    next_h: torch.Tensor, step: int, autocast: bool = True) -> Metrics:
+                    next_h: torch.Tensor, step: int) -> Metrics:
         """One step of DrQ-v2's critic loss on the critic (with the action encoder) and the encoder."""
-        loss, _, metrics = self.critic_loss(h, action, reward, discount, next_h, step, autocast)
+        loss, _, metrics = self.critic_loss(h, action, reward, discount, next_h, step)
         optimize(loss, self.critic_opt, self.encoder_opt)
         return metrics
 
     def actor_step(self, h: torch.Tensor, step: int) -> Metrics:
-        """One step of DrQ-v2's actor loss -min_i Q_i(h, u(a~)) on the actor (``h``: detached features)."""
-        with self.autocast():
-            dist = self.actor(h, self.stddev(step))
-            action = dist.sample(clip=self.cfg.stddev_clip)
-            log_prob = dist.log_prob(action).sum(-1, keepdim=True)
-            q1, q2 = self.critic(h, self.encode_action(action))
-            loss = losses.actor_loss(q1, q2)
+        """One step of DrQ-v2's actor loss -min_i Q_i(h, u(a~)) on the actor (``h``: detached features), in
+        float32 always: the policy's tanh saturates to exactly +-1 in bf16 (the module docstring)."""
+        dist = self.actor(h, self.stddev(step))
+        action = dist.sample(clip=self.cfg.stddev_clip)
+        log_prob = dist.log_prob(action).sum(-1, keepdim=True)
+        q1, q2 = self.critic(h, self.encode_action(action))
+        loss = losses.actor_loss(q1, q2)
         optimize(loss, self.actor_opt)
         return losses.actor_metrics(loss, log_prob, dist.entropy().sum(-1))
 
@@ -253,15 +264,14 @@ class DrQV2Backbone:
         without objectives nothing, and no metrics."""
         if self.aux_opt is None:
             return {}
-        aux = AuxBatch(batch, self._encode, self.aug, self.encode_action_sequence, self.cfg.reward_target,
+        aux = AuxBatch(batch, self.encode, self.aug, self.encode_action_sequence, self.cfg.reward_target,
                        self.encode_action)
         total = torch.zeros((), device=self.device)
         metrics: Metrics = {}
-        with self.autocast():
-            for name, objective in self.objectives.items():
-                loss, m = objective(aux)
-                total = total + self.weights[name] * loss.float()
-                metrics.update(m)
+        for name, objective in self.objectives.items():  # the encoder under autocast (encode), the heads in float32
+            loss, m = objective(aux)
+            total = total + self.weights[name] * loss
+            metrics.update(m)
         optimize(total, self.aux_opt)
         for objective in cast("dict[str, Objective]", self.objectives).values():
             objective.after_update()

@@ -50,7 +50,7 @@ class CQL(BackboneLearner):
                      next_h: torch.Tensor, step: int) -> Metrics:
         """One step of DrQ-v2's critic loss plus both heads' regularisers on the critic and the encoder."""
         bb = self.backbone
-        loss, q_data, metrics = bb.critic_loss(h, action, reward, discount, next_h, step, autocast=False)
+        loss, q_data, metrics = bb.critic_loss(h, action, reward, discount, next_h, step)
         regs, reg_metrics = self._regularisers(h, next_h, q_data, step)
         loss = loss + regs[0] + regs[1]
         metrics.update(reg_metrics)

@@ -33,7 +33,7 @@ class TD3BC(BackboneLearner):
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
         bb = self.backbone
         h, next_h, action, reward, discount = bb.encode_batch(batch, autocast=False)
-        metrics = bb.critic_step(h, action, reward, discount, next_h, step, autocast=False)
+        metrics = bb.critic_step(h, action, reward, discount, next_h, step)
         metrics.update(self._actor_step(h.detach(), action, step))
         bb.update_target()
         metrics.update(bb.aux_step(batch))
