@@ -131,11 +131,13 @@ def test_under_fast_only_the_encoder_runs_in_bf16_the_heads_and_losses_are_float
     batch = make_batch(B=8, seed=1)
     h, next_h, action, reward, discount = bb.encode_batch(batch)
     assert h.dtype == next_h.dtype == torch.float32  # the encoder's bf16 output, handed on in float32
+    plain = tiny_agent([]).backbone  # the plain path (no autocast anywhere) with the fast agent's heads
+    for name in ("actor", "critic", "critic_target"):
+        getattr(plain, name).load_state_dict(getattr(bb, name).state_dict())
     torch.manual_seed(4)
     loss, (q1, _), _ = bb.critic_loss(h, action, reward, discount, next_h, step=10)
     torch.manual_seed(4)
-    with torch.autocast("cpu", enabled=False):  # the same computation outside any autocast
-        want, (want_q1, _), _ = bb.critic_loss(h, action, reward, discount, next_h, step=10)
+    want, (want_q1, _), _ = plain.critic_loss(h, action, reward, discount, next_h, step=10)
     assert torch.equal(loss, want) and torch.equal(q1, want_q1)
     # a saturated policy: mu ~ 6 (tanh = 0.99999 in float32, exactly 1.0 in bf16, whose gradient would be 0)
     last = bb.actor.policy[-1]

@@ -5,8 +5,8 @@ learners on the DrQ-v2 backbone (``repro/agent/backbone.py``) all use these.
     critic = sum_i mse(Q_i(h, u(a)), target)
     actor  = -mean min_i Q_i(sg(h), u(a~))                   a~ a clipped-noise policy sample at sg(h)
 
-Q values may come from a bfloat16 autocast (``agent.amp``): the target and the Q values are cast to float32
-before the losses (a no-op in float32). Metrics are detached 0-d tensors (no host sync).
+The backbone computes Q in float32 (``agent.amp`` autocasts the encoder only: repro/agent/backbone.py); the casts to
+float32 below keep the losses float32 for any caller. Metrics are detached 0-d tensors (no host sync).
 """
 
 from __future__ import annotations

@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-# The one import of the dataset API (repro/data/dataset.py).
 from repro.agent.protocol import EpisodeLimit
+
+# The one import of the dataset API (repro/data/dataset.py).
 from repro.data.dataset import DatasetError, Manifest, iter_episodes, load_manifest, resolve_dataset
 from repro.data.replay import ReplayBuffer
 
