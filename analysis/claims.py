@@ -9,6 +9,10 @@ missing. A claim about every task ("on each of the nine tasks") is refuted by on
 the cells that exist, even if others are missing. When the runs fall short, the verdict is "not enough
 data" with the reason; on request (``Context.indicative``) an indicative reading at the frames the runs
 reach is added, labelled as such and never counted as supported or refuted.
+
+Each claim is defined once, in :data:`SPECS` (:class:`ClaimSpec`: its check and rule, its cells from the runs and
+from the paper for the power simulation, or why it is not simulated); `repro claims`, `repro plan --claims`
+(analysis/power.py) and the report list the claims through :func:`claim_specs`.
 """
 
 from __future__ import annotations
@@ -22,11 +26,23 @@ import pandas as pd
 
 from analysis import select
 from analysis.calibration import SOURCE_TEXT, published_values
+from analysis.cells import (
+    Cells,
+    CellSource,
+    drqv2_cell,
+    means_table,
+    observed_cells,
+    published_fixed_cells,
+    stacked,
+    table1_cells,
+    table2_cells,
+    table3_cells,
+)
 from analysis.claim_budget import ClaimBudget, claim_runs, frames_text, load_budgets, reach, seed_counts
 from analysis.context import Context
 from analysis.offline_tables import offline_runs
-from analysis.paper import DMC9, METAWORLD6, OFFLINE_TASKS
-from analysis.robustness import seed_spread, solved_counts
+from analysis.paper import DMC9, METAWORLD6, OFFLINE_TASKS, PaperData
+from analysis.robustness import cell_spread, seed_spread, solved_counts
 from analysis.speed import speed_measurements
 from analysis.stats import grand_mean_ci, ratio_of_means, ratio_to_task_means, score_matrix
 from analysis.tables import write_table
@@ -60,17 +76,47 @@ class NotEnoughData(Exception):
     """Raised by a check when the cells it needs are missing or have too few seeds."""
 
 
-CHECKS: dict[str, tuple[Callable[[Context], tuple[str, str]], str]] = {}
+Check = Callable[[Context], tuple[str, str]]  # a claim's check on the runs: (verdict, evidence)
 
 
-def check(claim_id: str, rule: str):
-    """Register ``fn(ctx) -> (verdict, evidence)`` for ``claim_id`` with a one-line ``rule``."""
+@dataclass(frozen=True)
+class Simulation:
+    """How the power simulation (analysis/power.py) runs a claim: ``sources(ctx, budget)`` the claim's cells with
+    where the paper gives each (analysis/cells.py), ``judge(ctx, cells)`` building the check's input from one draw
+    and calling the claim's rule (the function its check calls), ``observed(ctx)`` the same cells from the user's
+    runs (None: not conditioned on runs), ``tasks`` those of its runs (what its seeds cost), ``sims`` the draws if
+    fewer than the caller's, ``reps`` the bootstrap repetitions the rule runs in every draw (0: none)."""
 
-    def deco(fn: Callable[[Context], tuple[str, str]]):
-        CHECKS[claim_id] = (fn, rule)
-        return fn
+    sources: Callable[[Context, float], list[CellSource]]
+    judge: Callable[[Context, Cells], tuple[str, str]]
+    observed: Callable[[Context], Cells] | None
+    tasks: tuple[str, ...]
+    sims: int | None = None
+    reps: int = 0
+    notes: tuple[str, ...] = ()
 
-    return deco
+
+@dataclass(frozen=True)
+class ClaimSpec:
+    """One claim, defined once (:data:`SPECS`) and read by `repro claims`, `repro plan --claims` and the report:
+    its ``check`` on the runs with its one-line ``rule``, and either its ``simulation`` (its cells from the runs and
+    from the paper) or why the power simulation cannot run it (``not_simulated``). Its budget and seed minimum are
+    the row of analysis/claim_budgets.csv with its id (a reading's: the claim it reads). A ``reading_of`` spec is
+    another reading of that claim of claims.csv (its budget, its text with ``note`` appended), listed after it and
+    not counted among the paper's claims."""
+
+    id: str
+    check: Check
+    rule: str
+    simulation: Simulation | None = None
+    not_simulated: str = ""
+    reading_of: str = ""
+    note: str = ""
+
+    @property
+    def claim_id(self) -> str:
+        """The id of the claim of claims.csv (and of its row of claim_budgets.csv) this spec judges."""
+        return self.reading_of or self.id
 
 
 # ---------------------------------------------------------------- helpers
@@ -156,8 +202,6 @@ def offline_printed(ctx: Context) -> dict[str, float]:
 
 
 # ---------------------------------------------------------------- checks
-@check("online_avg_gain", "mean over the 9 tasks of TACO / DrQ-v2 >= 1.3 (about 1.4x, tolerance 0.1); CI by rliable "
-       "bootstrap")
 def _online_avg_gain(ctx: Context) -> tuple[str, str]:
     df = online_rows(ctx)
     table = means(df, ["task", "method"])
@@ -174,7 +218,8 @@ def avg_gain_rule(ctx: Context, x: np.ndarray, y: np.ndarray) -> tuple[str, str]
     means, the CI is evidence (``ctx.reps`` 0: no CI)."""
     r, lo, hi = ratio_of_means(x, y, ctx.reps, ctx.seed)
     verdict = SUPPORTED if r >= GAIN_BAR else REFUTED
-    return verdict, f"TACO/DrQ-v2 = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); paper: 1.4x (Table 1 gives 1.397)"
+    return verdict, (f"TACO/DrQ-v2 = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); paper: 1.4x (Table 1 gives "
+                     f"{ctx.paper.online_gain:.3f})")
 
 
 PUBLISHED_GAIN_ID = "online_avg_gain_vs_published"  # the reading of online_avg_gain against the published curves
@@ -206,10 +251,9 @@ def published_gain_rule(ctx: Context, x: np.ndarray, ys: Sequence[np.ndarray]) -
     verdict = SUPPORTED if r >= GAIN_BAR else REFUTED
     return verdict, (f"TACO/DrQ-v2 (published curves at {frames_text(frame)}) = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); "
                      f"published DrQ-v2 9-task mean {np.mean([np.mean(y) for y in ys]):.1f}; paper: 1.4x (Table 1 "
-                     "gives 1.397 with its own DrQ-v2)")
+                     f"gives {ctx.paper.online_gain:.3f} with its own DrQ-v2)")
 
 
-@check("online_beats_drqv2_all", "TACO mean > DrQ-v2 mean on each of the 9 tasks")
 def _beats_drqv2(ctx: Context) -> tuple[str, str]:
     return beats_drqv2_rule(ctx, means(online_rows(ctx), ["task", "method"]))
 
@@ -219,8 +263,6 @@ def beats_drqv2_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tup
     return universal(ctx, table, [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9])
 
 
-@check("online_beats_model_based", "TACO mean > both DreamerV3 and TD-MPC on >= 6 of 9 tasks (baselines from runs, "
-       "else the paper's Table 1)")
 def _beats_model_based(ctx: Context) -> tuple[str, str]:
     return beats_model_based_rule(ctx, means(online_rows(ctx), ["task", "method"]))
 
@@ -255,9 +297,6 @@ def _mean_curves(ctx: Context, curves: pd.DataFrame, task: str) -> dict[str, pd.
     return out
 
 
-@check("reacher_speed", "on reacher_hard, with curves cut at the budget (1.5M) and target = 95% of TACO's best "
-       "mean-curve value: TACO reaches it within 2/3 of the budget (1.0M frames) and DrQ-v2 needs >= 1.5x as many "
-       "frames (or never does)")
 def _reacher_speed(ctx: Context) -> tuple[str, str]:
     curves = labelled(select.online_main(ctx.curves, ctx.experiment_map))
     mc = _mean_curves(ctx, curves, "reacher_hard")
@@ -274,8 +313,6 @@ def _reacher_speed(ctx: Context) -> tuple[str, str]:
                                             "(paper: 0.75M vs 1.5M)")
 
 
-@check("longer_training", "TACO mean > DrQ-v2 mean at the last common frame (>= the budget, 2M) on quadruped_run, "
-       "hopper_hop, walker_run, cheetah_run")
 def _longer(ctx: Context) -> tuple[str, str]:
     curves = labelled(select.online_main(ctx.curves, ctx.experiment_map))
     lines, fails, missing = [], [], []
@@ -299,7 +336,6 @@ def _longer(ctx: Context) -> tuple[str, str]:
     return SUPPORTED, "; ".join(lines)
 
 
-@check("metaworld", "TACO mean success > each baseline's (DrQ-v2; A-LIX if run) on each of the 6 tasks at the budget")
 def _metaworld(ctx: Context) -> tuple[str, str]:
     table = means(labelled(select.metaworld(ctx.scores, ctx.experiment_map)), ["task", "method"])
     bases = ["DrQ-v2"] + (["A-LIX"] if any(k[1] == "A-LIX" for k in table) else [])
@@ -307,8 +343,6 @@ def _metaworld(ctx: Context) -> tuple[str, str]:
     return verdict, ev + ("" if "A-LIX" in bases else " (A-LIX not run: checked against DrQ-v2 only)")
 
 
-@check("action_repr_gain", "TACO mean > TACO w/o action repr mean on every task of the action_repr sweep (named: "
-       "quadruped_run, hopper_hop, reacher_hard)")
 def _action_repr_gain(ctx: Context) -> tuple[str, str]:
     df = select.action_repr(ctx.scores, ctx.experiment_map)
     table = means(df, ["task", "label"])
@@ -320,8 +354,6 @@ def _action_repr_gain(ctx: Context) -> tuple[str, str]:
     return verdict, f"gains {', '.join(gains)} (paper: +12.2% quadruped_run ... +70.4% hopper_hop). {ev}"
 
 
-@check("no_action_repr_vs_drqv2", "TACO w/o action repr beats DrQ-v2 on quadruped_run and reacher_hard, and is within "
-       "±20% of DrQ-v2 on the other tasks of the sweep")
 def _no_repr_vs_drqv2(ctx: Context) -> tuple[str, str]:
     df = select.action_repr(ctx.scores, ctx.experiment_map)
     table = means(df, ["task", "label"])
@@ -338,8 +370,6 @@ def _no_repr_vs_drqv2(ctx: Context) -> tuple[str, str]:
                                             + " (paper: +18% quadruped_run, +51% reacher_hard)")
 
 
-@check("tsne_clusters", f"silhouette of the 4 centroid labels on the t-SNE embedding: latent >= {CLUSTER_THRESHOLD} "
-       f"and raw < {CLUSTER_THRESHOLD}")
 def _tsne(ctx: Context) -> tuple[str, str]:
     if not ctx.results.runs.empty and "tsne" not in ctx.cache:
         from analysis.tsne import find_tsne_run
@@ -361,8 +391,6 @@ def _tsne(ctx: Context) -> tuple[str, str]:
         f"spaces: raw {res.silhouette_raw:.3f}, latent {res.silhouette_latent:.3f}); run {info['run_id']}")
 
 
-@check("batch_size", "on quadruped_run TACO's mean is non-decreasing in batch size and >= 10% higher at the largest "
-       "than at the smallest; DrQ-v2's range is <= 15% of its mean")
 def _batch(ctx: Context) -> tuple[str, str]:
     df = select.batch_size(ctx.scores, ctx.experiment_map)
     table = means(df, ["method", "batch_size"])
@@ -381,8 +409,6 @@ def _batch(ctx: Context) -> tuple[str, str]:
     return (SUPPORTED if grows and flat else REFUTED), ev + f" (TACO grows: {grows}; DrQ-v2 flat: {flat})"
 
 
-@check("objective_removal", "on quadruped_run the drop full - no TACO is positive and larger than the drops of no "
-       "CURL and no reward")
 def _objectives(ctx: Context) -> tuple[str, str]:
     table = means(select.objective_removal(ctx.scores, ctx.experiment_map), ["label"])
     require(ctx, table, [("full",), ("no TACO",), ("no CURL",), ("no reward",)])
@@ -393,8 +419,6 @@ def _objectives(ctx: Context) -> tuple[str, str]:
                                             + ", ".join(f"{k} {v:.0f}" for k, v in drops.items()))
 
 
-@check("vs_repr_objectives", "TACO mean > each other objective of Table 2 (SPR, ATC, DRIML; where the paper has its "
-       "value) on each of the 5 tasks")
 def _vs_repr(ctx: Context) -> tuple[str, str]:
     return vs_repr_rule(ctx, means(labelled(select.repr_objectives(ctx.scores, ctx.experiment_map)),
                                    ["task", "method"]))
@@ -424,7 +448,6 @@ def _offline_table(ctx: Context, value: str = "score") -> tuple[dict, pd.DataFra
     return means(df, ["task", "dataset", "method"], value), df
 
 
-@check("offline_gain", "return of X+TACO > X for X in TD3+BC, CQL on each of the 12 task/dataset pairs")
 def _offline_gain(ctx: Context) -> tuple[str, str]:
     table, _ = _offline_table(ctx)
     return offline_gain_rule(ctx, table)
@@ -437,9 +460,6 @@ def offline_gain_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tu
     return universal(ctx, table, pairs)
 
 
-@check("offline_average", "each printed average of Table 3's average row (TD3+BC+TACO, TD3+BC, CQL+TACO, CQL; "
-       "repro_data/paper/offline_average.csv) lies in the 95% CI of the reproduced average normalised score over the "
-       "12 pairs")
 def _offline_average(ctx: Context) -> tuple[str, str]:
     table, df = _offline_table(ctx, "normalized")
     pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
@@ -466,8 +486,6 @@ def offline_average_rule(ctx: Context, matrices: dict[str, np.ndarray]) -> tuple
     return (SUPPORTED if ok else REFUTED), "; ".join(lines)
 
 
-@check("horizon_choice", "K=3 > K=1 on hopper_hop, quadruped_walk, acrobot_swingup, reacher_hard; K=1 > K=3 on "
-       "quadruped_run, walker_run; K=1 and K=3 > DrQ-v2 on all 9 tasks")
 def _horizon(ctx: Context) -> tuple[str, str]:
     table = means(select.horizon(ctx.scores, ctx.experiment_map), ["task", "label"])
     pairs = [((t, "K=3"), (t, "K=1"), f"{t} K3>K1")
@@ -477,8 +495,6 @@ def _horizon(ctx: Context) -> tuple[str, str]:
     return universal(ctx, table, pairs)
 
 
-@check("action_repeat", "on hopper_hop the K in {1,3,5} with the highest mean is 5 at action repeat 1, 3 at 2 and 1 "
-       "at 4")
 def _action_repeat(ctx: Context) -> tuple[str, str]:
     table = means(select.action_repeat(ctx.scores, ctx.experiment_map), ["label"])
     keys = [(f"AR={a}, K={k}",) for a in (1, 2, 4) for k in (1, 3, 5)]
@@ -489,8 +505,6 @@ def _action_repeat(ctx: Context) -> tuple[str, str]:
                                             + " (paper: AR1 K=5, AR2 K=3, AR4 K=1)")
 
 
-@check("action_dim", "on quadruped_run the means at dims 6 and 24 are below every intermediate dim's, and the "
-       "intermediate dims' range is <= 15% of their mean")
 def _action_dim(ctx: Context) -> tuple[str, str]:
     df = select.action_dim_runs(ctx.scores, ctx.experiment_map)
     table = means(df, ["dim"]) if not df.empty else {}
@@ -504,9 +518,15 @@ def _action_dim(ctx: Context) -> tuple[str, str]:
     return (SUPPORTED if ok else REFUTED), ", ".join(f"d={d} {get(ctx, table, d):.0f}" for d in have)
 
 
-@check("speed", "on one hardware, FPS(DrQ-v2 B256) / FPS(TACO B1024) within ±25% of 3.6, and TACO's FPS decreases "
-       "with batch size where measured (from `repro bench` files and runs of experiment 'speed'; other runs' FPS only "
-       "in an indicative reading)")
+def speed_printed(paper: PaperData) -> tuple[str, str]:
+    """What the speed claim's evidence quotes from Tables 4-5 (the packaged paper data): the ratio's source and
+    TACO's FPS per batch size."""
+    taco = {b: paper.fps("TACO", b) for b in (256, 512, 1024)}
+    drq = paper.fps("DrQ-v2", 256)
+    return (f"(paper 3.6, from its table {drq:g}/{taco[1024]:g} = {drq / taco[1024]:.2f})",
+            "(paper " + ", ".join(f"B{b} {v:g}" for b, v in taco.items()) + ")")
+
+
 def _speed(ctx: Context) -> tuple[str, str]:
     meas = speed_measurements(ctx.results, fallback=ctx.below_budget)
     meas = meas[meas["speedup"] == "plain"]
@@ -519,14 +539,12 @@ def _speed(ctx: Context) -> tuple[str, str]:
             taco = [(b, fps[("TACO", b)]) for b in (256, 512, 1024) if ("TACO", b) in fps.index]
             decreasing = all(a[1] > b[1] for a, b in zip(taco, taco[1:]))
             ok = 0.75 * 3.6 <= ratio <= 1.25 * 3.6 and decreasing
-            ev = f"on {hw}: ratio {ratio:.2f} (paper 3.6, from its table 130/35 = 3.71); TACO FPS " + ", ".join(
-                f"B{b} {v:.1f}" for b, v in taco) + " (paper B256 94, B512 65, B1024 35)"
+            ev = (f"on {hw}: ratio {ratio:.2f} {speed_printed(ctx.paper)[0]}; TACO FPS "
+                  + ", ".join(f"B{b} {v:.1f}" for b, v in taco) + f" {speed_printed(ctx.paper)[1]}")
             return (SUPPORTED if ok else REFUTED), ev
     raise NotEnoughData("need TACO B1024 and DrQ-v2 B256 FPS measured on the same hardware")
 
 
-@check("seed_robustness", "TACO's std over seeds < DrQ-v2's on >= 7 of the 9 tasks, and DrQ-v2 has >= 1 broken seed "
-       "(below half its cell's median)")
 def _seeds(ctx: Context) -> tuple[str, str]:
     df = select.online_main(ctx.scores, ctx.experiment_map)
     df = df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df
@@ -549,8 +567,6 @@ def seed_robustness_rule(ctx: Context, spread: dict[tuple, dict]) -> tuple[str, 
                                             f"TACO broken seeds: {taco_broken}")
 
 
-@check("manipulator", "within the budget (30M frames) TACO solves (an eval return >= 500) at least a third of its "
-       "seeds (paper 3/6) and DrQ-v2 none")
 def _manipulator(ctx: Context) -> tuple[str, str]:
     curves = select.manipulator(ctx.curves, ctx.experiment_map)
     solved = solved_counts(curves, ctx.budget)
@@ -572,6 +588,201 @@ def manipulator_rule(ctx: Context, s: dict[str, dict]) -> tuple[str, str]:
     if last >= ctx.budget:
         return REFUTED, ev
     raise NotEnoughData(ev + f"; runs reach only {frames_text(last)} of {ctx.budget_text()}")
+
+
+# ---------------------------------------------------------------- the claims' cells (the power simulation's input)
+CI_REPS = 300  # bootstrap repetitions per simulated draw where the verdict reads a CI (offline_average)
+CI_SIMS = 100  # simulated draws of such a claim (each runs four bootstraps)
+
+
+def _online_sources(ctx: Context, budget: float) -> list[CellSource]:
+    """TACO's Table 1 cells and DrQ-v2's (its published per-seed values at ``budget``) on the nine tasks."""
+    return table1_cells(ctx, DMC9) + [drqv2_cell(ctx, t, budget, (t, "DrQ-v2")) for t in DMC9]
+
+
+def _published_sources(ctx: Context, budget: float) -> list[CellSource]:
+    return table1_cells(ctx, DMC9) + published_fixed_cells(ctx, DMC9, budget)
+
+
+def _manipulator_sources(ctx: Context, budget: float) -> list[CellSource]:
+    # appendix G's counts are in its text (claims.csv), not in a table of the paper data
+    return [CellSource(("TACO",), "bernoulli", 3 / 6, math.nan, source="appendix G: 3 of 6 seeds solve"),
+            CellSource(("DrQ-v2",), "bernoulli", 0.0, math.nan, source="appendix G: 0 of 6 seeds solve")]
+
+
+def _judge_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
+    require(ctx, means_table(cells), [(t, m) for t in DMC9 for m in ("TACO", "DrQ-v2")])
+    return avg_gain_rule(ctx, stacked(cells, [(t, "TACO") for t in DMC9]),
+                         stacked(cells, [(t, "DrQ-v2") for t in DMC9]))
+
+
+def _judge_published_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
+    require(ctx, means_table(cells), [(t, "TACO") for t in DMC9])
+    ys = [cells[(t, "published")] for t in DMC9]
+    if any(len(y) < ctx.min_seeds for y in ys):
+        raise NotEnoughData(f"the published DrQ-v2 curves do not cover {ctx.budget_text()} on every task")
+    return published_gain_rule(ctx, stacked(cells, [(t, "TACO") for t in DMC9]), ys)
+
+
+def _judge_offline_average(ctx: Context, cells: Cells) -> tuple[str, str]:
+    pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
+    require(ctx, means_table(cells), [(t, d, m) for t, d in pairs for m in OFFLINE_AVERAGED])
+    return offline_average_rule(ctx, {m: stacked(cells, [(t, d, m) for t, d in pairs]) for m in OFFLINE_AVERAGED})
+
+
+def _judge_seeds(ctx: Context, cells: Cells) -> tuple[str, str]:
+    return seed_robustness_rule(ctx, {k: cell_spread(v) for k, v in cells.items() if len(v)})
+
+
+def _judge_manipulator(ctx: Context, cells: Cells) -> tuple[str, str]:
+    return manipulator_rule(ctx, {k[0]: {"runs": len(v), "solved": int(v.sum()), "last_frame": float(ctx.budget)}
+                                  for k, v in cells.items()})
+
+
+def _on_table(rule: Callable[[Context, dict], tuple[str, str]]) -> Callable[[Context, Cells], tuple[str, str]]:
+    return lambda ctx, cells: rule(ctx, means_table(cells))
+
+
+def _online_observed(ctx: Context) -> Cells:
+    return observed_cells(online_rows(ctx), ["task", "method"])
+
+
+def _offline_observed(ctx: Context) -> Cells:
+    return observed_cells(offline_runs(offline_scores(ctx), ctx.experiment_map), ["task", "dataset", "method"],
+                          "normalized")
+
+
+def _seeds_observed(ctx: Context) -> Cells:
+    df = select.online_main(ctx.scores, ctx.experiment_map)
+    return observed_cells(df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df, ["task", "label"])
+
+
+def _repr_observed(ctx: Context) -> Cells:
+    return observed_cells(labelled(select.repr_objectives(ctx.scores, ctx.experiment_map)), ["task", "method"])
+
+
+_OFFLINE_NOTE = ("the rule compares returns; the cells are Table 3's normalised scores (100 x return / the reference "
+                 "return, increasing in the return), so every comparison agrees")
+_FIGURE_ONLY = "the paper gives {} only as a figure ({}), with no numbers"
+
+# ---------------------------------------------------------------- the claims
+# Every claim of claims.csv, in its order, each once (tests/test_claim_sources.py).
+SPECS: tuple[ClaimSpec, ...] = (
+    ClaimSpec("online_avg_gain", _online_avg_gain,
+              "mean over the 9 tasks of TACO / DrQ-v2 >= 1.3 (about 1.4x, tolerance 0.1); CI by rliable "
+              "bootstrap",
+              Simulation(_online_sources, _judge_gain, _online_observed, DMC9)),
+    ClaimSpec(PUBLISHED_GAIN_ID, _online_avg_gain_published, PUBLISHED_GAIN_RULE,
+              Simulation(_published_sources, _judge_published_gain, _online_observed, DMC9,
+                         notes=("DrQ-v2 is the published curves as published (fixed data, as `repro claims` reads "
+                                "them)",)),
+              reading_of="online_avg_gain",
+              note=f"read against DrQ-v2 as published by its authors, not against your DrQ-v2 runs: {SOURCE_TEXT}"),
+    ClaimSpec("online_beats_drqv2_all", _beats_drqv2,
+              "TACO mean > DrQ-v2 mean on each of the 9 tasks",
+              Simulation(_online_sources, _on_table(beats_drqv2_rule), _online_observed, DMC9)),
+    ClaimSpec("online_beats_model_based", _beats_model_based,
+              "TACO mean > both DreamerV3 and TD-MPC on >= 6 of 9 tasks (baselines from runs, "
+              "else the paper's Table 1)",
+              Simulation(lambda ctx, budget: table1_cells(ctx, DMC9), _on_table(beats_model_based_rule),
+                         _online_observed, DMC9,
+                         notes=("DreamerV3 and TD-MPC are Table 1's printed means (not rerun by any sweep), as the "
+                                "rule reads them",))),
+    ClaimSpec("reacher_speed", _reacher_speed,
+              "on reacher_hard, with curves cut at the budget (1.5M) and target = 95% of TACO's best mean-curve "
+              "value: TACO reaches it within 2/3 of the budget (1.0M frames) and DrQ-v2 needs >= 1.5x as many frames "
+              "(or never does)",
+              not_simulated="its rule reads TACO's and DrQ-v2's mean learning curves up to 1.5M frames; the paper "
+                            "gives TACO's curve only as a figure (F4), with no per-seed or per-frame numbers"),
+    ClaimSpec("longer_training", _longer,
+              "TACO mean > DrQ-v2 mean at the last common frame (>= the budget, 2M) on quadruped_run, "
+              "hopper_hop, walker_run, cheetah_run",
+              not_simulated="its rule reads both methods at 2M frames; the paper gives those only as learning-curve "
+                            "figures (F4), with no numbers at 2M"),
+    ClaimSpec("metaworld", _metaworld,
+              "TACO mean success > each baseline's (DrQ-v2; A-LIX if run) on each of the 6 tasks at the budget",
+              not_simulated="the paper gives Meta-world success rates only as figures (F5), with no mean or std per "
+                            "task"),
+    ClaimSpec("action_repr_gain", _action_repr_gain,
+              "TACO mean > TACO w/o action repr mean on every task of the action_repr sweep (named: "
+              "quadruped_run, hopper_hop, reacher_hard)",
+              not_simulated="the paper gives the gains as percentages of a bar figure (F3) with no std over seeds"),
+    ClaimSpec("no_action_repr_vs_drqv2", _no_repr_vs_drqv2,
+              "TACO w/o action repr beats DrQ-v2 on quadruped_run and reacher_hard, and is within "
+              "±20% of DrQ-v2 on the other tasks of the sweep",
+              not_simulated="the paper gives these as percentages of a bar figure (F3) with no std over seeds"),
+    ClaimSpec("tsne_clusters", _tsne,
+              f"silhouette of the 4 centroid labels on the t-SNE embedding: latent >= {CLUSTER_THRESHOLD} "
+              f"and raw < {CLUSTER_THRESHOLD}",
+              not_simulated="one trained agent and a t-SNE embedding: not a statistic over seeds"),
+    ClaimSpec("batch_size", _batch,
+              "on quadruped_run TACO's mean is non-decreasing in batch size and >= 10% higher at the largest "
+              "than at the smallest; DrQ-v2's range is <= 15% of its mean",
+              not_simulated=_FIGURE_ONLY.format("the batch-size results", "F7a")),
+    ClaimSpec("objective_removal", _objectives,
+              "on quadruped_run the drop full - no TACO is positive and larger than the drops of no "
+              "CURL and no reward",
+              not_simulated="the paper gives the ablation only as a figure (F7b), with no numbers"),
+    ClaimSpec("vs_repr_objectives", _vs_repr,
+              "TACO mean > each other objective of Table 2 (each of its methods but TACO and DrQ-v2; where the "
+              "paper has its value) on each of the 5 tasks",
+              Simulation(lambda ctx, budget: table2_cells(ctx, REPR_TASKS), _on_table(vs_repr_rule), _repr_observed,
+                         REPR_TASKS)),
+    ClaimSpec("offline_gain", _offline_gain,
+              "return of X+TACO > X for X in TD3+BC, CQL on each of the 12 task/dataset pairs",
+              Simulation(lambda ctx, budget: table3_cells(ctx, OFFLINE_AVERAGED), _on_table(offline_gain_rule),
+                         _offline_observed, OFFLINE_TASKS, notes=(_OFFLINE_NOTE,))),
+    ClaimSpec("offline_average", _offline_average,
+              "each printed average of Table 3's average row (TD3+BC+TACO, TD3+BC, CQL+TACO, CQL; "
+              "repro_data/paper/offline_average.csv) lies in the 95% CI of the reproduced average normalised score "
+              "over the 12 pairs",
+              Simulation(lambda ctx, budget: table3_cells(ctx, OFFLINE_AVERAGED), _judge_offline_average,
+                         _offline_observed, OFFLINE_TASKS, sims=CI_SIMS, reps=CI_REPS)),
+    ClaimSpec("horizon_choice", _horizon,
+              "K=3 > K=1 on hopper_hop, quadruped_walk, acrobot_swingup, reacher_hard; K=1 > K=3 on "
+              "quadruped_run, walker_run; K=1 and K=3 > DrQ-v2 on all 9 tasks",
+              not_simulated=_FIGURE_ONLY.format("K=1 and K=3", "F8")),
+    ClaimSpec("action_repeat", _action_repeat,
+              "on hopper_hop the K in {1,3,5} with the highest mean is 5 at action repeat 1, 3 at 2 and 1 "
+              "at 4",
+              not_simulated=_FIGURE_ONLY.format("the action-repeat results", "F9")),
+    ClaimSpec("action_dim", _action_dim,
+              "on quadruped_run the means at dims 6 and 24 are below every intermediate dim's, and the "
+              "intermediate dims' range is <= 15% of their mean",
+              not_simulated=_FIGURE_ONLY.format("the latent-dimension results", "appendix E")),
+    ClaimSpec("speed", _speed,
+              "on one hardware, FPS(DrQ-v2 B256) / FPS(TACO B1024) within ±25% of 3.6, and TACO's FPS decreases "
+              "with batch size where measured (from `repro bench` files and runs of experiment 'speed'; other runs' "
+              "FPS only in an indicative reading)",
+              not_simulated="a timing on your hardware (`repro bench`), not a statistic over seeds"),
+    ClaimSpec("seed_robustness", _seeds,
+              "TACO's std over seeds < DrQ-v2's on >= 7 of the 9 tasks, and DrQ-v2 has >= 1 broken seed "
+              "(below half its cell's median)",
+              Simulation(_online_sources, _judge_seeds, _seeds_observed, DMC9,
+                         notes=("a broken seed is one below half its cell's median: normal cells almost never have "
+                                "one, so DrQ-v2's published values carry the claim's second half",))),
+    ClaimSpec("manipulator", _manipulator,
+              "within the budget (30M frames) TACO solves (an eval return >= 500) at least a third of its "
+              "seeds (paper 3/6) and DrQ-v2 none",
+              Simulation(_manipulator_sources, _judge_manipulator, None, ("manipulator_bring_ball",),
+                         notes=("DrQ-v2's 0 of 6 taken as a solve probability of 0 (its 95% upper bound is 39%): "
+                                "optimistic", "not conditioned on runs (the rule reads learning curves)"))),
+)
+SPEC_OF = {s.id: s for s in SPECS}
+if len(SPEC_OF) != len(SPECS):  # a claim defined twice: one of its definitions would be silently dropped
+    raise ValueError(f"claims defined twice: {sorted({s.id for s in SPECS if sum(t.id == s.id for t in SPECS) > 1})}")
+
+
+def claim_specs(paper: PaperData) -> list[ClaimSpec]:
+    """The claims every reader lists (`repro claims`, `repro plan --claims`, the report): one spec per claim of
+    ``paper``'s claims.csv in its order, each followed by its other readings. Raises ValueError when a claim of
+    claims.csv has no spec or a spec judges a claim it does not have."""
+    ids = list(paper.claims["id"])
+    missing = [i for i in ids if i not in SPEC_OF]
+    extra = [s.id for s in SPECS if s.claim_id not in ids]
+    if missing or extra:
+        raise ValueError(f"claims.csv and analysis.claims.SPECS disagree: no spec for {missing}; no claim for {extra}")
+    return [s for i in ids for s in [SPEC_OF[i], *(r for r in SPECS if r.reading_of == i)]]
 
 
 # ---------------------------------------------------------------- entry points
@@ -606,14 +817,14 @@ def _short_of_budget(ctx: Context, spec: ClaimBudget) -> str | None:
     return None
 
 
-def _judge(ctx: Context, fn: Callable[[Context], tuple[str, str]]) -> tuple[str, str]:
+def _judge(ctx: Context, fn: Check) -> tuple[str, str]:
     try:
         return fn(ctx)
     except NotEnoughData as exc:
         return NO_DATA, str(exc)
 
 
-def _indicative(ctx: Context, spec: ClaimBudget, fn: Callable[[Context], tuple[str, str]]) -> tuple[str, str]:
+def _indicative(ctx: Context, spec: ClaimBudget, fn: Check) -> tuple[str, str]:
     """A reading at the frames every run of the claim reaches (the lowest last frame, capped at the
     claim's budget), one seed per cell allowed: (label, evidence), or ("", reason) if there is none."""
     runs = claim_runs(ctx.scores, spec, ctx.experiment_map, offline=spec.kind == "offline_updates")
@@ -635,27 +846,24 @@ def _indicative(ctx: Context, spec: ClaimBudget, fn: Callable[[Context], tuple[s
 
 
 def evaluate_claims(ctx: Context) -> list[Verdict]:
-    """One verdict per row of claims.csv, in its order, each at the claim's own budget."""
+    """One verdict per claim of :func:`claim_specs` (claims.csv's order, the reading of online_avg_gain against the
+    published DrQ-v2 curves after it), each at the claim's own budget."""
     budgets = load_budgets()
+    text = dict(zip(ctx.paper.claims["id"], ctx.paper.claims["claim"]))
     out = []
-    for row in ctx.paper.claims.itertuples(index=False):
-        fn, rule = CHECKS.get(row.id, (None, "no check implemented"))
-        spec = budgets.get(row.id)
-        if fn is None or spec is None:
-            why = ("no check implemented for this claim" if fn is None
-                   else "no budget for this claim in claim_budgets.csv")
-            out.append(Verdict(row.id, row.claim, NO_DATA, why, rule))
+    for spec in claim_specs(ctx.paper):
+        claim = text[spec.claim_id] + (f" [{spec.note}]" if spec.note else "")
+        budget = budgets.get(spec.claim_id)
+        if budget is None:
+            out.append(Verdict(spec.id, claim, NO_DATA, "no budget for this claim in claim_budgets.csv", spec.rule))
             continue
-        seeds = max(spec.min_seeds, ctx.min_seeds)
-        short = _short_of_budget(ctx, spec)
-        verdict, evidence, label = _reading(ctx, spec, short, fn)
-        out.append(Verdict(row.id, row.claim, verdict, evidence, rule, spec.text(), seeds, label))
-        if row.id == "online_avg_gain":
-            out.append(_published_gain(ctx, row.claim, spec, short))
+        verdict, evidence, label = _reading(ctx, budget, _short_of_budget(ctx, budget), spec.check)
+        out.append(Verdict(spec.id, claim, verdict, evidence, spec.rule, budget.text(),
+                           max(budget.min_seeds, ctx.min_seeds), label))
     return out
 
 
-def _reading(ctx: Context, spec: ClaimBudget, short: str | None, fn) -> tuple[str, str, str]:
+def _reading(ctx: Context, spec: ClaimBudget, short: str | None, fn: Check) -> tuple[str, str, str]:
     """(verdict, evidence, indicative label) of claim function ``fn`` under the budget rule: no data when the
     runs fall ``short`` of the claim's budget (with a labelled indicative reading on request), else judged."""
     if short is not None:
@@ -668,15 +876,6 @@ def _reading(ctx: Context, spec: ClaimBudget, short: str | None, fn) -> tuple[st
         label, extra = _indicative(ctx, spec, fn)
         evidence = f"{evidence}. {extra}"
     return verdict, evidence, label
-
-
-def _published_gain(ctx: Context, claim: str, spec: ClaimBudget, short: str | None) -> Verdict:
-    """The reading of online_avg_gain against the published DrQ-v2 curves, under the same budget rule (the
-    claim's budget and seed minimum; an indicative reading below it on request)."""
-    verdict, evidence, label = _reading(ctx, spec, short, _online_avg_gain_published)
-    text = f"{claim} [read against DrQ-v2 as published by its authors, not against your DrQ-v2 runs: {SOURCE_TEXT}]"
-    return Verdict(PUBLISHED_GAIN_ID, text, verdict, evidence, PUBLISHED_GAIN_RULE, spec.text(),
-                   max(spec.min_seeds, ctx.min_seeds), label)
 
 
 def verdict_counts(verdicts: Sequence[Verdict]) -> str:

@@ -58,6 +58,12 @@ class PaperData:
         return tuple(m for m in dict.fromkeys(self.repr_objectives["method"]) if m not in ("TACO", "DrQ-v2"))
 
     @cached_property
+    def online_gain(self) -> float:
+        """Table 1's TACO / DrQ-v2: the ratio of their means over the nine DMC tasks (the abstract's '1.4x')."""
+        piv = self.online.pivot(index="task", columns="method", values="mean").loc[list(DMC9)]
+        return float(piv["TACO"].mean() / piv["DrQ-v2"].mean())
+
+    @cached_property
     def offline(self) -> pd.DataFrame:
         """Table 3: task, dataset, method, normalized_mean, normalized_std."""
         df = self._csv("offline_rl_table.csv")
@@ -99,6 +105,10 @@ class PaperData:
     def repr_value(self, task: str, method: str) -> tuple[float, float] | None:
         """(mean, std) of Table 2, or None (also where the paper prints N/A)."""
         return _lookup(self.repr_objectives, task=task, method=method)
+
+    def fps(self, method: str, batch_size: int) -> float:
+        """Tables 4-5's FPS of ``method`` at ``batch_size`` (KeyError if the paper has no such entry)."""
+        return float(self.time_efficiency.set_index(["method", "batch_size"]).loc[(method, batch_size), "fps"])
 
 
 def _lookup(df: pd.DataFrame, **where: str) -> tuple[float, float] | None:

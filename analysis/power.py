@@ -2,23 +2,16 @@
 ``repro claims`` applies it, says "supported" if the paper's numbers are the truth (``repro plan --claims``).
 
 * **Cells.** Each simulated claim names its cells (task x method, or task x dataset x method) and where each
-  cell's truth comes from (:class:`CellSource`):
-
-  - DrQ-v2 on a DMC task with a published curve: the DrQ-v2 authors' per-seed values, interpolated at the
-    claim's budget (analysis.calibration.published_values), shifted so that their mean is the paper's mean, and
-    drawn with replacement (clipped to the task's return range). Their spread is the real seed-to-seed spread.
-  - every other cell: normal with the paper's mean and std over its seeds, truncated at the task's return
-    range (DMC returns [0, 1000]; normalised offline scores >= 0), written down per cell.
-  - a baseline the claim reads from the paper itself (DreamerV3 and TD-MPC in Table 1, the published DrQ-v2
-    curves against which ``online_avg_gain_vs_published`` is read) is fixed, not drawn.
-  - manipulator: each seed solves the task with the paper's proportion (TACO 3/6, DrQ-v2 0/6).
+  cell's truth comes from in its spec (analysis.claims.SPECS, built from analysis/cells.py, which says how each
+  kind of cell is drawn). A baseline the claim reads from the paper itself (DreamerV3 and TD-MPC in Table 1, the
+  published DrQ-v2 curves against which ``online_avg_gain_vs_published`` is read) is fixed, not drawn.
 
 * **Rule.** Each draw builds what the claim's check builds from runs (a ``means`` table of (seeds, mean) per
   cell, score matrices, per-cell spreads, solved counts) and calls the claim's rule in analysis.claims (the
   same function ``repro claims`` calls, with the same seed minimum and ``require``), so a cell with fewer
   seeds than the claim's minimum is "not enough data". Rules whose verdict reads a point estimate run with
   ``reps`` 0 (the point alone, the CI is only evidence); offline_average, whose verdict reads a bootstrap CI,
-  runs rliable's bootstrap in every draw (:data:`CI_REPS` repetitions, fewer draws).
+  runs rliable's bootstrap in every draw (``Simulation.reps`` repetitions, fewer draws).
 
 * **Monte-Carlo error.** The power p over S draws has standard error sqrt(p (1 - p) / S); every draw comes
   from one NumPy Generator seeded from (seed, claim, seeds per cell), so a fixed ``seed`` gives the same table.
@@ -31,7 +24,7 @@
   each cell; only the missing seeds are drawn from the cell's source.
 
 A claim whose rule cannot be simulated from what is known (a learning-curve rule, a figure-only number, a
-single run, a timing) is listed with the reason (:data:`NOT_SIMULATED`).
+single run, a timing) is listed with the reason its spec gives (``ClaimSpec.not_simulated``).
 """
 
 from __future__ import annotations
@@ -44,112 +37,19 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy import stats as sps
 
 from analysis import claims as cl
-from analysis import select
-from analysis.calibration import published_values
-from analysis.claim_budget import ClaimBudget, frames_text, load_budgets
+from analysis.cells import Cells, CellSource, Key
+from analysis.claim_budget import ClaimBudget, load_budgets
 from analysis.context import Context
 from analysis.load import Results
-from analysis.offline_tables import offline_runs
-from analysis.paper import DMC9, OFFLINE_TASKS, PaperData
-from analysis.robustness import cell_spread
+from analysis.paper import PaperData
 from analysis.tables import TableOutput, fmt_num, write_table
-from repro.config.schema import DatasetKind
 
 TARGET = 0.8  # the power "seeds for 80%" asks for
 DEFAULT_SIMS = 2000
 DEFAULT_MAX_SEEDS = 50
 REPORT_SIMS, REPORT_MAX_SEEDS = 500, 20  # the report's section: fewer draws, a shorter search
-CI_REPS = 300  # bootstrap repetitions per draw where the verdict reads a CI (offline_average)
-CI_SIMS = 100  # draws of such a claim (each runs four bootstraps)
-DMC_RANGE = (0.0, 1000.0)
-NORMALIZED_RANGE = (0.0, math.inf)
-
-Key = tuple
-Cells = dict[Key, np.ndarray]  # one draw: cell -> values over its seeds
-
-NOT_SIMULATED = {
-    "reacher_speed": "its rule reads TACO's and DrQ-v2's mean learning curves up to 1.5M frames; the paper gives "
-                     "TACO's curve only as a figure (F4), with no per-seed or per-frame numbers",
-    "longer_training": "its rule reads both methods at 2M frames; the paper gives those only as learning-curve "
-                       "figures (F4), with no numbers at 2M",
-    "metaworld": "the paper gives Meta-world success rates only as figures (F5), with no mean or std per task",
-    "action_repr_gain": "the paper gives the gains as percentages of a bar figure (F3) with no std over seeds",
-    "no_action_repr_vs_drqv2": "the paper gives these as percentages of a bar figure (F3) with no std over seeds",
-    "tsne_clusters": "one trained agent and a t-SNE embedding: not a statistic over seeds",
-    "batch_size": "the paper gives the batch-size results only as a figure (F7a), with no numbers",
-    "objective_removal": "the paper gives the ablation only as a figure (F7b), with no numbers",
-    "horizon_choice": "the paper gives K=1 and K=3 only as a figure (F8), with no numbers",
-    "action_repeat": "the paper gives the action-repeat results only as a figure (F9), with no numbers",
-    "action_dim": "the paper gives the latent-dimension results only as a figure (appendix E), with no numbers",
-    "speed": "a timing on your hardware (`repro bench`), not a statistic over seeds",
-}
-
-
-# ---------------------------------------------------------------- cell sources
-@dataclass(frozen=True)
-class CellSource:
-    """Where one cell's values come from: ``kind`` is "normal" (the paper's mean and std, truncated at
-    ``low``/``high``), "published" (the published per-seed ``values``, shifted to ``mean``, resampled),
-    "bernoulli" (solved with probability ``mean``) or "fixed" (``values`` as they are, never drawn)."""
-
-    key: Key
-    kind: str
-    mean: float
-    std: float
-    low: float = -math.inf
-    high: float = math.inf
-    values: tuple[float, ...] = ()
-    source: str = ""
-
-    def draw(self, rng: np.random.Generator, sims: int, n: int) -> np.ndarray:
-        """A (sims x n) array of values: n seeds in each of ``sims`` draws."""
-        if self.kind == "fixed":
-            return np.broadcast_to(np.asarray(self.values, dtype=float), (sims, len(self.values)))
-        if n == 0:
-            return np.empty((sims, 0))
-        if self.kind == "published":
-            shifted = np.clip(np.asarray(self.values) + (self.mean - float(np.mean(self.values))),
-                              self.low, self.high)
-            return rng.choice(shifted, size=(sims, n), replace=True)
-        if self.kind == "bernoulli":
-            return (rng.random((sims, n)) < self.mean).astype(float)
-        if not self.std > 0:
-            return np.full((sims, n), self.mean)
-        a, b = (self.low - self.mean) / self.std, (self.high - self.mean) / self.std
-        return sps.truncnorm.rvs(a, b, loc=self.mean, scale=self.std, size=(sims, n), random_state=rng)
-
-    def describe(self) -> str:
-        """The distribution, in words, as the cells table states it."""
-        if self.kind == "published":
-            return (f"published DrQ-v2 per-seed values (n={len(self.values)}, std {np.std(self.values, ddof=1):.1f}) "
-                    f"shifted to mean {self.mean:g}, resampled, clipped to [{self.low:g}, {self.high:g}]")
-        if self.kind == "bernoulli":
-            return f"each seed solves with probability {self.mean:.3g}"
-        if self.kind == "fixed":
-            return f"fixed (not drawn): {len(self.values)} value(s), mean {np.mean(self.values):.1f}"
-        return f"normal({self.mean:g}, {self.std:g}) truncated to [{self.low:g}, {self.high:g}]"
-
-
-def paper_normal(key: Key, mean: float, std: float, where: str, low: float = DMC_RANGE[0],
-                 high: float = DMC_RANGE[1]) -> CellSource:
-    """A cell drawn from the paper's mean ± std, truncated at the return range."""
-    return CellSource(key, "normal", mean, std, low, high, source=f"{where}: {mean:g} ± {std:g}")
-
-
-def drqv2_cell(ctx: Context, task: str, budget: float, key: Key) -> CellSource:
-    """DrQ-v2 on a DMC task: the published per-seed values at ``budget`` (where they exist) with Table 1's mean,
-    else Table 1's mean ± std."""
-    printed = ctx.paper.online_value(task, "DrQ-v2")
-    assert printed is not None, task  # Table 1 has DrQ-v2 on every DMC task
-    pub = published_values(ctx.published, task, budget)
-    if len(pub) >= 2:
-        return CellSource(key, "published", printed[0], float(np.std(pub, ddof=1)), *DMC_RANGE,
-                          values=tuple(float(v) for v in pub),
-                          source=f"Table 1 mean {printed[0]:g}; spread: published curves at {frames_text(budget)}")
-    return paper_normal(key, printed[0], printed[1], "Table 1")
 
 
 # ---------------------------------------------------------------- simulated claims
@@ -170,137 +70,22 @@ class SimClaim:
     notes: list[str] = field(default_factory=list)
 
 
-def means_table(cells: Cells) -> dict[Key, tuple[int, float]]:
-    """What analysis.claims.means builds from runs: (seeds, mean) per cell."""
-    return {k: (len(v), float(np.mean(v))) for k, v in cells.items() if len(v)}
-
-
-def stacked(cells: Cells, keys: Sequence[Key]) -> np.ndarray:
-    """A (seeds x cells) matrix as analysis.stats.score_matrix builds it: every cell cut to the fewest seeds."""
-    k = min(len(cells[key]) for key in keys)
-    return np.stack([cells[key][:k] for key in keys], axis=1)
-
-
-def observed_cells(df: pd.DataFrame, keys: Sequence[str], value: str = "score") -> Cells:
-    """The values of the runs that reached the budget, per cell, in seed order."""
-    out: Cells = {}
-    if df.empty:
-        return out
-    ok = df[df["reached"].astype(bool) & df[value].notna()].sort_values("seed")
-    for key, rows in ok.groupby(list(keys)):
-        out[key if isinstance(key, tuple) else (key,)] = rows[value].to_numpy(dtype=float)
-    return out
-
-
-def _judge_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
-    cl.require(ctx, means_table(cells), [(t, m) for t in DMC9 for m in ("TACO", "DrQ-v2")])
-    return cl.avg_gain_rule(ctx, stacked(cells, [(t, "TACO") for t in DMC9]),
-                            stacked(cells, [(t, "DrQ-v2") for t in DMC9]))
-
-
-def _judge_published_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
-    cl.require(ctx, means_table(cells), [(t, "TACO") for t in DMC9])
-    ys = [cells[(t, "published")] for t in DMC9]
-    if any(len(y) < ctx.min_seeds for y in ys):
-        raise cl.NotEnoughData(f"the published DrQ-v2 curves do not cover {ctx.budget_text()} on every task")
-    return cl.published_gain_rule(ctx, stacked(cells, [(t, "TACO") for t in DMC9]), ys)
-
-
-def _judge_offline_average(ctx: Context, cells: Cells) -> tuple[str, str]:
-    pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
-    cl.require(ctx, means_table(cells), [(t, d, m) for t, d in pairs for m in cl.OFFLINE_AVERAGED])
-    return cl.offline_average_rule(ctx, {m: stacked(cells, [(t, d, m) for t, d in pairs])
-                                         for m in cl.OFFLINE_AVERAGED})
-
-
-def _judge_seeds(ctx: Context, cells: Cells) -> tuple[str, str]:
-    return cl.seed_robustness_rule(ctx, {k: cell_spread(v) for k, v in cells.items() if len(v)})
-
-
-def _judge_manipulator(ctx: Context, cells: Cells) -> tuple[str, str]:
-    return cl.manipulator_rule(ctx, {k[0]: {"runs": len(v), "solved": int(v.sum()), "last_frame": float(ctx.budget)}
-                                     for k, v in cells.items()})
-
-
-def _on_table(rule: Callable[[Context, dict], tuple[str, str]]) -> Callable[[Context, Cells], tuple[str, str]]:
-    return lambda ctx, cells: rule(ctx, means_table(cells))
-
-
-def _online_observed(ctx: Context) -> Cells:
-    return observed_cells(cl.online_rows(ctx), ["task", "method"])
-
-
-def _offline_observed(ctx: Context) -> Cells:
-    return observed_cells(offline_runs(cl.offline_scores(ctx), ctx.experiment_map), ["task", "dataset", "method"],
-                          "normalized")
-
-
-def _seeds_observed(ctx: Context) -> Cells:
-    df = select.online_main(ctx.scores, ctx.experiment_map)
-    return observed_cells(df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df, ["task", "label"])
-
-
-def _repr_observed(ctx: Context) -> Cells:
-    return observed_cells(cl.labelled(select.repr_objectives(ctx.scores, ctx.experiment_map)), ["task", "method"])
-
-
 def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = None) -> list[SimClaim]:
-    """Every claim this module can simulate, with its cells' sources from the paper (``ctx.paper``) and the
-    published DrQ-v2 curves (``ctx.published``)."""
+    """Every claim whose spec has a simulation (analysis.claims.SPECS), in claims.csv's order, with its cells'
+    sources from the paper (``ctx.paper``) and the published DrQ-v2 curves (``ctx.published``) at its budget."""
     budgets = budgets or load_budgets()
-    b1 = float(budgets["online_beats_drqv2_all"].budget or 0)
-
-    def taco(t: str) -> CellSource:
-        v = ctx.paper.online_value(t, "TACO")
-        assert v is not None, t
-        return paper_normal((t, "TACO"), v[0], v[1], "Table 1")
-
-    online = [taco(t) for t in DMC9] + [drqv2_cell(ctx, t, b1, (t, "DrQ-v2")) for t in DMC9]
-    fixed_pub = [CellSource((t, "published"), "fixed", math.nan, math.nan,
-                            values=tuple(float(v) for v in published_values(ctx.published, t, b1)),
-                            source=f"published DrQ-v2 curves at {frames_text(b1)}, as published") for t in DMC9]
-    repr_cells = [taco(t) for t in cl.REPR_TASKS]
-    for t in cl.REPR_TASKS:
-        for m in ctx.paper.repr_others:
-            v = ctx.paper.repr_value(t, m)
-            if v is not None:
-                repr_cells.append(paper_normal((t, m), v[0], v[1], "Table 2"))
-    off = ctx.paper.offline
-    offline_cells = [paper_normal((r.task, r.dataset, r.method), float(r.normalized_mean), float(r.normalized_std),
-                                  "Table 3 (normalised)", *NORMALIZED_RANGE)
-                     for r in off.itertuples(index=False)
-                     if r.task in OFFLINE_TASKS and r.dataset in DatasetKind.values() and pd.notna(r.normalized_mean)]
-    gain_cells = [c for c in offline_cells if c.key[2] in ("TD3+BC+TACO", "TD3+BC", "CQL+TACO", "CQL")]
-    manip = [CellSource(("TACO",), "bernoulli", 3 / 6, math.nan, source="appendix G: 3 of 6 seeds solve"),
-             CellSource(("DrQ-v2",), "bernoulli", 0.0, math.nan, source="appendix G: 0 of 6 seeds solve")]
-    offline_note = ("the rule compares returns; the cells are Table 3's normalised scores (100 x return / the "
-                    "reference return, increasing in the return), so every comparison agrees")
-    out = [
-        SimClaim("online_avg_gain", budgets["online_avg_gain"], online, _judge_gain, _online_observed, DMC9),
-        SimClaim(cl.PUBLISHED_GAIN_ID, budgets["online_avg_gain"], [taco(t) for t in DMC9] + fixed_pub,
-                 _judge_published_gain, _online_observed, DMC9,
-                 notes=["DrQ-v2 is the published curves as published (fixed data, as `repro claims` reads them)"]),
-        SimClaim("online_beats_drqv2_all", budgets["online_beats_drqv2_all"], online, _on_table(cl.beats_drqv2_rule),
-                 _online_observed, DMC9),
-        SimClaim("online_beats_model_based", budgets["online_beats_model_based"], [taco(t) for t in DMC9],
-                 _on_table(cl.beats_model_based_rule), _online_observed, DMC9,
-                 notes=["DreamerV3 and TD-MPC are Table 1's printed means (not rerun by any sweep), as the rule "
-                        "reads them"]),
-        SimClaim("vs_repr_objectives", budgets["vs_repr_objectives"], repr_cells, _on_table(cl.vs_repr_rule),
-                 _repr_observed, cl.REPR_TASKS),
-        SimClaim("offline_gain", budgets["offline_gain"], gain_cells, _on_table(cl.offline_gain_rule),
-                 _offline_observed, OFFLINE_TASKS, notes=[offline_note]),
-        SimClaim("offline_average", budgets["offline_average"], gain_cells, _judge_offline_average, _offline_observed,
-                 OFFLINE_TASKS, sims=CI_SIMS, reps=CI_REPS,
-                 notes=[f"its verdict reads a bootstrap CI: rliable's bootstrap runs in every draw ({CI_REPS} "
-                        f"repetitions instead of {ctx.reps:,}; {CI_SIMS} draws)"]),
-        SimClaim("seed_robustness", budgets["seed_robustness"], online, _judge_seeds, _seeds_observed, DMC9,
-                 notes=["a broken seed is one below half its cell's median: normal cells almost never have one, so "
-                        "DrQ-v2's published values carry the claim's second half"]),
-        SimClaim("manipulator", budgets["manipulator"], manip, _judge_manipulator, None, ("manipulator_bring_ball",),
-                 notes=["DrQ-v2's 0 of 6 taken as a solve probability of 0 (its 95% upper bound is 39%): optimistic",
-                        "not conditioned on runs (the rule reads learning curves)"]),
-    ]
+    out = []
+    for spec in cl.claim_specs(ctx.paper):
+        sim = spec.simulation
+        if sim is None:
+            continue
+        budget = budgets[spec.claim_id]
+        notes = list(sim.notes)
+        if sim.reps:
+            notes.append(f"its verdict reads a bootstrap CI: rliable's bootstrap runs in every draw ({sim.reps} "
+                         f"repetitions instead of {ctx.reps:,}; {sim.sims} draws)")
+        out.append(SimClaim(spec.id, budget, sim.sources(ctx, float(budget.budget or 0)), sim.judge, sim.observed,
+                            sim.tasks, sim.sims, sim.reps, notes))
     return out
 
 
@@ -442,18 +227,16 @@ class PowerRow:
 def power_rows(ctx: Context, sims: int = DEFAULT_SIMS, max_seeds: int = DEFAULT_MAX_SEEDS,
                verdicts: Sequence[cl.Verdict] | None = None, conditioned: bool = False,
                bootstrap_claims: bool = True) -> list[PowerRow]:
-    """One row per claim of claims.csv (and the published-curves reading of online_avg_gain), in that order.
-    ``conditioned``: also the power given the user's runs in ``ctx`` (and their ``verdicts``);
-    ``bootstrap_claims`` False: leave out the claims whose rule runs a bootstrap in every draw (the report)."""
+    """One row per claim of analysis.claims.claim_specs (claims.csv's order, the published-curves reading of
+    online_avg_gain after it). ``conditioned``: also the power given the user's runs in ``ctx`` (and their
+    ``verdicts``); ``bootstrap_claims`` False: leave out the claims whose rule runs a bootstrap in every draw (the
+    report)."""
     budgets = load_budgets()
     sim = {c.id: c for c in simulated_claims(ctx, budgets)}
-    ids = [i for cid in ctx.paper.claims["id"] for i in ([cid, cl.PUBLISHED_GAIN_ID] if cid == "online_avg_gain"
-                                                          else [cid])]
     by_verdict = {v.id: v for v in verdicts or []}
     rows = []
-    for cid in ids:
-        spec = budgets.get("online_avg_gain" if cid == cl.PUBLISHED_GAIN_ID else cid)
-        rule = cl.PUBLISHED_GAIN_RULE if cid == cl.PUBLISHED_GAIN_ID else cl.CHECKS.get(cid, (None, ""))[1]
+    for claim in cl.claim_specs(ctx.paper):
+        cid, rule, spec = claim.id, claim.rule, budgets.get(claim.claim_id)
         if spec is None:
             rows.append(PowerRow(cid, False, rule, 0, 0, reason="no budget in claim_budgets.csv"))
             continue
@@ -462,7 +245,7 @@ def power_rows(ctx: Context, sims: int = DEFAULT_SIMS, max_seeds: int = DEFAULT_
         if cid in by_verdict:
             row.verdict, row.evidence = by_verdict[cid].shown, by_verdict[cid].evidence
         if cid not in sim:
-            row.reason = NOT_SIMULATED.get(cid, "no simulation for this claim")
+            row.reason = claim.not_simulated
             rows.append(row)
             continue
         c = sim[cid]

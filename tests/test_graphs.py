@@ -5,13 +5,15 @@ test, and benchmarks/gpu_check.sh's fast_check)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import pytest
 import torch
 
 from repro.agent import fast
 from repro.agent.agent import Agent
 from repro.agent.graphs import GraphedUpdate
-from repro.bench.online_update import synthetic_batch
+from repro.bench.batches import batch_stream, synthetic_episodes
 from repro.config.compose import compose, typed
 from repro.learners import build_learner
 
@@ -27,6 +29,13 @@ def agent_of(flags: list[str], device: str = "cpu") -> Agent:
     learner = build_learner(rc.agent, OBS, 4, device)
     assert isinstance(learner, Agent)
     return learner
+
+
+def stream_of(agent: Agent, device: str = "cpu") -> Iterator[dict[str, torch.Tensor]]:
+    """Batches drawn as training draws them (repro/bench/batches.py): a replay of short synthetic episodes, sampled
+    with the agent's sample_options; a new batch at each step, so a graph that kept its first one would show."""
+    episodes = synthetic_episodes(n_episodes=2, length=20, action_dim=4, frame_shape=(3, *OBS[1:]))
+    return batch_stream(agent, agent.cfg, OBS[0] // 3, episodes, device)
 
 
 def test_the_plan_records_the_update_on_cuda_only_and_only_for_the_online_agent(monkeypatch):
@@ -55,8 +64,9 @@ def test_the_static_update_is_the_update_bit_for_bit(flags):
     plain, static = agent_of(flags), agent_of(flags)
     graph = GraphedUpdate(static.static_update, "cpu", capture=False)
     got, want = [], []
+    stream = stream_of(plain)
     for i in range(4):
-        batch, step = synthetic_batch(4, plain.cfg.K, 4, "cpu", seed=i, image=OBS[1]), 2 * i + 1
+        batch, step = next(stream), 2 * i + 1
         torch.manual_seed(100 + i)
         want.append({k: v.clone() for k, v in plain.update(batch, step).items()})
         torch.manual_seed(100 + i)
@@ -88,8 +98,9 @@ def test_replayed_updates_track_the_eager_fast_updates_on_cuda():
     assert graphed.graph is not None and eager.graph is not None
     eager.graph.capture = False  # the same static body, never recorded
     rows: list[tuple[dict[str, float], dict[str, float]]] = []
+    stream = stream_of(graphed, "cuda")
     for i in range(8):
-        batch = synthetic_batch(4, graphed.cfg.K, 4, "cuda", seed=i, image=OBS[1])
+        batch = next(stream)
         torch.manual_seed(100 + i)
         g = {k: float(v) for k, v in graphed.update(batch, 2 * i + 1).items()}
         torch.manual_seed(100 + i)

@@ -1,8 +1,9 @@
 """A speed-up path against the plain path: the losses of the same updates from the same weights and batches.
 
-Two agents of one agent file are built from one seed; each gets the same stream of synthetic batches
-(repro/bench/online_update.py:synthetic_batch, batch ``i`` from seed ``i``) and the same RNG state before every
-update (the augmentation and target-noise draws), so on the plain path twice the losses are equal bit for bit.
+Two agents of one agent file are built from one seed; each gets the same stream of batches, drawn as training
+draws them (repro/bench/batches.py:batch_stream: a replay of synthetic episodes sampled with the agent's
+sample_options, from one seed), and the same RNG state before every update (the augmentation and target-noise
+draws), so on the plain path twice the losses are equal bit for bit.
 The differences of another path (bfloat16, another kernel order) grow update by update as its weights drift;
 the report holds every update's losses on both paths and, per loss, the difference of their means over the
 updates against a tolerance ``abs + rel x |plain mean|`` (and each update's largest difference, reported). Used by
@@ -25,15 +26,17 @@ def losses(flags: list[str], device: str, batch: int, updates: int, hidden: int 
     (frames of ``image`` pixels square)."""
     import torch
 
-    from repro.bench.online_update import build_agent, synthetic_batch
+    from repro.bench.batches import batch_stream, synthetic_episodes
+    from repro.bench.online_update import build_agent
 
     hidden_flag = [f"agent.hidden_dim={hidden}"] if hidden else []
     agent, rc = build_agent(algo, batch, "cheetah_run", device, flags + hidden_flag, image)
+    episodes = synthetic_episodes(action_dim=agent.action_dim, frame_shape=(3, image, image))
+    stream = batch_stream(agent, rc.agent, rc.env.frame_stack, episodes, device, batch)
     out = []
     for i in range(updates):
         torch.manual_seed(1 + i)  # the same augmentation and noise draws on both paths
-        stream = synthetic_batch(batch, rc.agent.K, agent.action_dim, device, seed=i, image=image)
-        metrics = agent.update(stream, step=10**6 + 2 * i)
+        metrics = agent.update(next(stream), step=10**6 + 2 * i)
         out.append({k: float(metrics[k]) for k in LOSSES if k in metrics})
     return out
 

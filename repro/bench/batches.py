@@ -7,7 +7,7 @@ with "the batch has no future_obs_seq"); this one has what training gives it."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -42,12 +42,25 @@ def fill_buffer(episodes: Sequence[Mapping[str, np.ndarray]], cfg: AgentConfig, 
     return buf
 
 
+def batch_stream(learner: Any, cfg: AgentConfig, frame_stack: int, episodes: Sequence[Mapping[str, np.ndarray]],
+                 device: str, size: int | None = None, seed: int = 0) -> Iterator[Any]:
+    """Batches of ``size`` (default: the learner's batch size) drawn one after another from ``episodes`` as
+    ``learner``'s training draws them: one replay (or sequence sampler) filled once, sampled at every step. The
+    same ``seed`` gives the same stream (the replay's own generator, not torch's), so two agents compared update by
+    update (repro/bench/agreement.py, tests/test_graphs.py) see the same batches."""
+    size = learner.batch_size if size is None else size
+    if isinstance(learner, SequenceLearner):
+        sampler = learner.make_sampler(episodes, seed=seed)
+        while True:
+            yield sampler.sample(size)
+    buf = fill_buffer(episodes, cfg, frame_stack, seed=seed, device=device)
+    while True:
+        yield buf.sample(size, **learner.sample_options)
+
+
 def training_batch(learner: Any, cfg: AgentConfig, frame_stack: int, episodes: Sequence[Mapping[str, np.ndarray]],
                    device: str, size: int | None = None, seed: int = 0) -> tuple[Any, int]:
     """(a batch of ``size`` (default: the learner's batch size) drawn from ``episodes`` as ``learner``'s training
-    draws one, its batch size)."""
+    draws one, its batch size): the first of :func:`batch_stream`."""
     size = learner.batch_size if size is None else size
-    if isinstance(learner, SequenceLearner):
-        return learner.make_sampler(episodes, seed=seed).sample(size), size
-    buf = fill_buffer(episodes, cfg, frame_stack, seed=seed, device=device)
-    return buf.sample(size, **learner.sample_options), size
+    return next(batch_stream(learner, cfg, frame_stack, episodes, device, size, seed)), size
