@@ -152,3 +152,61 @@ def test_every_command_fails_and_prints_through_the_one_console_helper():
     with pytest.raises(Exception) as exc:  # typer.Exit carries the code
         fail("x", 7)
     assert getattr(exc.value, "exit_code", None) == 7
+
+
+# Issue 37: an objective's parameters are typed by the dataclass registered with it (ObjectiveSpec.params) and checked
+# before anything is written, by `repro train` and `repro sweep`, with and without --dry-run.
+OBJECTIVE_EDGES = [
+    (["agent=spr", "agent.objective_params.spr.momentum=abc"],
+     "agent.objective_params.spr.momentum must be a number (got 'abc')."),
+    (["agent=spr", "agent.objective_params.spr.projection_dim=4.5"],  # was truncated to 4
+     "agent.objective_params.spr.projection_dim must be an integer or null (got 4.5)."),
+    (["agent=atc", "agent.objective_params.atc.predictor_hidden=8.0"],
+     "agent.objective_params.atc.predictor_hidden must be an integer (got 8.0)."),
+    (["agent=spr", "agent.objective_params.spr.rollout=abc"],  # was read as true
+     "agent.objective_params.spr.rollout must be true or false (got 'abc')."),
+    (["agent=spr", "+agent.objective_params.spr.projectoin_dim=4"],  # was a traceback from the objective's __init__
+     "unknown setting agent.objective_params.spr.projectoin_dim of objective 'spr'. Did you mean: projection_dim?"),
+    (["agent=taco", "+agent.objective_params.spr.projectoin_dim=4"],  # checked though spr is not trained
+     "unknown setting agent.objective_params.spr.projectoin_dim of objective 'spr'. Did you mean: projection_dim?"),
+    (["agent=driml", "+agent.objective_params.driml.hidden=4"],  # was a traceback
+     "agent.objective_params.driml: objective 'driml' takes no parameters (got hidden)."),
+    (["agent=spr", "agent.objective_params.spr.momentum=1.0"],  # was a traceback from MomentumTarget
+     "agent.objective_params.spr.momentum must be in [0.0, 1.0) (got 1.0)."),
+    (["agent=taco", "agent.objectives.foo=1.0"],  # listed taco, curl, reward (the agent file's) as known
+     "unknown objective 'foo' in agent.objectives. Registered objectives: taco, curl, reward, spr, atc, driml"),
+    (["agent=taco", "+agent.objective_params.nope.x=1"],
+     "unknown objective 'nope' in agent.objective_params. Registered objectives: taco, curl, reward, spr, atc, driml"),
+    (["agent=taco", "agent.objectives.spr=1.0"],
+     "agent.objectives.spr is not in the agent file's config: add it with +agent.objectives.spr=1.0."),
+]
+
+
+@pytest.mark.parametrize("overrides,message", OBJECTIVE_EDGES)
+def test_a_bad_objective_parameter_is_one_line_and_exit_2_before_anything_is_written(tmp_path, overrides, message):
+    for dry_run in (["--dry-run"], []):
+        result = runner.invoke(app, ["train", *dry_run, "task=cheetah_run", "profile=tiny", *overrides,
+                                     f"runtime.results_root={tmp_path}"], terminal_width=400)
+        lines = result.output.strip().splitlines()
+        assert result.exit_code == 2 and len(lines) == 1 and lines[0].startswith(f"error: {message}"), result.output
+        sets = [x for o in overrides[1:] for x in ("--set", o)]
+        result = runner.invoke(app, ["sweep", "tiny", *dry_run, "--tasks", "cheetah_run", "--seeds", "1", *sets,
+                                     "--set", overrides[0], "-r", str(tmp_path)], terminal_width=400)
+        assert result.exit_code == 2 and message in result.output, result.output
+        assert len(result.output.strip().splitlines()) == 1, result.output
+    assert not any(tmp_path.iterdir())  # nothing written
+
+
+def test_objective_parameters_are_read_typed():
+    from repro.agent.objectives.base import ObjectiveContext
+    from repro.agent.objectives.common import typed_params
+    from repro.config.compose import compose, objective_params, typed
+    from repro.config.schema import SPRParams
+
+    params = objective_params("spr", {"momentum": 0, "projection_dim": "8"})
+    assert params == SPRParams(momentum=0.0, projection_dim=8, rollout=True)
+    assert isinstance(params.momentum, float) and objective_params("taco", None) is None
+    agent = typed(compose(["agent=spr", "profile=tiny", "agent.objective_params.spr.projection_dim=8"])).agent
+    assert agent.objective_params["spr"]["projection_dim"] == 8  # the config is left as given (its run's identity)
+    ctx = ObjectiveContext(repr_dim=4, feature_dim=4, hidden_dim=4, action_dim=1, K=1, seq_dim=1)
+    assert typed_params(ctx, SPRParams) == SPRParams()  # a context built by hand: the registered defaults

@@ -182,7 +182,7 @@ def test_a_value_dropped_from_the_yaml_is_one_config_error_line():
     (["agent=dt", "offline.dataset=medium", "agent.dt.dropout=1.0"],
      "agent.dt.dropout must be in [0.0, 1.0) (got 1.0)."),
     (["agent=spr", "agent.objective_params.spr.momentum=1.5"],
-     "agent.objective_params.spr.momentum must be in [0.0, 1.0] (got 1.5)."),
+     "agent.objective_params.spr.momentum must be in [0.0, 1.0) (got 1.5)."),
 ])
 def test_a_value_above_its_upper_bound_is_one_line_exit_2_before_anything_is_written(tmp_path, overrides, message):
     """Ranges take an upper bound too (issue 35): IQL's expectile was checked only inside its first update (a

@@ -5,6 +5,7 @@ tree names them, and each is first-class: config, train, sweep, status, bench, t
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.metadata
 import itertools
 import math
@@ -186,14 +187,50 @@ def test_a_plugin_learner_s_section_is_typed_and_held_by_its_runs_only():
 @pytest.mark.parametrize("override, message", [
     ("agent.learner=toy_rwbcc",
      "agent.learner=toy_rwbcc is not one of actor_critic, bc, td3bc, cql, iql, dt, alix, toy_rwbc, toy_utd."),
-    ("+agent.objectives.toy_invv=1", "unknown objective 'toy_invv'. Did you mean: toy_inv?"),
+    ("+agent.objectives.toy_invv=1", "unknown objective 'toy_invv' in agent.objectives. Did you mean: toy_inv? "
+                                     "Registered objectives: taco, curl, reward, spr, atc, driml, toy_inv."),
+    ("agent.objectives.foo=1", "unknown objective 'foo' in agent.objectives. Registered objectives: taco, curl, "
+                               "reward, spr, atc, driml, toy_inv."),
+    # the objective's parameters, typed by its registered params (InvParams): issue 37
+    ("agent.objective_params.toy_inv.hidden_dim=abc",
+     "agent.objective_params.toy_inv.hidden_dim must be an integer or null (got 'abc')."),
+    ("agent.objective_params.toy_inv.hidden_dim=4.7",  # was truncated to 4
+     "agent.objective_params.toy_inv.hidden_dim must be an integer or null (got 4.7)."),
+    ("+agent.objective_params.toy_inv.hiden_dim=4",  # was a traceback from the objective's __init__
+     "unknown setting agent.objective_params.toy_inv.hiden_dim of objective 'toy_inv'. Did you mean: hidden_dim?"),
 ])
 def test_a_misspelled_registered_name_is_one_line_and_exit_2(tmp_path, override: str, message: str):
     from repro_app.cli import app
 
-    out = CliRunner().invoke(app, ["train", "agent=toy_inv", override, f"runtime.results_root={tmp_path}"])
-    assert out.exit_code == 2 and message in out.output and len(out.output.strip().splitlines()) == 1, out.output
+    for dry_run in (["--dry-run"], []):
+        out = CliRunner().invoke(app, ["train", *dry_run, "agent=toy_inv", override,
+                                       f"runtime.results_root={tmp_path}"], terminal_width=400)
+        assert out.exit_code == 2 and message in out.output and len(out.output.strip().splitlines()) == 1, out.output
     assert not list(tmp_path.iterdir())
+
+
+def test_an_objective_reads_its_registered_params_typed():
+    from taco_repro_toy import InvParams
+
+    from repro.config.compose import objective_params
+    from repro.config.plugins import ObjectiveSpec
+
+    assert objective_params("toy_inv", {"hidden_dim": 8}) == InvParams(hidden_dim=8)
+    rc = typed(compose(["agent=toy_inv", "task=cheetah_run", "profile=tiny",
+                        "agent.objective_params.toy_inv.hidden_dim=8"]))
+    assert build_learner(rc.agent, (9, 84, 84), 6, "cpu").backbone.objectives["toy_inv"].head[0].out_features == 8
+    for params, message in ((dict, "params must be a dataclass"), (RWBCFields, "must give every field a default"),
+                            (None, "ranges names 'hidden_dim', which is not a field of its params.")):
+        spec = ObjectiveSpec("toy_x", factory="m:a", params=params, ranges={"hidden_dim": (1, True)})
+        with pytest.raises(PluginError, match=re.escape(message)):
+            check_spec(spec, "toy_x")
+
+
+@dataclasses.dataclass
+class RWBCFields:
+    """A params dataclass without defaults (refused: an objective's parameters are optional in a config)."""
+
+    hidden_dim: int
 
 
 @pytest.mark.parametrize("agent, override, message", [

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,6 +17,7 @@ from repro.agent.objectives.atc import ATCObjective
 from repro.agent.objectives.driml import DRIMLObjective, first_action_only
 from repro.agent.objectives.spr import MomentumTarget, SPRObjective, negative_cosine
 from repro.config.compose import CONF_DIR, compose, typed
+from repro.config.schema import ATCParams, SPRParams
 
 OBS = (9, 32, 32)  # small frames: the encoder gives 32 x 9 x 9 features
 A = 3
@@ -360,7 +362,7 @@ def test_agent_files_differ_from_taco_only_in_the_objectives():
 
 def test_agent_files_are_commented_and_match_code_defaults():
     taco_keys = set(yaml.safe_load((CONF_DIR / "agent" / "taco.yaml").read_text()))
-    defaults = {"spr": SPRObjective.DEFAULTS, "atc": ATCObjective.DEFAULTS}
+    defaults = {"spr": dataclasses.asdict(SPRParams()), "atc": dataclasses.asdict(ATCParams())}  # the registered
     for name in NEW_AGENTS:
         text = (CONF_DIR / "agent" / f"{name}.yaml").read_text()
         for line in text.splitlines():

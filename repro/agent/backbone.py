@@ -34,6 +34,7 @@ from repro.agent.losses import Metrics
 from repro.agent.modules import LearnerBase, ModuleSet
 from repro.agent.networks import ActionEncoder, Actor, Critic, Encoder, default_latent_action_dim
 from repro.agent.objectives import OBJECTIVES, AuxBatch, Objective, ObjectiveContext
+from repro.config.compose import objective_params
 from repro.config.schema import AgentConfig
 
 EncodedBatch = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]  # h, h', a, r, discount
@@ -104,7 +105,7 @@ class DrQV2Backbone:
                                step_dim=self.step_dim, encoder=self.encoder)
         objectives = OrderedDict()
         for name in active:
-            ctx.params = dict(cfg.objective_params.get(name, {}))
+            ctx.params = objective_params(name, cfg.objective_params.get(name))  # typed (checked by validate)
             objectives[name] = OBJECTIVES[name](ctx)
         self.objectives = nn.ModuleDict(objectives).to(self.device)
         self.shared = ctx._shared.to(self.device) if ctx._shared is not None else None

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import os
 import re
-from collections.abc import Iterable
+import typing
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, cast
 
@@ -18,6 +20,7 @@ from repro.config.schema import (
     AGENT_FIELDS,
     BUDGET_KEYS,
     AgentConfig,
+    Choice,
     LearnerName,
     RunConfig,
     choice_fields,
@@ -25,6 +28,7 @@ from repro.config.schema import (
     learner_names,
     learner_specs,
     objective_names,
+    objective_specs,
     plugin_conf_dirs,
     registered_ranges,
     section_type,
@@ -159,6 +163,7 @@ def compose(overrides: list[str] | tuple[str, ...] = ()) -> DictConfig:
         for ov in overrides:
             key = ov.partition("=")[0].lstrip("+~")
             if f"'{key}'" in first or key in first:
+                _check_objective_key(ov)
                 base = compose_base()
                 try:
                     _check_keys([ov], base)
@@ -168,6 +173,36 @@ def compose(overrides: list[str] | tuple[str, ...] = ()) -> DictConfig:
     finally:
         GlobalHydra.instance().clear()
     return validate(raw)
+
+
+def unknown_objective(name: str, where: str) -> str:
+    """The one line for an objective name nobody registered, found in ``where`` (``agent.objectives``): the close
+    names, then every registered objective (the plugins' included)."""
+    names = objective_names()
+    close = difflib.get_close_matches(name, names, n=3, cutoff=0.5)
+    hint = f" Did you mean: {', '.join(close)}?" if close else ""
+    return f"unknown objective '{name}' in {where}.{hint} Registered objectives: {', '.join(names)}."
+
+
+def _check_objective_key(override: str) -> None:
+    """ConfigError for an override ``agent.objectives.<name>=w`` or ``agent.objective_params.<name>.<setting>=v``
+    that Hydra refused: a name nobody registered, a setting the objective does not have, or (both known) a key the
+    agent file does not hold, which needs Hydra's ``+``. Nothing for any other key."""
+    key, _, value = override.partition("=")
+    parts = key.lstrip("+~").split(".")
+    if len(parts) < 3 or parts[0] != "agent" or parts[1] not in ("objectives", "objective_params"):
+        return
+    try:
+        names = objective_names()
+    except PluginError as exc:
+        raise ConfigError(str(exc)) from None
+    name, section = parts[2], f"agent.{parts[1]}"
+    if name not in names:
+        raise ConfigError(unknown_objective(name, section))
+    if section == "agent.objective_params" and len(parts) == 4:
+        _params_type(name, {parts[3]: None})  # an unknown setting, or one of an objective that takes none
+    if not key.startswith(("+", "~")) and len(parts) == (3 if section == "agent.objectives" else 4):
+        raise ConfigError(f"{key.lstrip('+~')} is not in the agent file's config: add it with +{key}={value}.")
 
 
 _BASE: DictConfig | None = None
@@ -203,6 +238,7 @@ def validate(raw: DictConfig) -> DictConfig:
         value = str(OmegaConf.select(cfg, key))
         if not NAME_RE.match(value):
             raise ConfigError(f"{key}='{value}' may only contain letters, digits, '_', '.' and '-'.")
+    _check_objectives(cfg)
     _check_ranges(cfg)
     if cfg.seed < 0:
         raise ConfigError(f"seed must be >= 0 (got {cfg.seed}).")
@@ -210,11 +246,73 @@ def validate(raw: DictConfig) -> DictConfig:
         raise ConfigError("env.distracting_dims and train.eval_episodes must be >= 0.")
     if cfg.train.video_size < 16 or cfg.train.video_size % 2:
         raise ConfigError(f"train.video_size must be an even number >= 16 (got {cfg.train.video_size}).")
-    for name in cfg.agent.objectives:
-        if name not in objective_names():
-            raise ConfigError(f"unknown objective '{name}'." + close_matches(str(name), sorted(objective_names())))
     _check_learner(cfg)
     return cfg
+
+
+def _check_objectives(cfg: DictConfig) -> None:
+    """Every name of ``agent.objectives`` and ``agent.objective_params`` is a registered objective, and every
+    objective's parameters read as its registered ``params`` (:func:`objective_params`). The config itself is left as
+    given (its run's identity)."""
+    for section in ("objectives", "objective_params"):
+        for name in cfg.agent[section]:
+            if name not in objective_names():
+                raise ConfigError(unknown_objective(str(name), f"agent.{section}"))
+    for name, given in cfg.agent.objective_params.items():
+        objective_params(str(name), given)
+
+
+def _type_text(kind: Any) -> str:
+    """How an error line names a parameter's type: ``an integer``, ``a number``, ``true or false``, ``a string``,
+    ``one of a, b`` (a :class:`Choice`), each ``or null`` when Optional."""
+    args = [a for a in typing.get_args(kind) if a is not type(None)]
+    if len(args) == 1 and type(None) in typing.get_args(kind):
+        return f"{_type_text(args[0])} or null"
+    if isinstance(kind, type) and issubclass(kind, Choice):
+        return f"one of {', '.join(kind.values())}"
+    words = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
+    return words.get(kind, getattr(kind, "__name__", str(kind)))
+
+
+def _params_type(name: str, given: Mapping[Any, Any]) -> type | None:
+    """The registered ``params`` dataclass of objective ``name`` (None when it takes none); ConfigError (one line)
+    when ``given`` names a setting it does not have."""
+    spec = objective_specs()[name]
+    where = f"agent.objective_params.{name}"
+    if spec.params is None:
+        if given:
+            raise ConfigError(f"{where}: objective '{name}' takes no parameters (got {', '.join(map(str, given))}).")
+        return None
+    known = [f.name for f in dataclasses.fields(spec.params)]
+    for key in given:
+        if key not in known:
+            raise ConfigError(f"unknown setting {where}.{key} of objective '{name}'." + close_matches(str(key), known))
+    return spec.params
+
+
+def objective_params(name: str, given: Any = None) -> Any:
+    """The parameters of the registered objective ``name`` typed: an instance of its ``ObjectiveSpec.params``, the
+    values ``given`` (``agent.objective_params.<name>``: a mapping, or None) over the dataclass's defaults; None for
+    an objective that takes none. ConfigError (one line) for a setting it does not have or a value of the wrong type
+    (a float where an integer is meant included: it is refused, never truncated). Called by :func:`validate` before
+    anything is written, and by the agent that builds the objective."""
+    where = f"agent.objective_params.{name}"
+    if isinstance(given, DictConfig):
+        given = OmegaConf.to_container(given, resolve=True)
+    given = {} if given is None else given
+    if not isinstance(given, Mapping):
+        raise ConfigError(f"{where} must be a mapping of setting: value (got {given!r}).")
+    kind = _params_type(name, given)
+    if kind is None:
+        return None
+    hints = typing.get_type_hints(kind)
+    node = OmegaConf.structured(kind)
+    for key, value in given.items():
+        try:
+            node[key] = value
+        except OmegaConfBaseException:
+            raise ConfigError(f"{where}.{key} must be {_type_text(hints[key])} (got {value!r}).") from None
+    return OmegaConf.to_object(node)
 
 
 def _structure(raw: DictConfig) -> DictConfig:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, is_dataclass
+from dataclasses import MISSING, dataclass, field, fields, is_dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import TypeVar
@@ -75,7 +75,12 @@ class ObjectiveSpec:
     ``agent.objective_params.<name>.<setting>``, checked in the runs whose ``agent.objectives`` names it.
     ``companions``: registered objectives that the method named ``label`` trains with it (the paper's TACO is the
     TACO, CURL and reward losses): with all of them enabled, ``label`` alone names the lot; with some off, the label
-    says which (``TACO w/o CURL``)."""
+    says which (``TACO w/o CURL``).
+    ``params``: its parameters, a dataclass whose fields (each with a default: the objective's own) are the settings
+    ``agent.objective_params.<name>.<setting>``. A run's values are checked against it (a misspelled setting, a value
+    of the wrong type, an integer given as a float: one line, exit 2, before a run writes anything) and the objective
+    reads them as an instance of it (``ObjectiveContext.params``). None: it takes no parameters (any given is refused).
+    ``ranges`` name fields of ``params``."""
 
     name: str
     label: str | None = None
@@ -83,6 +88,7 @@ class ObjectiveSpec:
     conf: str | Path | None = None
     ranges: Ranges = field(default_factory=dict)
     companions: tuple[str, ...] = ()
+    params: type | None = None
 
     @property
     def tag(self) -> str:
@@ -106,20 +112,27 @@ def check_spec(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
     if isinstance(spec, LearnerSpec) and spec.section is not None and not (
             isinstance(spec.section, type) and is_dataclass(spec.section)):
         raise PluginError(f"{where}: section must be a dataclass (got {spec.section!r}).")
+    if isinstance(spec, ObjectiveSpec) and spec.params is not None:
+        if not (isinstance(spec.params, type) and is_dataclass(spec.params)):
+            raise PluginError(f"{where}: params must be a dataclass (got {spec.params!r}).")
+        no_default = [f.name for f in fields(spec.params) if f.default is MISSING and f.default_factory is MISSING]
+        if no_default:
+            raise PluginError(f"{where}: params {spec.params.__name__} must give every field a default (the "
+                              f"objective's own; missing for {', '.join(no_default)}).")
     check_ranges(spec, where)
 
 
 def check_ranges(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
-    """PluginError (one line) for ``ranges`` that cannot be checked: not ``{name: bound}`` (:data:`Bound`), or (a
-    learner's) naming no field of its section."""
+    """PluginError (one line) for ``ranges`` that cannot be checked: not ``{name: bound}`` (:data:`Bound`), or naming
+    no field of its section (a learner's) or of its ``params`` (an objective's)."""
     if not isinstance(spec.ranges, Mapping):
         raise PluginError(f"{where}: ranges must be a mapping setting -> (low, inclusive) (got {spec.ranges!r}).")
-    known = None
-    if isinstance(spec, LearnerSpec):
-        known = {f.name for f in fields(spec.section)} if spec.section is not None else set()
+    typed = spec.section if isinstance(spec, LearnerSpec) else spec.params
+    known = {f.name for f in fields(typed)} if typed is not None else set()
     for key, bound in spec.ranges.items():
-        if known is not None and key not in known:
-            raise PluginError(f"{where}: ranges names '{key}', which is not a field of its section.")
+        if key not in known:
+            raise PluginError(f"{where}: ranges names '{key}', which is not a field of its "
+                              f"{'section' if isinstance(spec, LearnerSpec) else 'params'}.")
         if not is_bound(bound):
             raise PluginError(f"{where}: ranges['{key}'] must be (low, inclusive) or (low, inclusive, high, "
                               f"inclusive), e.g. (0.0, False) for > 0, (0.0, False, 1.0, False) for in (0, 1) "

@@ -298,6 +298,26 @@ class DTConfig:
 
 
 @dataclass
+class SPRParams:
+    """``agent.objective_params.spr`` (repro/agent/objectives/spr.py). An objective's parameters are optional in a
+    config: a default here is the objective's own (SPR's), used where the agent file gives none (conf/agent/spr.yaml
+    writes them all out, with their comments)."""
+
+    momentum: float = 0.0  # target <- m target + (1 - m) online; SPR with augmentation: 0 (a stop-gradient copy)
+    projection_dim: Optional[int] = None  # width of the projection g and predictor q; None: agent.hidden_dim
+    rollout: bool = True  # roll the transition model out over the K actions, a loss at every step
+
+
+@dataclass
+class ATCParams:
+    """``agent.objective_params.atc`` (repro/agent/objectives/atc.py); defaults: ATC's on DMControl (as
+    :class:`SPRParams`)."""
+
+    momentum: float = 0.99  # target update rate tau = 0.01 every update
+    predictor_hidden: int = 512  # hidden size of the residual anchor MLP
+
+
+@dataclass
 class AgentConfig:
     """What every learner's agent shares (conf/agent/<agent>.yaml; ``learner`` and ``stddev_schedule.step_scale``
     from conf/config.yaml unless the agent file sets them). A learner's own settings are its registered ``section``,
@@ -321,7 +341,8 @@ class AgentConfig:
     action_hidden_dim: int
     reward_target: RewardTarget
     objectives: dict[str, float]  # a registered objective (objective_names()) -> loss weight
-    objective_params: dict[str, Any]  # a registered objective -> its parameters
+    objective_params: dict[str, Any]  # a registered objective -> its parameters (typed by its registered ``params``,
+    # checked by repro.config.compose.validate; an objective reads them typed: compose.objective_params)
     compile: bool
     amp: bool
     fast: bool  # agent.fast: repro/agent/fast.py resolves what it turns on
@@ -461,17 +482,17 @@ BUILTIN_LEARNERS = (
 )
 _WITH_CURL_AND_REWARD = (ObjectiveName.curl.value, ObjectiveName.reward.value)  # TACO's loss: TACO + CURL + reward;
 # the Table 2 objectives replace TACO's term and keep the other two
-_MOMENTUM = (0.0, True, 1.0, True)  # target <- m target + (1 - m) online
+_MOMENTUM = (0.0, True, 1.0, False)  # target <- m target + (1 - m) online (1: the target would never move)
 BUILTIN_OBJECTIVES = (
     ObjectiveSpec(ObjectiveName.taco.value, label="TACO", companions=_WITH_CURL_AND_REWARD,
                   factory="repro.agent.objectives.taco:TACOObjective"),
     ObjectiveSpec(ObjectiveName.curl.value, label="CURL", factory="repro.agent.objectives.taco:CURLObjective"),
     ObjectiveSpec(ObjectiveName.reward.value, label="Reward", factory="repro.agent.objectives.taco:RewardObjective"),
     ObjectiveSpec(ObjectiveName.spr.value, label="SPR", companions=_WITH_CURL_AND_REWARD,
-                  factory="repro.agent.objectives.spr:SPRObjective",
+                  factory="repro.agent.objectives.spr:SPRObjective", params=SPRParams,
                   ranges={"momentum": _MOMENTUM, "projection_dim": _AT_LEAST_1}),
     ObjectiveSpec(ObjectiveName.atc.value, label="ATC", companions=_WITH_CURL_AND_REWARD,
-                  factory="repro.agent.objectives.atc:ATCObjective",
+                  factory="repro.agent.objectives.atc:ATCObjective", params=ATCParams,
                   ranges={"momentum": _MOMENTUM, "predictor_hidden": _AT_LEAST_1}),
     ObjectiveSpec(ObjectiveName.driml.value, label="DRIML", companions=_WITH_CURL_AND_REWARD,
                   factory="repro.agent.objectives.driml:DRIMLObjective"),

@@ -12,14 +12,14 @@ temporal shift k = 1 (here the agent's K, which task files set to 1 on quadruped
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import torch
 from torch import nn
 
 from repro.agent.networks import orthogonal_init
 from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext, info_nce
-from repro.agent.objectives.common import MomentumTarget, read_params
+from repro.agent.objectives.common import MomentumTarget, typed_params
+from repro.config.schema import ATCParams
 
 
 class ATCObjective(Objective):
@@ -27,26 +27,20 @@ class ATCObjective(Objective):
 
     extra_metrics = ("acc",)
 
-    DEFAULTS: dict[str, Any] = {
-        "momentum": 0.99,          # ATC on DMControl: target update rate tau = 0.01 every update
-        "predictor_hidden": 512,   # ATC: anchor MLP hidden size 512 (residual)
-    }
-
     def __init__(self, ctx: ObjectiveContext):
         super().__init__(ctx)
-        p = read_params(ctx, self.DEFAULTS, "atc")
+        p = typed_params(ctx, ATCParams)  # agent.objective_params.atc
         if ctx.encoder is None:
             raise ValueError("atc needs the online encoder in the objective context (momentum target).")
         d = ctx.feature_dim
         self.heads = ctx.shared()
-        self.predictor = nn.Sequential(nn.Linear(d, int(p["predictor_hidden"])), nn.ReLU(),
-                                       nn.Linear(int(p["predictor_hidden"]), d))
+        self.predictor = nn.Sequential(nn.Linear(d, p.predictor_hidden), nn.ReLU(), nn.Linear(p.predictor_hidden, d))
         self.predictor.apply(orthogonal_init)
         # ATC's W is a bias-free linear layer with PyTorch's default initialisation U(-1/sqrt(d), 1/sqrt(d)).
         bound = 1.0 / math.sqrt(d)
         self.W = nn.Parameter(torch.empty(d, d).uniform_(-bound, bound))
         self.target = MomentumTarget({"encoder": ctx.encoder, "state_proj": self.heads.state_proj},
-                                     float(p["momentum"]))
+                                     p.momentum)
 
     def logits(self, anchor: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """(c + MLP(c)) W c~^T minus each row's max (the shift leaves the cross-entropy unchanged)."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import abc
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import torch
@@ -25,7 +25,9 @@ class ObjectiveContext:
     K: int
     seq_dim: int  # size of the encoded action sequence (K d_u, or K |A| without action encoder)
     step_dim: int = 0  # size of one encoded action (d_u, or |A| without action encoder)
-    params: dict[str, Any] = field(default_factory=dict)  # agent.objective_params.<name>
+    # agent.objective_params.<name> typed: an instance of the objective's registered ``params`` dataclass (None: it
+    # registers none, or the context was built by hand; ``common.typed_params`` then gives the defaults)
+    params: Any = None
     encoder: nn.Module | None = None  # the online conv encoder (read-only reference, e.g. to copy an EMA target)
     _shared: SharedHeads | None = None
 

@@ -3,21 +3,26 @@
 from __future__ import annotations
 
 import copy
-from typing import Any
+from typing import TypeVar
 
 import torch
 from torch import nn
 
 from repro.agent.objectives.base import ObjectiveContext
 
+P = TypeVar("P")
 
-def read_params(ctx: ObjectiveContext, defaults: dict[str, Any], name: str) -> dict[str, Any]:
-    """``defaults`` updated with ``agent.objective_params.<name>``; unknown keys are refused."""
-    unknown = sorted(set(ctx.params) - set(defaults))
-    if unknown:
-        raise ValueError(f"agent.objective_params.{name}: unknown key(s) {', '.join(unknown)}; "
-                         f"known: {', '.join(sorted(defaults))}.")
-    return {**defaults, **ctx.params}
+
+def typed_params(ctx: ObjectiveContext, kind: type[P]) -> P:
+    """The objective's parameters, an instance of ``kind`` (its registered ``ObjectiveSpec.params``): the context's,
+    checked and typed by the config (repro.config.compose.objective_params), or ``kind``'s defaults when the context
+    carries none (one built by hand)."""
+    if ctx.params is None:
+        return kind()
+    if not isinstance(ctx.params, kind):
+        raise TypeError(f"the objective's parameters are a {type(ctx.params).__name__}, not a {kind.__name__} (is "
+                        f"the objective registered with params={kind.__name__}?)")
+    return ctx.params
 
 
 def negative_cosine(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

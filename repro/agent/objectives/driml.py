@@ -30,8 +30,6 @@ class DRIMLObjective(Objective):
 
     def __init__(self, ctx: ObjectiveContext):
         super().__init__(ctx)
-        if ctx.params:
-            raise ValueError(f"agent.objective_params.driml takes no keys (got {', '.join(map(str, ctx.params))}).")
         self.heads = ctx.shared()
         self.proj_sa = nn.Sequential(nn.Linear(ctx.feature_dim + ctx.seq_dim, ctx.hidden_dim), nn.ReLU(),
                                      nn.Linear(ctx.hidden_dim, ctx.feature_dim))

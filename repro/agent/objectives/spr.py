@@ -12,31 +12,24 @@ network with the gradient stopped), 0.99 without augmentation; prediction depth 
 
 from __future__ import annotations
 
-from typing import Any
-
 import torch
 from torch import nn
 
 from repro.agent.networks import orthogonal_init
 from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext
-from repro.agent.objectives.common import MomentumTarget, negative_cosine, read_params  # noqa: F401
+from repro.agent.objectives.common import MomentumTarget, negative_cosine, typed_params
+from repro.config.schema import SPRParams
 
 
 class SPRObjective(Objective):
     """Negative cosine between q(g(T(z_t, u_seq))) and the momentum target's g_m(H_m(f_m(o_{t+K})))."""
 
-    DEFAULTS: dict[str, Any] = {
-        "momentum": 0.0,          # SPR with augmentation: tau = 0 (target = online, gradient stopped)
-        "projection_dim": None,   # null: hidden_dim (SPR projects with the first layer of the Q head)
-        "rollout": True,          # SPR: roll the transition model out over the K actions, loss at every step
-    }
-
     def __init__(self, ctx: ObjectiveContext):
         super().__init__(ctx)
-        p = read_params(ctx, self.DEFAULTS, "spr")
-        proj_dim = int(p["projection_dim"] or ctx.hidden_dim)
+        p = typed_params(ctx, SPRParams)  # agent.objective_params.spr
+        proj_dim = p.projection_dim or ctx.hidden_dim
         self.heads = ctx.shared()
-        self.rollout = bool(p["rollout"])
+        self.rollout = p.rollout
         self.needs_future_seq = self.rollout
         action_in = ctx.step_dim if self.rollout else ctx.seq_dim
         self.transition = nn.Sequential(
@@ -46,7 +39,7 @@ class SPRObjective(Objective):
         self.prediction = nn.Linear(proj_dim, proj_dim)
         for mod in (self.transition, self.projection, self.prediction):
             mod.apply(orthogonal_init)
-        self.momentum = float(p["momentum"])
+        self.momentum = p.momentum
         self.target: MomentumTarget | None = None
         if self.momentum > 0.0:
             if ctx.encoder is None:

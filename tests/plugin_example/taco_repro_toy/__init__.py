@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional
 
 from repro.config.plugins import LearnerSpec, ObjectiveSpec
 
@@ -31,6 +32,14 @@ class UTDConfig:
     critic_steps: int  # critic steps per update, each on its own random shift of the batch (1: DrQ-v2)
 
 
+@dataclass
+class InvParams:
+    """``agent.objective_params.toy_inv``: the objective's parameters, each with its default (an agent file may give
+    none); taco-repro checks a run's values against it and the objective reads them as an instance of it."""
+
+    hidden_dim: Optional[int] = None  # width of the inverse-dynamics MLP; None: agent.hidden_dim
+
+
 # ranges: checked with taco-repro's own (one line, exit 2, before a run writes anything): temperature > 0 (it
 # divides), max_weight >= 1 (the weights' mean is 1), critic_steps >= 1; the objective's hidden_dim >= 1 when set
 # (null is not checked)
@@ -40,4 +49,4 @@ LEARNER = LearnerSpec(name="toy_rwbc", offline=True, label="RWBC", section=RWBCC
 ONLINE_LEARNER = LearnerSpec(name="toy_utd", offline=False, label="DrQ-v2-UTD", section=UTDConfig,
                              factory="taco_repro_toy.online:UTD", conf=CONF, ranges={"critic_steps": (1, True)})
 OBJECTIVE = ObjectiveSpec(name="toy_inv", label="InvDyn", factory="taco_repro_toy.objective:InverseDynamics",
-                          conf=CONF, ranges={"hidden_dim": (1, True)})
+                          conf=CONF, params=InvParams, ranges={"hidden_dim": (1, True)})

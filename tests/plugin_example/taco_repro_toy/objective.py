@@ -8,18 +8,17 @@ from torch import nn
 
 from repro.agent.networks import orthogonal_init
 from repro.agent.objectives.base import AuxBatch, Objective, ObjectiveContext
-from repro.agent.objectives.common import read_params
+from repro.agent.objectives.common import typed_params
+from taco_repro_toy import InvParams
 from taco_repro_toy.losses import inverse_dynamics_loss
 
 
 class InverseDynamics(Objective):
     """MLP([H(f(aug o_t)), H(f(aug o_{t+K}))]) -> (a_t..a_{t+K-1}); the gradient reaches the encoder through o_t."""
 
-    DEFAULTS = {"hidden_dim": None}  # agent.objective_params.toy_inv.hidden_dim; null: agent.hidden_dim
-
     def __init__(self, ctx: ObjectiveContext):
         super().__init__(ctx)
-        hidden = int(read_params(ctx, self.DEFAULTS, "toy_inv")["hidden_dim"] or ctx.hidden_dim)
+        hidden = typed_params(ctx, InvParams).hidden_dim or ctx.hidden_dim  # agent.objective_params.toy_inv, typed
         self.heads = ctx.shared()  # the state projection H shared with the other objectives
         self.head = nn.Sequential(nn.Linear(2 * ctx.feature_dim, hidden), nn.ReLU(),
                                   nn.Linear(hidden, ctx.K * ctx.action_dim), nn.Tanh())
