@@ -214,9 +214,14 @@ def _beats_drqv2(ctx: Context) -> tuple[str, str]:
     return beats_drqv2_rule(ctx, means(online_rows(ctx), ["task", "method"]))
 
 
+def beats_drqv2_pairs() -> list[tuple[tuple, tuple, str]]:
+    """online_beats_drqv2_all's comparisons: (TACO cell, DrQ-v2 cell, name) per task."""
+    return [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9]
+
+
 def beats_drqv2_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
     """online_beats_drqv2_all on a (task, method) ``means`` table."""
-    return universal(ctx, table, [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9])
+    return universal(ctx, table, beats_drqv2_pairs())
 
 
 @check("online_beats_model_based", "TACO mean > both DreamerV3 and TD-MPC on >= 6 of 9 tasks (baselines from runs, "
@@ -400,11 +405,15 @@ def _vs_repr(ctx: Context) -> tuple[str, str]:
                                    ["task", "method"]))
 
 
+def vs_repr_pairs(ctx: Context) -> list[tuple[tuple, tuple, str]]:
+    """vs_repr_objectives' comparisons: TACO against each other objective where the paper has its value."""
+    return [((t, "TACO"), (t, m), f"{t} vs {m}") for t in REPR_TASKS for m in ctx.paper.repr_others
+            if ctx.paper.repr_value(t, m) is not None]
+
+
 def vs_repr_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
     """vs_repr_objectives on a (task, method) ``means`` table."""
-    pairs = [((t, "TACO"), (t, m), f"{t} vs {m}") for t in REPR_TASKS for m in ctx.paper.repr_others
-             if ctx.paper.repr_value(t, m) is not None]
-    return universal(ctx, table, pairs)
+    return universal(ctx, table, vs_repr_pairs(ctx))
 
 
 def offline_scores(ctx: Context) -> pd.DataFrame:
@@ -430,11 +439,15 @@ def _offline_gain(ctx: Context) -> tuple[str, str]:
     return offline_gain_rule(ctx, table)
 
 
+def offline_gain_pairs() -> list[tuple[tuple, tuple, str]]:
+    """offline_gain's comparisons: X+TACO against X per task/dataset pair, X in TD3+BC and CQL."""
+    return [((t, d, f"{x}+TACO"), (t, d, x), f"{t}/{d} {x}") for t in OFFLINE_TASKS
+            for d in DatasetKind.values() for x in ("TD3+BC", "CQL")]
+
+
 def offline_gain_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
     """offline_gain on a (task, dataset, method) ``means`` table of returns."""
-    pairs = [((t, d, f"{x}+TACO"), (t, d, x), f"{t}/{d} {x}") for t in OFFLINE_TASKS
-             for d in DatasetKind.values() for x in ("TD3+BC", "CQL")]
-    return universal(ctx, table, pairs)
+    return universal(ctx, table, offline_gain_pairs())
 
 
 @check("offline_average", "each printed average of Table 3's average row (TD3+BC+TACO, TD3+BC, CQL+TACO, CQL; "

@@ -46,6 +46,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
+from analysis import bootstrap as bs
 from analysis import claims as cl
 from analysis import select
 from analysis.calibration import published_values
@@ -54,7 +55,7 @@ from analysis.context import Context
 from analysis.load import Results
 from analysis.offline_tables import offline_runs
 from analysis.paper import DMC9, OFFLINE_TASKS, PaperData
-from analysis.robustness import cell_spread
+from analysis.robustness import BROKEN_FRACTION, cell_spread
 from analysis.tables import TableOutput, fmt_num, write_table
 from repro.config.schema import DatasetKind
 
@@ -69,6 +70,12 @@ NORMALIZED_RANGE = (0.0, math.inf)
 
 Key = tuple
 Cells = dict[Key, np.ndarray]  # one draw: cell -> values over its seeds
+Draws = dict[Key, np.ndarray]  # every draw: cell -> (draws x its seeds)
+# A claim's verdict in every draw at once, as its ``judge`` gives it draw by draw: an object array of verdicts,
+# "" where a value the verdict compares lies within :data:`TIE` of its threshold (there the draw is judged one by
+# one, so that a difference in the last bits of a whole-array sum cannot change a verdict).
+BatchJudge = Callable[[Context, Draws], np.ndarray]
+TIE = 1e-9  # relative distance from a threshold under which a draw is judged by ``judge`` itself
 
 NOT_SIMULATED = {
     "reacher_speed": "its rule reads TACO's and DrQ-v2's mean learning curves up to 1.5M frames; the paper gives "
@@ -168,6 +175,7 @@ class SimClaim:
     sims: int | None = None  # draws (default: the caller's)
     reps: int = 0  # bootstrap repetitions the rule runs in each draw
     notes: list[str] = field(default_factory=list)
+    batch: BatchJudge | None = None  # the verdicts of all draws at once (see :data:`BatchJudge`)
 
 
 def means_table(cells: Cells) -> dict[Key, tuple[int, float]]:
@@ -226,6 +234,159 @@ def _on_table(rule: Callable[[Context, dict], tuple[str, str]]) -> Callable[[Con
     return lambda ctx, cells: rule(ctx, means_table(cells))
 
 
+# ---------------------------------------------------------------- the same verdicts, every draw at once
+def _sims(draws: Draws) -> int:
+    return next(iter(draws.values())).shape[0]
+
+
+def _enough(ctx: Context, draws: Draws, key: Key) -> bool:
+    """analysis.claims.get's test of a cell (its seeds are the same number in every draw)."""
+    return key in draws and draws[key].shape[1] > 0 and draws[key].shape[1] >= ctx.min_seeds
+
+
+def _near(a: np.ndarray, b: np.ndarray | float) -> np.ndarray:
+    """Where ``a`` and ``b`` are within :data:`TIE` of each other (relative)."""
+    return np.abs(a - b) <= TIE * (1.0 + np.abs(a) + np.abs(b))
+
+
+def _verdicts(sims: int, supported: np.ndarray | bool, otherwise: str, unsure: np.ndarray | bool) -> np.ndarray:
+    out = np.where(np.broadcast_to(supported, (sims,)), cl.SUPPORTED, otherwise).astype(object)
+    out[np.broadcast_to(unsure, (sims,))] = ""
+    return out
+
+
+def _all(sims: int, verdict: str) -> np.ndarray:
+    return np.full(sims, verdict, dtype=object)
+
+
+def _stacked_draws(draws: Draws, keys: Sequence[Key]) -> np.ndarray:
+    """:func:`stacked` of every draw: (draws x seeds x cells)."""
+    k = min(draws[key].shape[1] for key in keys)
+    return np.stack([draws[key][:, :k] for key in keys], axis=2)
+
+
+def universal_batch(pairs: Callable[[Context], Sequence[tuple[Key, Key, str]]]) -> BatchJudge:
+    """analysis.claims.universal over a means table, every draw at once: refuted where a pair present fails,
+    else not enough data where one is missing, else supported."""
+
+    def judge(ctx: Context, draws: Draws) -> np.ndarray:
+        sims = _sims(draws)
+        fail, unsure, missing = np.zeros(sims, bool), np.zeros(sims, bool), False
+        for a, b, _ in pairs(ctx):
+            if not (_enough(ctx, draws, a) and _enough(ctx, draws, b)):
+                missing = True
+                continue
+            va, vb = draws[a].mean(axis=1), draws[b].mean(axis=1)
+            fail |= ~(va > vb)
+            unsure |= _near(va, vb)
+        out = np.where(fail, cl.REFUTED, cl.NO_DATA if missing else cl.SUPPORTED).astype(object)
+        out[unsure] = ""
+        return out
+
+    return judge
+
+
+def _gain_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """:func:`_judge_gain` (analysis.claims.avg_gain_rule) in every draw."""
+    sims = _sims(draws)
+    taco, drq = [(t, "TACO") for t in DMC9], [(t, "DrQ-v2") for t in DMC9]
+    if not all(_enough(ctx, draws, k) for k in taco + drq):
+        return _all(sims, cl.NO_DATA)
+    r = bs.RATIO_OF_MEANS.vector(_stacked_draws(draws, taco), _stacked_draws(draws, drq))[:, 0]
+    return _verdicts(sims, r >= cl.GAIN_BAR, cl.REFUTED, _near(r, cl.GAIN_BAR))
+
+
+def _published_gain_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """:func:`_judge_published_gain` (analysis.claims.published_gain_rule) in every draw."""
+    sims = _sims(draws)
+    taco = [(t, "TACO") for t in DMC9]
+    if not all(_enough(ctx, draws, k) for k in taco):
+        return _all(sims, cl.NO_DATA)
+    ys = [np.ascontiguousarray(draws[(t, "published")], dtype=float) for t in DMC9]
+    if any(y.shape[1] < ctx.min_seeds for y in ys):
+        return _all(sims, cl.NO_DATA)
+    r = bs.RATIO_TO_TASK_MEANS.vector(_stacked_draws(draws, taco), *(y[:, :, None] for y in ys))[:, 0]
+    return _verdicts(sims, r >= cl.GAIN_BAR, cl.REFUTED, _near(r, cl.GAIN_BAR))
+
+
+def _model_based_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """analysis.claims.beats_model_based_rule in every draw (a baseline without cells: Table 1's value)."""
+    sims = _sims(draws)
+    if not all(_enough(ctx, draws, (t, "TACO")) for t in DMC9):
+        return _all(sims, cl.NO_DATA)
+    wins, unsure = np.zeros(sims, int), np.zeros(sims, bool)
+    for t in DMC9:
+        base = []
+        for m in cl.MODEL_BASED:
+            if _enough(ctx, draws, (t, m)):
+                base.append(draws[(t, m)].mean(axis=1))
+            else:
+                printed = ctx.paper.online_value(t, m)
+                assert printed is not None  # Table 1 has both baselines on every DMC task
+                base.append(np.full(sims, float(printed[0])))
+        best = np.max(np.stack(base), axis=0)
+        taco = draws[(t, "TACO")].mean(axis=1)
+        wins += taco > best
+        unsure |= _near(taco, best)
+    return _verdicts(sims, wins >= 6, cl.REFUTED, unsure)
+
+
+def _seeds_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """analysis.claims.seed_robustness_rule on every draw's cell spreads (analysis.robustness.cell_spread)."""
+    sims = _sims(draws)
+    got = {k: v for k, v in draws.items() if v.shape[1] > 0 and v.shape[1] >= ctx.min_seeds}
+    tasks = [t for t in DMC9 if (t, "TACO") in got and (t, "DrQ-v2") in got]
+    if len(tasks) < 9:
+        return _all(sims, cl.NO_DATA)
+    less, broken, unsure = np.zeros(sims, int), np.zeros(sims, int), np.zeros(sims, bool)
+    for t in tasks:
+        a, b = got[(t, "TACO")], got[(t, "DrQ-v2")]
+        sa = a.std(ddof=1, axis=1) if a.shape[1] > 1 else np.full(sims, math.nan)
+        sb = b.std(ddof=1, axis=1) if b.shape[1] > 1 else np.full(sims, math.nan)
+        less += sa < sb
+        unsure |= _near(sa, sb)
+    for k, v in got.items():
+        if k[1] != "DrQ-v2":
+            continue
+        med = np.median(v, axis=1)
+        half = BROKEN_FRACTION * med
+        broken += np.where(med > 0, (v < half[:, None]).sum(axis=1), 0)
+        unsure |= _near(med, 0.0) | _near(v, half[:, None]).any(axis=1)
+    return _verdicts(sims, (less >= 7) & (broken >= 1), cl.REFUTED, unsure)
+
+
+def _manipulator_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """analysis.claims.manipulator_rule on every draw's solved counts (values 0 or 1: exact sums)."""
+    sims = _sims(draws)
+    runs = {k[0]: v.shape[1] for k, v in draws.items()}
+    solved = {k[0]: v.sum(axis=1) for k, v in draws.items()}
+    drq_solves = solved["DrQ-v2"] > 0 if "DrQ-v2" in solved else np.zeros(sims, bool)
+    if "TACO" not in runs or "DrQ-v2" not in runs or min(runs.values()) < ctx.min_seeds:
+        out = _all(sims, cl.NO_DATA)
+    else:
+        # every cell's last frame is the budget in the simulation: short of a third of TACO's seeds is refuted
+        out = np.where(solved["TACO"] / runs["TACO"] >= 1 / 3, cl.SUPPORTED, cl.REFUTED).astype(object)
+    out[drq_solves] = cl.REFUTED
+    return out
+
+
+def _offline_average_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """analysis.claims.offline_average_rule in every draw: each printed average inside its method's bootstrap CI
+    (the same CIs: the bootstrap indices depend only on the shapes and the random state, so they are drawn once)."""
+    sims = _sims(draws)
+    pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
+    keys = [(t, d, m) for t, d in pairs for m in cl.OFFLINE_AVERAGED]
+    if not all(_enough(ctx, draws, k) for k in keys):
+        return _all(sims, cl.NO_DATA)
+    ok = np.ones(sims, bool)
+    for m, p in cl.offline_printed(ctx).items():
+        mats = _stacked_draws(draws, [(t, d, m) for t, d in pairs])
+        cis = bs.same_shape_intervals(bs.MEAN, [[mats[i]] for i in range(sims)], ctx.reps, ctx.seed)
+        lo, hi = np.array([c[0][0] for c in cis]), np.array([c[1][0] for c in cis])
+        ok &= (lo <= p) & (p <= hi)
+    return _verdicts(sims, ok, cl.REFUTED, False)
+
+
 def _online_observed(ctx: Context) -> Cells:
     return observed_cells(cl.online_rows(ctx), ["task", "method"])
 
@@ -276,30 +437,33 @@ def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = N
     offline_note = ("the rule compares returns; the cells are Table 3's normalised scores (100 x return / the "
                     "reference return, increasing in the return), so every comparison agrees")
     out = [
-        SimClaim("online_avg_gain", budgets["online_avg_gain"], online, _judge_gain, _online_observed, DMC9),
+        SimClaim("online_avg_gain", budgets["online_avg_gain"], online, _judge_gain, _online_observed, DMC9,
+                 batch=_gain_batch),
         SimClaim(cl.PUBLISHED_GAIN_ID, budgets["online_avg_gain"], [taco(t) for t in DMC9] + fixed_pub,
                  _judge_published_gain, _online_observed, DMC9,
-                 notes=["DrQ-v2 is the published curves as published (fixed data, as `repro claims` reads them)"]),
+                 notes=["DrQ-v2 is the published curves as published (fixed data, as `repro claims` reads them)"],
+                 batch=_published_gain_batch),
         SimClaim("online_beats_drqv2_all", budgets["online_beats_drqv2_all"], online, _on_table(cl.beats_drqv2_rule),
-                 _online_observed, DMC9),
+                 _online_observed, DMC9, batch=universal_batch(lambda c: cl.beats_drqv2_pairs())),
         SimClaim("online_beats_model_based", budgets["online_beats_model_based"], [taco(t) for t in DMC9],
                  _on_table(cl.beats_model_based_rule), _online_observed, DMC9,
                  notes=["DreamerV3 and TD-MPC are Table 1's printed means (not rerun by any sweep), as the rule "
-                        "reads them"]),
+                        "reads them"], batch=_model_based_batch),
         SimClaim("vs_repr_objectives", budgets["vs_repr_objectives"], repr_cells, _on_table(cl.vs_repr_rule),
-                 _repr_observed, cl.REPR_TASKS),
+                 _repr_observed, cl.REPR_TASKS, batch=universal_batch(cl.vs_repr_pairs)),
         SimClaim("offline_gain", budgets["offline_gain"], gain_cells, _on_table(cl.offline_gain_rule),
-                 _offline_observed, OFFLINE_TASKS, notes=[offline_note]),
+                 _offline_observed, OFFLINE_TASKS, notes=[offline_note],
+                 batch=universal_batch(lambda c: cl.offline_gain_pairs())),
         SimClaim("offline_average", budgets["offline_average"], gain_cells, _judge_offline_average, _offline_observed,
                  OFFLINE_TASKS, sims=CI_SIMS, reps=CI_REPS,
                  notes=[f"its verdict reads a bootstrap CI: rliable's bootstrap runs in every draw ({CI_REPS} "
-                        f"repetitions instead of {ctx.reps:,}; {CI_SIMS} draws)"]),
+                        f"repetitions instead of {ctx.reps:,}; {CI_SIMS} draws)"], batch=_offline_average_batch),
         SimClaim("seed_robustness", budgets["seed_robustness"], online, _judge_seeds, _seeds_observed, DMC9,
                  notes=["a broken seed is one below half its cell's median: normal cells almost never have one, so "
-                        "DrQ-v2's published values carry the claim's second half"]),
+                        "DrQ-v2's published values carry the claim's second half"], batch=_seeds_batch),
         SimClaim("manipulator", budgets["manipulator"], manip, _judge_manipulator, None, ("manipulator_bring_ball",),
                  notes=["DrQ-v2's 0 of 6 taken as a solve probability of 0 (its 95% upper bound is 39%): optimistic",
-                        "not conditioned on runs (the rule reads learning curves)"]),
+                        "not conditioned on runs (the rule reads learning curves)"], batch=_manipulator_batch),
     ]
     return out
 
@@ -369,13 +533,22 @@ def simulate(ctx: Context, claim: SimClaim, seeds: int, sims: int = DEFAULT_SIMS
         arrays[cell.key] = np.concatenate([np.broadcast_to(have, (sims, len(have))), new], axis=1) \
             if cell.kind != "fixed" else new
     counts = {cl.SUPPORTED: 0, cl.REFUTED: 0, cl.NO_DATA: 0}
+    batch = claim.batch(sctx, arrays) if claim.batch is not None and arrays else None
     for i in range(sims):
-        try:
-            verdict, _ = claim.judge(sctx, {k: a[i] for k, a in arrays.items()})
-        except cl.NotEnoughData:
-            verdict = cl.NO_DATA
+        verdict = batch[i] if batch is not None else ""
+        if not verdict:
+            verdict = judge_draw(sctx, claim, {k: a[i] for k, a in arrays.items()})
         counts[verdict] += 1
     return Power(seeds, counts[cl.SUPPORTED] / sims, counts[cl.REFUTED] / sims, sims)
+
+
+def judge_draw(sctx: Context, claim: SimClaim, cells: Cells) -> str:
+    """The claim's verdict on one draw, by its rule."""
+    try:
+        verdict, _ = claim.judge(sctx, cells)
+    except cl.NotEnoughData:
+        verdict = cl.NO_DATA
+    return verdict
 
 
 def seeds_for(ctx: Context, claim: SimClaim, target: float = TARGET, sims: int = DEFAULT_SIMS, seed: int = 0,
