@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 import zlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -176,6 +176,9 @@ class SimClaim:
     reps: int = 0  # bootstrap repetitions the rule runs in each draw
     notes: list[str] = field(default_factory=list)
     batch: BatchJudge | None = None  # the verdicts of all draws at once (see :data:`BatchJudge`)
+    # simulate()'s results by its arguments: the table asks for the same power more than once (at the claim's
+    # minimum, and first in the search for 80%)
+    memo: dict[Hashable, Power] = field(default_factory=dict, repr=False, compare=False)
 
 
 def means_table(cells: Cells) -> dict[Key, tuple[int, float]]:
@@ -522,7 +525,16 @@ def _rng(seed: int, claim_id: str, seeds: int) -> np.random.Generator:
 def simulate(ctx: Context, claim: SimClaim, seeds: int, sims: int = DEFAULT_SIMS, seed: int = 0,
              observed: Cells | None = None, min_seeds: int = 1) -> Power:
     """The claim's verdicts over ``sims`` draws with ``seeds`` per cell (the ``observed`` values of a cell kept,
-    only its missing seeds drawn)."""
+    only its missing seeds drawn); computed once per claim and arguments (``claim.memo``)."""
+    key = (id(ctx.paper), ctx.budget, seeds, sims, seed, min_seeds,
+           tuple(sorted((k, np.asarray(v, dtype=float).tobytes()) for k, v in (observed or {}).items())))
+    if key not in claim.memo:
+        claim.memo[key] = _simulate(ctx, claim, seeds, sims, seed, observed, min_seeds)
+    return claim.memo[key]
+
+
+def _simulate(ctx: Context, claim: SimClaim, seeds: int, sims: int, seed: int, observed: Cells | None,
+              min_seeds: int) -> Power:
     sims = min(claim.sims, sims) if claim.sims else sims
     rng = _rng(seed, claim.id, seeds)
     sctx = sim_context(ctx, claim, min_seeds)

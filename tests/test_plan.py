@@ -69,6 +69,22 @@ def test_simulation_is_deterministic_under_a_fixed_random_state(ctx):
         power.seeds_for(ctx, claim, sims=300, seed=7, max_seeds=40)
 
 
+def test_a_claims_powers_are_kept_by_their_arguments(ctx):
+    """simulate() keeps each result in the claim's memo: asked again with the same arguments it gives the same
+    Power, and with other seeds, draws, random state or seeds done it computes (what a fresh claim gives)."""
+    effect = [(10.0, 5.0, 8.0, 5.0)]
+    claim = _pairs_claim(effect)
+    done = {("t0", "A"): np.array([1.0, 2.0, 3.0]), ("t0", "B"): np.array([5.0, 6.0, 7.0])}
+    calls = [(4, 300, 7, None), (5, 300, 7, None), (4, 200, 7, None), (4, 300, 8, None), (4, 300, 7, done)]
+    first = [power.simulate(ctx, claim, n, sims, seed=s, observed=o) for n, sims, s, o in calls]
+    assert len(claim.memo) == len(calls)
+    assert [power.simulate(ctx, claim, n, sims, seed=s, observed=o) for n, sims, s, o in calls] == first
+    assert len(claim.memo) == len(calls)
+    assert first == [power.simulate(ctx, _pairs_claim(effect), n, sims, seed=s, observed=o)
+                     for n, sims, s, o in calls]
+    assert first[0] != first[4]
+
+
 def test_seeds_for_80_percent_power_and_the_seed_minimum(ctx):
     claim = _pairs_claim([(10.0, 5.0, 8.0, 5.0)])
     n, p = power.seeds_for(ctx, claim, sims=2000, seed=3, max_seeds=40)
