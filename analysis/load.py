@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 import yaml
 from omegaconf import OmegaConf
@@ -517,7 +518,7 @@ def load_published(root: Path | str = PUBLISHED_DIR) -> Results:
     if not root.is_dir():
         raise ResultsRootError(f"published curves folder {root} does not exist or is not a directory")
     rows: list[dict[str, Any]] = []
-    evals: list[pd.DataFrame] = []
+    evals: list[dict[str, np.ndarray]] = []  # each run's eval columns (one frame of them all at the end)
     problems: list[Problem] = []
     for path in sorted(root.glob("dmc_*.csv")):
         try:
@@ -534,22 +535,25 @@ def load_published(root: Path | str = PUBLISHED_DIR) -> Results:
                          action_repeat=PUBLISHED_ACTION_REPEAT, distracting_dims=0,
                          train_frames=int(part["frame"].max()), status="done")
             frames = part["frame"].to_numpy(dtype=float)
-            ev = pd.DataFrame({c: math.nan for c in EVAL_TABLE_COLUMNS}, index=range(len(part)))
+            n = len(part)
+            ev = {k: (np.full(n, v, dtype=np.int64) if isinstance(v, int) and not isinstance(v, bool)
+                      else np.full(n, v, dtype=object)) for k, v in ident.items()}
+            ev.update({c: np.full(n, math.nan) for c in EVAL_TABLE_COLUMNS})
             ev["frame"] = frames
             ev["step"] = frames // PUBLISHED_ACTION_REPEAT
-            ev["episode"] = range(len(part))
+            ev["episode"] = np.arange(n, dtype=np.int64)
             ev["episode_reward"] = part["episode_reward"].to_numpy(dtype=float)
-            ev["total_time"] = pd.to_numeric(part["hour"], errors="coerce").to_numpy() * 3600.0 \
-                if "hour" in part.columns else math.nan
-            evals.append(ev.assign(**ident))
+            if "hour" in part.columns:
+                ev["total_time"] = pd.to_numeric(part["hour"], errors="coerce").to_numpy(dtype=float) * 3600.0
+            evals.append(ev)
             rows.append({**ident, "resolved_from": str(path.name), "eval_rows": len(part),
                          "last_frame": float(frames.max()), "last_update": math.nan, "fps": math.nan,
                          "updates_per_s": math.nan})
     runs = pd.DataFrame(rows) if rows else pd.DataFrame(columns=[*IDENTITY, "resolved_from", "eval_rows",
                                                                    "last_frame", "last_update", "fps",
                                                                    "updates_per_s"])
-    eval_all = (pd.concat(evals, ignore_index=True)[[*IDENTITY, *EVAL_TABLE_COLUMNS]] if evals
-                else pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS]))
+    eval_all = (pd.DataFrame({c: np.concatenate([ev[c] for ev in evals]) for c in [*IDENTITY, *EVAL_TABLE_COLUMNS]})
+                if evals else pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS]))
     runs["source"] = SOURCE_PUBLISHED
     eval_all["source"] = SOURCE_PUBLISHED
     return Results(root=root, runs=runs, eval=eval_all, problems=problems)
