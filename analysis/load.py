@@ -213,6 +213,18 @@ def _float_or_none(value: Any) -> float | None:
         return None
 
 
+def _field_counts(text: str) -> tuple[list[str], list[int]]:
+    """(the header's fields, every later row's number of fields) as the csv module reads ``text``; text without
+    quotes, carriage returns or NUL (what the runs write) is split on newlines and commas instead, with the same
+    result (a blank line is a row of no fields)."""
+    if '"' in text or "\r" in text or "\0" in text:
+        rows = list(csv.reader(io.StringIO(text)))
+        return rows[0], [len(r) for r in rows[1:]]
+    lines = text.split("\n")[:-1]  # the text ends with a newline (checked by the caller)
+    header = lines[0].split(",") if lines[0] else []
+    return header, [line.count(",") + 1 if line else 0 for line in lines[1:]]
+
+
 def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
                     text_columns: tuple[str, ...] = ()) -> pd.DataFrame:
     """Read a run CSV, raising ValueError with a reason if it is malformed or truncated.
@@ -227,14 +239,13 @@ def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
         raise ValueError("empty file (no header)")
     if not text.endswith("\n"):
         raise ValueError("truncated: the last line has no newline")
-    rows = list(csv.reader(io.StringIO(text)))
-    header = rows[0]
+    header, counts = _field_counts(text)
     missing = [c for c in required if c not in header]
     if missing:
         raise ValueError(f"missing column(s) {', '.join(missing)}")
-    for lineno, row in enumerate(rows[1:], start=2):
-        if len(row) != len(header):
-            raise ValueError(f"line {lineno} has {len(row)} fields, header has {len(header)}")
+    for lineno, count in enumerate(counts, start=2):
+        if count != len(header):
+            raise ValueError(f"line {lineno} has {count} fields, header has {len(header)}")
     df = pd.read_csv(io.StringIO(text))
     for col in required:
         converted = pd.to_numeric(df[col], errors="coerce")

@@ -463,3 +463,25 @@ def test_cli_claims_indicative_flag(tmp_path):
     table = pd.read_csv(tmp_path / "out" / "claims.csv", keep_default_na=False).set_index("id")
     assert table.loc["online_beats_drqv2_all", "verdict"] == NO_DATA
     assert table.loc["online_beats_drqv2_all", "indicative"].startswith("indicative: TACO ahead")
+
+
+@pytest.mark.parametrize("text", [
+    "frame,step,episode_reward\n0,0,1.5\n1000,500,2.5\n",
+    "frame,step,episode_reward\n0,0\n",
+    "frame,step,episode_reward\n0,0,1,4\n",
+    "frame,step,episode_reward\n\n0,0,1\n",
+    "\nframe,step\n0,0\n",
+    "frame,step,episode_reward\n0,0,\"1,5\"\n",
+    "frame,step,episode_reward\r\n0,0,1\r\n",
+    "frame,step,episode_reward\n0,0,1\n0,1\n",
+    ",\n,\n",
+])
+def test_csv_field_counts_are_the_csv_modules(text):
+    """analysis.load reads unquoted run CSVs without the csv module: the same header and field counts."""
+    import csv
+    import io
+
+    from analysis.load import _field_counts
+
+    rows = list(csv.reader(io.StringIO(text)))
+    assert _field_counts(text) == (rows[0], [len(r) for r in rows[1:]])
