@@ -226,13 +226,14 @@ def _field_counts(text: str) -> tuple[list[str], list[int]]:
 
 
 def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
-                    text_columns: tuple[str, ...] = ()) -> pd.DataFrame:
+                    text_columns: tuple[str, ...] = (), only: tuple[str, ...] | None = None) -> pd.DataFrame:
     """Read a run CSV, raising ValueError with a reason if it is malformed or truncated.
 
     Checks: non-empty header with the ``required`` columns, every row with the header's field count,
     a final newline (a missing one means the last row was cut), numeric required columns, and strictly
     increasing ``order`` (``frame``; an offline run's ``update``). Columns other than ``text_columns`` are
-    numbers (an unparsable value becomes NaN).
+    numbers (an unparsable value becomes NaN). ``only``: parse only these columns (those present) besides the
+    required ones, after the same checks of every row's field count.
     """
     text = path.read_text(encoding="utf-8", errors="strict")
     if not text.strip():
@@ -246,7 +247,10 @@ def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
     for lineno, count in enumerate(counts, start=2):
         if count != len(header):
             raise ValueError(f"line {lineno} has {count} fields, header has {len(header)}")
-    df = pd.read_csv(io.StringIO(text))
+    keep = None
+    if only is not None and len(set(header)) == len(header):
+        keep = [c for c in header if c in required or c in only]
+    df = pd.read_csv(io.StringIO(text), usecols=keep)
     for col in required:
         converted = pd.to_numeric(df[col], errors="coerce")
         if converted.isna().any():
@@ -414,11 +418,11 @@ def _train_speed(train_path: Path, offline: bool, problems: list[Problem]) -> di
     if train_path.exists():
         try:
             if offline:
-                train = read_csv_strict(train_path, OFFLINE_TRAIN_REQUIRED, order="update")
+                train = read_csv_strict(train_path, OFFLINE_TRAIN_REQUIRED, order="update", only=())
                 rates = pd.to_numeric(train["updates_per_s"], errors="coerce").dropna()
                 speed["updates_per_s"] = float(rates.median()) if len(rates) else math.nan
             else:
-                speed["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED))
+                speed["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED, only=("critic_loss",)))
         except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
             problems.append(Problem(str(train_path), f"malformed train.csv ({exc}); its speed not used"))
     return speed
