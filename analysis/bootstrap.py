@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -248,21 +248,53 @@ def resample(arrays: Sequence[np.ndarray], indices: Sequence[np.ndarray]) -> lis
     return [a[idx, np.arange(a.shape[1])] for a, idx in zip(arrays, indices)]
 
 
-def bootstrap_values(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, seed: int,
-                     chunk_elements: int = CHUNK_ELEMENTS) -> np.ndarray:
-    """The statistic at each of ``reps`` repetitions: (reps, k)."""
+def index_chunks(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, seed: int,
+                 chunk_elements: int = CHUNK_ELEMENTS) -> Iterator[list[np.ndarray]]:
+    """The bootstrap indices of ``reps`` repetitions of ``arrays`` (their shapes), chunk by chunk: each chunk one
+    (repetitions, runs, tasks) array per matrix (:meth:`IndexStream.take`)."""
     stream = IndexStream([a.shape for a in arrays], seed)
     per_rep = stream.per_rep * max(1, stat.cost if stat.cost else _pairs(arrays))
     chunk = max(1, chunk_elements // per_rep)
     if stream.mixed:
         chunk = max(1, min(chunk, MIXED_WORDS // max(1, stream.words_per_rep)))
-    parts = []
     done = 0
     while done < reps:
         b = min(chunk, reps - done)
-        parts.append(stat.vector(*resample(arrays, stream.take(b))))
+        yield stream.take(b)
         done += b
+
+
+def values_from(stat: Statistic, arrays: Sequence[np.ndarray], chunks: Iterable[list[np.ndarray]]) -> np.ndarray:
+    """The statistic at each repetition of the index ``chunks`` (:func:`index_chunks`): (reps, k)."""
+    parts = [stat.vector(*resample(arrays, idx)) for idx in chunks]
     return np.concatenate(parts).astype(float, copy=False)
+
+
+def bootstrap_values(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, seed: int,
+                     chunk_elements: int = CHUNK_ELEMENTS) -> np.ndarray:
+    """The statistic at each of ``reps`` repetitions: (reps, k)."""
+    return values_from(stat, arrays, index_chunks(stat, arrays, reps, seed, chunk_elements))
+
+
+def percentile_cis(values: np.ndarray, size: float = CI_SIZE) -> np.ndarray:
+    """The percentile interval of bootstrap ``values`` (reps, k): (2, k)."""
+    alpha = (1.0 - size) / 2
+    return np.percentile(values, [100 * alpha, 100 * (1.0 - alpha)], axis=0)
+
+
+def same_shape_intervals(stat: Statistic, draws: Sequence[Sequence[np.ndarray]], reps: int, seed: int,
+                         size: float = CI_SIZE) -> list[np.ndarray]:
+    """The CI (2, k) of :func:`interval_estimates` for each of several data sets of the same shapes (the power
+    simulation's draws): the bootstrap indices depend only on the shapes and the random state, so they are drawn
+    once; each CI is the one :func:`interval_estimates` gives for that data set alone."""
+    if not draws:
+        return []
+    mats = [[np.ascontiguousarray(a, dtype=float) for a in arrays] for arrays in draws]
+    shapes = {tuple(a.shape for a in m) for m in mats}
+    if len(shapes) > 1:
+        raise ValueError(f"the data sets differ in shape: {sorted(shapes)}")
+    chunks = list(index_chunks(stat, mats[0], reps, seed))
+    return [percentile_cis(values_from(stat, m, chunks), size) for m in mats]
 
 
 def _pairs(arrays: Sequence[np.ndarray]) -> int:
@@ -283,11 +315,7 @@ def interval_estimates(stat: Statistic, arrays: Sequence[np.ndarray], reps: int,
         h.update(a.tobytes())
 
     def compute() -> tuple[np.ndarray, np.ndarray]:
-        point = stat.point(*mats)
-        values = bootstrap_values(stat, mats, reps, seed)
-        alpha = (1.0 - size) / 2
-        q = [100 * alpha, 100 * (1.0 - alpha)]
-        return point, np.percentile(values, q, axis=0)
+        return stat.point(*mats), percentile_cis(bootstrap_values(stat, mats, reps, seed), size)
 
     point, cis = lookup("intervals", h.hexdigest(), compute)  # the same interval is computed once (analysis/cache.py)
     return point.copy(), cis.copy()

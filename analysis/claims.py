@@ -24,11 +24,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
+from analysis import bootstrap as bs
 from analysis import select
 from analysis.calibration import SOURCE_TEXT, published_values
 from analysis.cells import (
     Cells,
     CellSource,
+    Key,
     drqv2_cell,
     means_table,
     observed_cells,
@@ -42,7 +44,7 @@ from analysis.claim_budget import ClaimBudget, claim_runs, frames_text, load_bud
 from analysis.context import Context
 from analysis.offline_tables import offline_runs
 from analysis.paper import DMC9, METAWORLD6, OFFLINE_TASKS, PaperData
-from analysis.robustness import cell_spread, seed_spread, solved_counts
+from analysis.robustness import BROKEN_FRACTION, cell_spread, seed_spread, solved_counts
 from analysis.speed import speed_measurements
 from analysis.stats import grand_mean_ci, ratio_of_means, ratio_to_task_means, score_matrix
 from analysis.tables import write_table
@@ -94,6 +96,7 @@ class Simulation:
     sims: int | None = None
     reps: int = 0
     notes: tuple[str, ...] = ()
+    batch: BatchJudge | None = None  # ``judge`` on every draw at once (:data:`BatchJudge`); None: draw by draw
 
 
 @dataclass(frozen=True)
@@ -258,9 +261,14 @@ def _beats_drqv2(ctx: Context) -> tuple[str, str]:
     return beats_drqv2_rule(ctx, means(online_rows(ctx), ["task", "method"]))
 
 
+def beats_drqv2_pairs() -> list[tuple[tuple, tuple, str]]:
+    """online_beats_drqv2_all's comparisons: (TACO cell, DrQ-v2 cell, name) per task."""
+    return [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9]
+
+
 def beats_drqv2_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
     """online_beats_drqv2_all on a (task, method) ``means`` table."""
-    return universal(ctx, table, [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9])
+    return universal(ctx, table, beats_drqv2_pairs())
 
 
 def _beats_model_based(ctx: Context) -> tuple[str, str]:
@@ -424,11 +432,15 @@ def _vs_repr(ctx: Context) -> tuple[str, str]:
                                    ["task", "method"]))
 
 
+def vs_repr_pairs(ctx: Context) -> list[tuple[tuple, tuple, str]]:
+    """vs_repr_objectives' comparisons: TACO against each other objective where the paper has its value."""
+    return [((t, "TACO"), (t, m), f"{t} vs {m}") for t in REPR_TASKS for m in ctx.paper.repr_others
+            if ctx.paper.repr_value(t, m) is not None]
+
+
 def vs_repr_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
     """vs_repr_objectives on a (task, method) ``means`` table."""
-    pairs = [((t, "TACO"), (t, m), f"{t} vs {m}") for t in REPR_TASKS for m in ctx.paper.repr_others
-             if ctx.paper.repr_value(t, m) is not None]
-    return universal(ctx, table, pairs)
+    return universal(ctx, table, vs_repr_pairs(ctx))
 
 
 def offline_scores(ctx: Context) -> pd.DataFrame:
@@ -453,11 +465,15 @@ def _offline_gain(ctx: Context) -> tuple[str, str]:
     return offline_gain_rule(ctx, table)
 
 
+def offline_gain_pairs() -> list[tuple[tuple, tuple, str]]:
+    """offline_gain's comparisons: X+TACO against X per task/dataset pair, X in TD3+BC and CQL."""
+    return [((t, d, f"{x}+TACO"), (t, d, x), f"{t}/{d} {x}") for t in OFFLINE_TASKS
+            for d in DatasetKind.values() for x in ("TD3+BC", "CQL")]
+
+
 def offline_gain_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
     """offline_gain on a (task, dataset, method) ``means`` table of returns."""
-    pairs = [((t, d, f"{x}+TACO"), (t, d, x), f"{t}/{d} {x}") for t in OFFLINE_TASKS
-             for d in DatasetKind.values() for x in ("TD3+BC", "CQL")]
-    return universal(ctx, table, pairs)
+    return universal(ctx, table, offline_gain_pairs())
 
 
 def _offline_average(ctx: Context) -> tuple[str, str]:
@@ -643,6 +659,166 @@ def _on_table(rule: Callable[[Context, dict], tuple[str, str]]) -> Callable[[Con
     return lambda ctx, cells: rule(ctx, means_table(cells))
 
 
+# ---------------------------------------------------------------- the same verdicts, every draw at once
+Draws = dict[Key, np.ndarray]  # every draw of the power simulation: cell -> (draws x its seeds)
+# A claim's verdict in every draw at once, as its ``judge`` gives it draw by draw: an object array of verdicts,
+# "" where a value the verdict compares lies within :data:`TIE` of its threshold (there the draw is judged one by
+# one, so that a difference in the last bits of a whole-array sum cannot change a verdict).
+BatchJudge = Callable[[Context, Draws], np.ndarray]
+TIE = 1e-9  # relative distance from a threshold under which a draw is judged by ``judge`` itself
+
+def _sims(draws: Draws) -> int:
+    return next(iter(draws.values())).shape[0]
+
+
+def _enough(ctx: Context, draws: Draws, key: Key) -> bool:
+    """analysis.claims.get's test of a cell (its seeds are the same number in every draw)."""
+    return key in draws and draws[key].shape[1] > 0 and draws[key].shape[1] >= ctx.min_seeds
+
+
+def _near(a: np.ndarray, b: np.ndarray | float) -> np.ndarray:
+    """Where ``a`` and ``b`` are within :data:`TIE` of each other (relative)."""
+    return np.abs(a - b) <= TIE * (1.0 + np.abs(a) + np.abs(b))
+
+
+def _verdicts(sims: int, supported: np.ndarray | bool, otherwise: str, unsure: np.ndarray | bool) -> np.ndarray:
+    out = np.where(np.broadcast_to(supported, (sims,)), SUPPORTED, otherwise).astype(object)
+    out[np.broadcast_to(unsure, (sims,))] = ""
+    return out
+
+
+def _all(sims: int, verdict: str) -> np.ndarray:
+    return np.full(sims, verdict, dtype=object)
+
+
+def _stacked_draws(draws: Draws, keys: Sequence[Key]) -> np.ndarray:
+    """:func:`stacked` of every draw: (draws x seeds x cells)."""
+    k = min(draws[key].shape[1] for key in keys)
+    return np.stack([draws[key][:, :k] for key in keys], axis=2)
+
+
+def universal_batch(pairs: Callable[[Context], Sequence[tuple[Key, Key, str]]]) -> BatchJudge:
+    """analysis.claims.universal over a means table, every draw at once: refuted where a pair present fails,
+    else not enough data where one is missing, else supported."""
+
+    def judge(ctx: Context, draws: Draws) -> np.ndarray:
+        sims = _sims(draws)
+        fail, unsure, missing = np.zeros(sims, bool), np.zeros(sims, bool), False
+        for a, b, _ in pairs(ctx):
+            if not (_enough(ctx, draws, a) and _enough(ctx, draws, b)):
+                missing = True
+                continue
+            va, vb = draws[a].mean(axis=1), draws[b].mean(axis=1)
+            fail |= ~(va > vb)
+            unsure |= _near(va, vb)
+        out = np.where(fail, REFUTED, NO_DATA if missing else SUPPORTED).astype(object)
+        out[unsure] = ""
+        return out
+
+    return judge
+
+
+def _gain_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """:func:`_judge_gain` (analysis.claims.avg_gain_rule) in every draw."""
+    sims = _sims(draws)
+    taco, drq = [(t, "TACO") for t in DMC9], [(t, "DrQ-v2") for t in DMC9]
+    if not all(_enough(ctx, draws, k) for k in taco + drq):
+        return _all(sims, NO_DATA)
+    r = bs.RATIO_OF_MEANS.vector(_stacked_draws(draws, taco), _stacked_draws(draws, drq))[:, 0]
+    return _verdicts(sims, r >= GAIN_BAR, REFUTED, _near(r, GAIN_BAR))
+
+
+def _published_gain_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """:func:`_judge_published_gain` (analysis.claims.published_gain_rule) in every draw."""
+    sims = _sims(draws)
+    taco = [(t, "TACO") for t in DMC9]
+    if not all(_enough(ctx, draws, k) for k in taco):
+        return _all(sims, NO_DATA)
+    ys = [np.ascontiguousarray(draws[(t, "published")], dtype=float) for t in DMC9]
+    if any(y.shape[1] < ctx.min_seeds for y in ys):
+        return _all(sims, NO_DATA)
+    r = bs.RATIO_TO_TASK_MEANS.vector(_stacked_draws(draws, taco), *(y[:, :, None] for y in ys))[:, 0]
+    return _verdicts(sims, r >= GAIN_BAR, REFUTED, _near(r, GAIN_BAR))
+
+
+def _model_based_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """analysis.claims.beats_model_based_rule in every draw (a baseline without cells: Table 1's value)."""
+    sims = _sims(draws)
+    if not all(_enough(ctx, draws, (t, "TACO")) for t in DMC9):
+        return _all(sims, NO_DATA)
+    wins, unsure = np.zeros(sims, int), np.zeros(sims, bool)
+    for t in DMC9:
+        base = []
+        for m in MODEL_BASED:
+            if _enough(ctx, draws, (t, m)):
+                base.append(draws[(t, m)].mean(axis=1))
+            else:
+                printed = ctx.paper.online_value(t, m)
+                assert printed is not None  # Table 1 has both baselines on every DMC task
+                base.append(np.full(sims, float(printed[0])))
+        best = np.max(np.stack(base), axis=0)
+        taco = draws[(t, "TACO")].mean(axis=1)
+        wins += taco > best
+        unsure |= _near(taco, best)
+    return _verdicts(sims, wins >= 6, REFUTED, unsure)
+
+
+def _seeds_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """analysis.claims.seed_robustness_rule on every draw's cell spreads (analysis.robustness.cell_spread)."""
+    sims = _sims(draws)
+    got = {k: v for k, v in draws.items() if v.shape[1] > 0 and v.shape[1] >= ctx.min_seeds}
+    tasks = [t for t in DMC9 if (t, "TACO") in got and (t, "DrQ-v2") in got]
+    if len(tasks) < 9:
+        return _all(sims, NO_DATA)
+    less, broken, unsure = np.zeros(sims, int), np.zeros(sims, int), np.zeros(sims, bool)
+    for t in tasks:
+        a, b = got[(t, "TACO")], got[(t, "DrQ-v2")]
+        sa = a.std(ddof=1, axis=1) if a.shape[1] > 1 else np.full(sims, math.nan)
+        sb = b.std(ddof=1, axis=1) if b.shape[1] > 1 else np.full(sims, math.nan)
+        less += sa < sb
+        unsure |= _near(sa, sb)
+    for k, v in got.items():
+        if k[1] != "DrQ-v2":
+            continue
+        med = np.median(v, axis=1)
+        half = BROKEN_FRACTION * med
+        broken += np.where(med > 0, (v < half[:, None]).sum(axis=1), 0)
+        unsure |= _near(med, 0.0) | _near(v, half[:, None]).any(axis=1)
+    return _verdicts(sims, (less >= 7) & (broken >= 1), REFUTED, unsure)
+
+
+def _manipulator_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """analysis.claims.manipulator_rule on every draw's solved counts (values 0 or 1: exact sums)."""
+    sims = _sims(draws)
+    runs = {k[0]: v.shape[1] for k, v in draws.items()}
+    solved = {k[0]: v.sum(axis=1) for k, v in draws.items()}
+    drq_solves = solved["DrQ-v2"] > 0 if "DrQ-v2" in solved else np.zeros(sims, bool)
+    if "TACO" not in runs or "DrQ-v2" not in runs or min(runs.values()) < ctx.min_seeds:
+        out = _all(sims, NO_DATA)
+    else:
+        # every cell's last frame is the budget in the simulation: short of a third of TACO's seeds is refuted
+        out = np.where(solved["TACO"] / runs["TACO"] >= 1 / 3, SUPPORTED, REFUTED).astype(object)
+    out[drq_solves] = REFUTED
+    return out
+
+
+def _offline_average_batch(ctx: Context, draws: Draws) -> np.ndarray:
+    """analysis.claims.offline_average_rule in every draw: each printed average inside its method's bootstrap CI
+    (the same CIs: the bootstrap indices depend only on the shapes and the random state, so they are drawn once)."""
+    sims = _sims(draws)
+    pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
+    keys = [(t, d, m) for t, d in pairs for m in OFFLINE_AVERAGED]
+    if not all(_enough(ctx, draws, k) for k in keys):
+        return _all(sims, NO_DATA)
+    ok = np.ones(sims, bool)
+    for m, p in offline_printed(ctx).items():
+        mats = _stacked_draws(draws, [(t, d, m) for t, d in pairs])
+        cis = bs.same_shape_intervals(bs.MEAN, [[mats[i]] for i in range(sims)], ctx.reps, ctx.seed)
+        lo, hi = np.array([c[0][0] for c in cis]), np.array([c[1][0] for c in cis])
+        ok &= (lo <= p) & (p <= hi)
+    return _verdicts(sims, ok, REFUTED, False)
+
+
 def _online_observed(ctx: Context) -> Cells:
     return observed_cells(online_rows(ctx), ["task", "method"])
 
@@ -671,23 +847,24 @@ SPECS: tuple[ClaimSpec, ...] = (
     ClaimSpec("online_avg_gain", _online_avg_gain,
               "mean over the 9 tasks of TACO / DrQ-v2 >= 1.3 (about 1.4x, tolerance 0.1); CI by rliable "
               "bootstrap",
-              Simulation(_online_sources, _judge_gain, _online_observed, DMC9)),
+              Simulation(_online_sources, _judge_gain, _online_observed, DMC9, batch=_gain_batch)),
     ClaimSpec(PUBLISHED_GAIN_ID, _online_avg_gain_published, PUBLISHED_GAIN_RULE,
               Simulation(_published_sources, _judge_published_gain, _online_observed, DMC9,
                          notes=("DrQ-v2 is the published curves as published (fixed data, as `repro claims` reads "
-                                "them)",)),
+                                "them)",), batch=_published_gain_batch),
               reading_of="online_avg_gain",
               note=f"read against DrQ-v2 as published by its authors, not against your DrQ-v2 runs: {SOURCE_TEXT}"),
     ClaimSpec("online_beats_drqv2_all", _beats_drqv2,
               "TACO mean > DrQ-v2 mean on each of the 9 tasks",
-              Simulation(_online_sources, _on_table(beats_drqv2_rule), _online_observed, DMC9)),
+              Simulation(_online_sources, _on_table(beats_drqv2_rule), _online_observed, DMC9,
+                         batch=universal_batch(lambda c: beats_drqv2_pairs()))),
     ClaimSpec("online_beats_model_based", _beats_model_based,
               "TACO mean > both DreamerV3 and TD-MPC on >= 6 of 9 tasks (baselines from runs, "
               "else the paper's Table 1)",
               Simulation(lambda ctx, budget: table1_cells(ctx, DMC9), _on_table(beats_model_based_rule),
                          _online_observed, DMC9,
                          notes=("DreamerV3 and TD-MPC are Table 1's printed means (not rerun by any sweep), as the "
-                                "rule reads them",))),
+                                "rule reads them",), batch=_model_based_batch)),
     ClaimSpec("reacher_speed", _reacher_speed,
               "on reacher_hard, with curves cut at the budget (1.5M) and target = 95% of TACO's best mean-curve "
               "value: TACO reaches it within 2/3 of the budget (1.0M frames) and DrQ-v2 needs >= 1.5x as many frames "
@@ -727,17 +904,19 @@ SPECS: tuple[ClaimSpec, ...] = (
               "TACO mean > each other objective of Table 2 (each of its methods but TACO and DrQ-v2; where the "
               "paper has its value) on each of the 5 tasks",
               Simulation(lambda ctx, budget: table2_cells(ctx, REPR_TASKS), _on_table(vs_repr_rule), _repr_observed,
-                         REPR_TASKS)),
+                         REPR_TASKS, batch=universal_batch(vs_repr_pairs))),
     ClaimSpec("offline_gain", _offline_gain,
               "return of X+TACO > X for X in TD3+BC, CQL on each of the 12 task/dataset pairs",
               Simulation(lambda ctx, budget: table3_cells(ctx, OFFLINE_AVERAGED), _on_table(offline_gain_rule),
-                         _offline_observed, OFFLINE_TASKS, notes=(_OFFLINE_NOTE,))),
+                         _offline_observed, OFFLINE_TASKS, notes=(_OFFLINE_NOTE,),
+                         batch=universal_batch(lambda c: offline_gain_pairs()))),
     ClaimSpec("offline_average", _offline_average,
               "each printed average of Table 3's average row (TD3+BC+TACO, TD3+BC, CQL+TACO, CQL; "
               "repro_data/paper/offline_average.csv) lies in the 95% CI of the reproduced average normalised score "
               "over the 12 pairs",
               Simulation(lambda ctx, budget: table3_cells(ctx, OFFLINE_AVERAGED), _judge_offline_average,
-                         _offline_observed, OFFLINE_TASKS, sims=CI_SIMS, reps=CI_REPS)),
+                         _offline_observed, OFFLINE_TASKS, sims=CI_SIMS, reps=CI_REPS,
+                         batch=_offline_average_batch)),
     ClaimSpec("horizon_choice", _horizon,
               "K=3 > K=1 on hopper_hop, quadruped_walk, acrobot_swingup, reacher_hard; K=1 > K=3 on "
               "quadruped_run, walker_run; K=1 and K=3 > DrQ-v2 on all 9 tasks",
@@ -760,13 +939,15 @@ SPECS: tuple[ClaimSpec, ...] = (
               "(below half its cell's median)",
               Simulation(_online_sources, _judge_seeds, _seeds_observed, DMC9,
                          notes=("a broken seed is one below half its cell's median: normal cells almost never have "
-                                "one, so DrQ-v2's published values carry the claim's second half",))),
+                                "one, so DrQ-v2's published values carry the claim's second half",),
+                         batch=_seeds_batch)),
     ClaimSpec("manipulator", _manipulator,
               "within the budget (30M frames) TACO solves (an eval return >= 500) at least a third of its "
               "seeds (paper 3/6) and DrQ-v2 none",
               Simulation(_manipulator_sources, _judge_manipulator, None, ("manipulator_bring_ball",),
                          notes=("DrQ-v2's 0 of 6 taken as a solve probability of 0 (its 95% upper bound is 39%): "
-                                "optimistic", "not conditioned on runs (the rule reads learning curves)"))),
+                                "optimistic", "not conditioned on runs (the rule reads learning curves)"),
+                         batch=_manipulator_batch)),
 )
 SPEC_OF = {s.id: s for s in SPECS}
 if len(SPEC_OF) != len(SPECS):  # a claim defined twice: one of its definitions would be silently dropped

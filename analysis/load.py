@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 import yaml
 from omegaconf import OmegaConf
@@ -212,29 +213,44 @@ def _float_or_none(value: Any) -> float | None:
         return None
 
 
+def _field_counts(text: str) -> tuple[list[str], list[int]]:
+    """(the header's fields, every later row's number of fields) as the csv module reads ``text``; text without
+    quotes, carriage returns or NUL (what the runs write) is split on newlines and commas instead, with the same
+    result (a blank line is a row of no fields)."""
+    if '"' in text or "\r" in text or "\0" in text:
+        rows = list(csv.reader(io.StringIO(text)))
+        return rows[0], [len(r) for r in rows[1:]]
+    lines = text.split("\n")[:-1]  # the text ends with a newline (checked by the caller)
+    header = lines[0].split(",") if lines[0] else []
+    return header, [line.count(",") + 1 if line else 0 for line in lines[1:]]
+
+
 def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
-                    text_columns: tuple[str, ...] = ()) -> pd.DataFrame:
+                    text_columns: tuple[str, ...] = (), only: tuple[str, ...] | None = None) -> pd.DataFrame:
     """Read a run CSV, raising ValueError with a reason if it is malformed or truncated.
 
     Checks: non-empty header with the ``required`` columns, every row with the header's field count,
     a final newline (a missing one means the last row was cut), numeric required columns, and strictly
     increasing ``order`` (``frame``; an offline run's ``update``). Columns other than ``text_columns`` are
-    numbers (an unparsable value becomes NaN).
+    numbers (an unparsable value becomes NaN). ``only``: parse only these columns (those present) besides the
+    required ones, after the same checks of every row's field count.
     """
     text = path.read_text(encoding="utf-8", errors="strict")
     if not text.strip():
         raise ValueError("empty file (no header)")
     if not text.endswith("\n"):
         raise ValueError("truncated: the last line has no newline")
-    rows = list(csv.reader(io.StringIO(text)))
-    header = rows[0]
+    header, counts = _field_counts(text)
     missing = [c for c in required if c not in header]
     if missing:
         raise ValueError(f"missing column(s) {', '.join(missing)}")
-    for lineno, row in enumerate(rows[1:], start=2):
-        if len(row) != len(header):
-            raise ValueError(f"line {lineno} has {len(row)} fields, header has {len(header)}")
-    df = pd.read_csv(io.StringIO(text))
+    for lineno, count in enumerate(counts, start=2):
+        if count != len(header):
+            raise ValueError(f"line {lineno} has {count} fields, header has {len(header)}")
+    keep = None
+    if only is not None and len(set(header)) == len(header):
+        keep = [c for c in header if c in required or c in only]
+    df = pd.read_csv(io.StringIO(text), usecols=keep)
     for col in required:
         converted = pd.to_numeric(df[col], errors="coerce")
         if converted.isna().any():
@@ -402,11 +418,11 @@ def _train_speed(train_path: Path, offline: bool, problems: list[Problem]) -> di
     if train_path.exists():
         try:
             if offline:
-                train = read_csv_strict(train_path, OFFLINE_TRAIN_REQUIRED, order="update")
+                train = read_csv_strict(train_path, OFFLINE_TRAIN_REQUIRED, order="update", only=())
                 rates = pd.to_numeric(train["updates_per_s"], errors="coerce").dropna()
                 speed["updates_per_s"] = float(rates.median()) if len(rates) else math.nan
             else:
-                speed["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED))
+                speed["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED, only=("critic_loss",)))
         except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
             problems.append(Problem(str(train_path), f"malformed train.csv ({exc}); its speed not used"))
     return speed
@@ -517,7 +533,7 @@ def load_published(root: Path | str = PUBLISHED_DIR) -> Results:
     if not root.is_dir():
         raise ResultsRootError(f"published curves folder {root} does not exist or is not a directory")
     rows: list[dict[str, Any]] = []
-    evals: list[pd.DataFrame] = []
+    evals: list[dict[str, np.ndarray]] = []  # each run's eval columns (one frame of them all at the end)
     problems: list[Problem] = []
     for path in sorted(root.glob("dmc_*.csv")):
         try:
@@ -534,22 +550,25 @@ def load_published(root: Path | str = PUBLISHED_DIR) -> Results:
                          action_repeat=PUBLISHED_ACTION_REPEAT, distracting_dims=0,
                          train_frames=int(part["frame"].max()), status="done")
             frames = part["frame"].to_numpy(dtype=float)
-            ev = pd.DataFrame({c: math.nan for c in EVAL_TABLE_COLUMNS}, index=range(len(part)))
+            n = len(part)
+            ev = {k: (np.full(n, v, dtype=np.int64) if isinstance(v, int) and not isinstance(v, bool)
+                      else np.full(n, v, dtype=object)) for k, v in ident.items()}
+            ev.update({c: np.full(n, math.nan) for c in EVAL_TABLE_COLUMNS})
             ev["frame"] = frames
             ev["step"] = frames // PUBLISHED_ACTION_REPEAT
-            ev["episode"] = range(len(part))
+            ev["episode"] = np.arange(n, dtype=np.int64)
             ev["episode_reward"] = part["episode_reward"].to_numpy(dtype=float)
-            ev["total_time"] = pd.to_numeric(part["hour"], errors="coerce").to_numpy() * 3600.0 \
-                if "hour" in part.columns else math.nan
-            evals.append(ev.assign(**ident))
+            if "hour" in part.columns:
+                ev["total_time"] = pd.to_numeric(part["hour"], errors="coerce").to_numpy(dtype=float) * 3600.0
+            evals.append(ev)
             rows.append({**ident, "resolved_from": str(path.name), "eval_rows": len(part),
                          "last_frame": float(frames.max()), "last_update": math.nan, "fps": math.nan,
                          "updates_per_s": math.nan})
     runs = pd.DataFrame(rows) if rows else pd.DataFrame(columns=[*IDENTITY, "resolved_from", "eval_rows",
                                                                    "last_frame", "last_update", "fps",
                                                                    "updates_per_s"])
-    eval_all = (pd.concat(evals, ignore_index=True)[[*IDENTITY, *EVAL_TABLE_COLUMNS]] if evals
-                else pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS]))
+    eval_all = (pd.DataFrame({c: np.concatenate([ev[c] for ev in evals]) for c in [*IDENTITY, *EVAL_TABLE_COLUMNS]})
+                if evals else pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS]))
     runs["source"] = SOURCE_PUBLISHED
     eval_all["source"] = SOURCE_PUBLISHED
     return Results(root=root, runs=runs, eval=eval_all, problems=problems)

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 import zlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -68,6 +68,10 @@ class SimClaim:
     sims: int | None = None  # draws (default: the caller's)
     reps: int = 0  # bootstrap repetitions the rule runs in each draw
     notes: list[str] = field(default_factory=list)
+    batch: cl.BatchJudge | None = None  # the verdicts of all draws at once (see analysis.claims.BatchJudge)
+    # simulate()'s results by its arguments: the table asks for the same power more than once (at the claim's
+    # minimum, and first in the search for 80%)
+    memo: dict[Hashable, Power] = field(default_factory=dict, repr=False, compare=False)
 
 
 def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = None) -> list[SimClaim]:
@@ -85,7 +89,7 @@ def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = N
             notes.append(f"its verdict reads a bootstrap CI: rliable's bootstrap runs in every draw ({sim.reps} "
                          f"repetitions instead of {ctx.reps:,}; {sim.sims} draws)")
         out.append(SimClaim(spec.id, budget, sim.sources(ctx, float(budget.budget or 0)), sim.judge, sim.observed,
-                            sim.tasks, sim.sims, sim.reps, notes))
+                            sim.tasks, sim.sims, sim.reps, notes, sim.batch))
     return out
 
 
@@ -143,7 +147,16 @@ def _rng(seed: int, claim_id: str, seeds: int) -> np.random.Generator:
 def simulate(ctx: Context, claim: SimClaim, seeds: int, sims: int = DEFAULT_SIMS, seed: int = 0,
              observed: Cells | None = None, min_seeds: int = 1) -> Power:
     """The claim's verdicts over ``sims`` draws with ``seeds`` per cell (the ``observed`` values of a cell kept,
-    only its missing seeds drawn)."""
+    only its missing seeds drawn); computed once per claim and arguments (``claim.memo``)."""
+    key = (id(ctx.paper), ctx.budget, seeds, sims, seed, min_seeds,
+           tuple(sorted((k, np.asarray(v, dtype=float).tobytes()) for k, v in (observed or {}).items())))
+    if key not in claim.memo:
+        claim.memo[key] = _simulate(ctx, claim, seeds, sims, seed, observed, min_seeds)
+    return claim.memo[key]
+
+
+def _simulate(ctx: Context, claim: SimClaim, seeds: int, sims: int, seed: int, observed: Cells | None,
+              min_seeds: int) -> Power:
     sims = min(claim.sims, sims) if claim.sims else sims
     rng = _rng(seed, claim.id, seeds)
     sctx = sim_context(ctx, claim, min_seeds)
@@ -154,13 +167,22 @@ def simulate(ctx: Context, claim: SimClaim, seeds: int, sims: int = DEFAULT_SIMS
         arrays[cell.key] = np.concatenate([np.broadcast_to(have, (sims, len(have))), new], axis=1) \
             if cell.kind != "fixed" else new
     counts = {cl.SUPPORTED: 0, cl.REFUTED: 0, cl.NO_DATA: 0}
+    batch = claim.batch(sctx, arrays) if claim.batch is not None and arrays else None
     for i in range(sims):
-        try:
-            verdict, _ = claim.judge(sctx, {k: a[i] for k, a in arrays.items()})
-        except cl.NotEnoughData:
-            verdict = cl.NO_DATA
+        verdict = batch[i] if batch is not None else ""
+        if not verdict:
+            verdict = judge_draw(sctx, claim, {k: a[i] for k, a in arrays.items()})
         counts[verdict] += 1
     return Power(seeds, counts[cl.SUPPORTED] / sims, counts[cl.REFUTED] / sims, sims)
+
+
+def judge_draw(sctx: Context, claim: SimClaim, cells: Cells) -> str:
+    """The claim's verdict on one draw, by its rule."""
+    try:
+        verdict, _ = claim.judge(sctx, cells)
+    except cl.NotEnoughData:
+        verdict = cl.NO_DATA
+    return verdict
 
 
 def seeds_for(ctx: Context, claim: SimClaim, target: float = TARGET, sims: int = DEFAULT_SIMS, seed: int = 0,

@@ -463,3 +463,43 @@ def test_cli_claims_indicative_flag(tmp_path):
     table = pd.read_csv(tmp_path / "out" / "claims.csv", keep_default_na=False).set_index("id")
     assert table.loc["online_beats_drqv2_all", "verdict"] == NO_DATA
     assert table.loc["online_beats_drqv2_all", "indicative"].startswith("indicative: TACO ahead")
+
+
+@pytest.mark.parametrize("text", [
+    "frame,step,episode_reward\n0,0,1.5\n1000,500,2.5\n",
+    "frame,step,episode_reward\n0,0\n",
+    "frame,step,episode_reward\n0,0,1,4\n",
+    "frame,step,episode_reward\n\n0,0,1\n",
+    "\nframe,step\n0,0\n",
+    "frame,step,episode_reward\n0,0,\"1,5\"\n",
+    "frame,step,episode_reward\r\n0,0,1\r\n",
+    "frame,step,episode_reward\n0,0,1\n0,1\n",
+    ",\n,\n",
+])
+def test_csv_field_counts_are_the_csv_modules(text):
+    """analysis.load reads unquoted run CSVs without the csv module: the same header and field counts."""
+    import csv
+    import io
+
+    from analysis.load import _field_counts
+
+    rows = list(csv.reader(io.StringIO(text)))
+    assert _field_counts(text) == (rows[0], [len(r) for r in rows[1:]])
+
+
+def test_train_speed_reads_only_its_columns_with_every_check(tmp_path):
+    """_train_speed parses only frame, fps and critic_loss of train.csv: the same median FPS as a full read, and
+    a short row or a non-numeric fps is still a problem."""
+    from analysis.load import _fps_summary, _train_speed, read_csv_strict
+    from repro.runs.runformat import TRAIN_REQUIRED
+
+    path = tmp_path / "train.csv"
+    path.write_text("frame,step,fps,note,critic_loss\n1000,500,40.0,x,\n2000,1000,50.0,y,0.5\n3000,1500,70.0,z,0.4\n")
+    full = _fps_summary(read_csv_strict(path, TRAIN_REQUIRED))
+    assert _train_speed(path, False, [])["fps"] == full == 60.0
+    assert list(read_csv_strict(path, TRAIN_REQUIRED, only=("critic_loss",)).columns) == ["frame", "fps",
+                                                                                         "critic_loss"]
+    for bad in ("frame,step,fps\n1000,500,40.0\n2000,1000\n", "frame,step,fps\n1000,500,x\n"):
+        path.write_text(bad)
+        problems: list = []
+        assert math.isnan(_train_speed(path, False, problems)["fps"]) and len(problems) == 1

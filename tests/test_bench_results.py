@@ -129,7 +129,7 @@ def test_a_run_is_labelled_with_the_path_it_trained_with(tmp_path):
 
     from analysis.load import load_results
     from analysis.speed import speed_measurements
-    from tests.analysis_fixtures import write_run
+    from analysis_fixtures import write_run
 
     plain = write_run(tmp_path, experiment="speed", algo="taco", task="cheetah_run", seed=1, final=1.0, fps=10.0)
     fast = write_run(tmp_path, experiment="speed", algo="taco", task="cheetah_run", seed=2, final=1.0, fps=30.0)

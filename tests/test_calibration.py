@@ -76,6 +76,19 @@ def test_published_curves_are_packaged_with_licence_and_loaded_apart_from_runs(t
     # quadruped_run: 8 published seeds, one evaluation every 20K frames to 2.98M
     q = pub.eval[pub.eval["task"] == "quadruped_run"]
     assert q["run_id"].nunique() == 8 and len(q) == 8 * 150
+    # each run's rows are its seed's rows of the file, in order, with its identity on every row
+    raw = pd.read_csv(PUBLISHED_DIR / "dmc_quadruped_run.csv", index_col=0)
+    seed = int(raw["seed"].max())
+    mine = q[q["run_id"] == f"published/quadruped_run/seed{seed}"]
+    part = raw[raw["seed"] == seed]
+    assert mine["frame"].tolist() == part["frame"].astype(float).tolist()
+    assert mine["episode_reward"].tolist() == part["episode_reward"].tolist()
+    assert mine["step"].tolist() == (part["frame"] // 2).astype(float).tolist()
+    assert mine["total_time"].tolist() == (part["hour"] * 3600.0).tolist()
+    assert mine["episode"].tolist() == list(range(len(part))) and (mine["seed"] == seed).all()
+    assert (mine["train_frames"] == part["frame"].max()).all() and mine["K"].isna().all()
+    assert str(pub.eval["seed"].dtype) == str(pub.eval["episode"].dtype) == "int64"
+    assert pub.eval["success"].isna().all() and pub.eval.index.equals(pd.RangeIndex(len(pub.eval)))
     _drq_runs(tmp_path, "main", [100.0, 110.0, 120.0])
     user = load_results(tmp_path)
     assert set(user.runs["source"]) == set(user.eval["source"]) == {SOURCE_RUNS}

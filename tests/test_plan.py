@@ -70,6 +70,22 @@ def test_simulation_is_deterministic_under_a_fixed_random_state(ctx):
         power.seeds_for(ctx, claim, sims=300, seed=7, max_seeds=40)
 
 
+def test_a_claims_powers_are_kept_by_their_arguments(ctx):
+    """simulate() keeps each result in the claim's memo: asked again with the same arguments it gives the same
+    Power, and with other seeds, draws, random state or seeds done it computes (what a fresh claim gives)."""
+    effect = [(10.0, 5.0, 8.0, 5.0)]
+    claim = _pairs_claim(effect)
+    done = {("t0", "A"): np.array([1.0, 2.0, 3.0]), ("t0", "B"): np.array([5.0, 6.0, 7.0])}
+    calls = [(4, 300, 7, None), (5, 300, 7, None), (4, 200, 7, None), (4, 300, 8, None), (4, 300, 7, done)]
+    first = [power.simulate(ctx, claim, n, sims, seed=s, observed=o) for n, sims, s, o in calls]
+    assert len(claim.memo) == len(calls)
+    assert [power.simulate(ctx, claim, n, sims, seed=s, observed=o) for n, sims, s, o in calls] == first
+    assert len(claim.memo) == len(calls)
+    assert first == [power.simulate(ctx, _pairs_claim(effect), n, sims, seed=s, observed=o)
+                     for n, sims, s, o in calls]
+    assert first[0] != first[4]
+
+
 def test_seeds_for_80_percent_power_and_the_seed_minimum(ctx):
     claim = _pairs_claim([(10.0, 5.0, 8.0, 5.0)])
     n, p = power.seeds_for(ctx, claim, sims=2000, seed=3, max_seeds=40)
@@ -174,10 +190,46 @@ def test_replay_bytes_without_building_the_buffer_equal_the_buffers_own():
     assert ReplayBuffer.bytes_for(500, (3, 84, 84), 6) == buf.nbytes()
 
 
+def test_each_claims_verdicts_of_all_draws_at_once_are_its_rules_draw_by_draw(ctx):
+    """analysis.power judges every draw at once (SimClaim.batch); each verdict it gives is the one the claim's own
+    rule gives that draw, below, at and above the claim's seed minimum, with the cells shifted so that verdicts
+    differ, with a cell's seeds kept from runs, and a tie is left to the rule."""
+    rng = np.random.default_rng(0)
+    seen: set[str] = set()
+    for claim in power.simulated_claims(ctx):
+        assert claim.batch is not None, claim.id
+        sims = 12 if claim.reps else 80
+        for seeds in (1, 3, 6):
+            sctx = power.sim_context(ctx, claim)
+            draws = {c.key: c.draw(rng, sims, 0 if c.kind == "fixed" else seeds) for c in claim.cells}
+            scale = rng.uniform(0.6, 1.4, size=(sims, 1))  # one method's cells shifted in each draw
+            shifted = {k: (v * scale if k[-1] in ("TACO", "TD3+BC+TACO", "CQL+TACO") and v.shape[1] else v)
+                       for k, v in draws.items()}
+            first = next(iter(shifted))
+            kept = {**shifted, first: np.concatenate([np.broadcast_to(shifted[first][:1, :1], (sims, 1)),
+                                                      shifted[first][:, 1:]], axis=1)}
+            for cells in (draws, shifted, kept):
+                batch = claim.batch(sctx, cells)
+                assert len(batch) == sims
+                decided = [i for i in range(sims) if batch[i]]
+                assert len(decided) >= sims - 1, (claim.id, seeds)
+                for i in decided:
+                    assert batch[i] == power.judge_draw(sctx, claim, {k: a[i] for k, a in cells.items()}), \
+                        (claim.id, seeds, i)
+                seen |= set(batch)
+    assert {cl.SUPPORTED, cl.REFUTED, cl.NO_DATA} <= seen
+    # a tie (TACO's mean equal to DrQ-v2's on every task) is not decided at once: the rule judges it
+    claim = next(c for c in power.simulated_claims(ctx) if c.id == "online_beats_drqv2_all")
+    sctx = power.sim_context(ctx, claim)
+    tie = {c.key: np.full((4, 3), 500.0) for c in claim.cells}
+    assert list(claim.batch(sctx, tie)) == [""] * 4
+    assert power.judge_draw(sctx, claim, {k: v[0] for k, v in tie.items()}) == cl.REFUTED
+
+
 def test_power_given_the_runs_done_keeps_their_values(tmp_path):
     from analysis.load import load_results
     from analysis.paper import DMC9
-    from tests.analysis_fixtures import write_run
+    from analysis_fixtures import write_run
 
     for task in DMC9:  # 2 seeds of each method: below the claim's minimum of 3
         for s in range(2):
