@@ -12,7 +12,8 @@ Where a cell's truth comes from:
   returns [0, 1000]; normalised offline scores >= 0).
 - a baseline the claim reads from the paper itself (the published DrQ-v2 curves against which
   ``online_avg_gain_vs_published`` is read) is fixed, not drawn.
-- a solved / not solved cell (manipulator): each seed solves with the paper's proportion.
+- a solved / not solved cell (manipulator): each seed solves with the proportion the paper's prose gives (appendix G:
+  its counts in repro_data/paper/claim_numbers.csv).
 """
 
 from __future__ import annotations
@@ -160,3 +161,22 @@ def table3_cells(ctx: Context, methods: Sequence[str]) -> list[CellSource]:
             for r in ctx.paper.offline.itertuples(index=False)
             if r.task in OFFLINE_TASKS and r.dataset in DatasetKind.values() and r.method in methods
             and pd.notna(r.normalized_mean)]
+
+
+def solved_cells(ctx: Context, claim: str, counts: dict[str, str]) -> list[CellSource]:
+    """Solved / not solved cells (key (label,)): each of ``label``'s seeds solves with the proportion the paper's
+    prose gives for ``claim`` (its number ``counts[label]`` of its number "seeds", claim_numbers.csv)."""
+    paper = ctx.paper
+    seeds = paper.claim_number(claim, "seeds")
+    where = paper.claims.set_index("id").loc[claim, "where"]
+    out = []
+    for label, name in counts.items():
+        solved = paper.claim_number(claim, name)
+        out.append(CellSource((label,), "bernoulli", solved / seeds, math.nan,
+                              source=f"{where}: {solved:g} of {seeds:g} seeds solve"))
+    return out
+
+
+def solve_upper_bound(solved: int, seeds: int, level: float = 0.95) -> float:
+    """The one-sided Clopper-Pearson upper bound on a solve probability from ``solved`` of ``seeds`` (0 of 6: 39%)."""
+    return 1.0 if solved >= seeds else float(sps.beta.ppf(level, solved + 1, seeds - solved))

@@ -35,6 +35,8 @@ from analysis.cells import (
     means_table,
     observed_cells,
     published_fixed_cells,
+    solve_upper_bound,
+    solved_cells,
     stacked,
     table1_cells,
     table2_cells,
@@ -79,6 +81,13 @@ class NotEnoughData(Exception):
 
 
 Check = Callable[[Context], tuple[str, str]]  # a claim's check on the runs: (verdict, evidence)
+# A text as written, or one built from the paper data (a rule or note that quotes a number the paper prints)
+PaperText = str | Callable[[PaperData], str]
+
+
+def paper_text(text: PaperText, paper: PaperData) -> str:
+    """``text`` as shown for ``paper``: built from its numbers where it quotes them."""
+    return text(paper) if callable(text) else text
 
 
 @dataclass(frozen=True)
@@ -95,14 +104,19 @@ class Simulation:
     tasks: tuple[str, ...]
     sims: int | None = None
     reps: int = 0
-    notes: tuple[str, ...] = ()
+    notes: tuple[PaperText, ...] = ()
     batch: BatchJudge | None = None  # ``judge`` on every draw at once (:data:`BatchJudge`); None: draw by draw
+
+    def notes_text(self, paper: PaperData) -> list[str]:
+        """``notes`` as shown for ``paper`` (:func:`paper_text`)."""
+        return [paper_text(n, paper) for n in self.notes]
 
 
 @dataclass(frozen=True)
 class ClaimSpec:
     """One claim, defined once (:data:`SPECS`) and read by `repro claims`, `repro plan --claims` and the report:
-    its ``check`` on the runs with its one-line ``rule``, and either its ``simulation`` (its cells from the runs and
+    its ``check`` on the runs with its one-line ``rule`` (where it quotes a number of the paper's prose, a function of
+    the paper data: :meth:`rule_text`), and either its ``simulation`` (its cells from the runs and
     from the paper) or why the power simulation cannot run it (``not_simulated``). Its budget and seed minimum are
     the row of analysis/claim_budgets.csv with its id (a reading's: the claim it reads). A ``reading_of`` spec is
     another reading of that claim of claims.csv (its budget, its text with ``note`` appended), listed after it and
@@ -110,11 +124,15 @@ class ClaimSpec:
 
     id: str
     check: Check
-    rule: str
+    rule: PaperText
     simulation: Simulation | None = None
     not_simulated: str = ""
     reading_of: str = ""
     note: str = ""
+
+    def rule_text(self, paper: PaperData) -> str:
+        """``rule`` as shown for ``paper``, with the numbers it quotes from the paper data (:func:`paper_text`)."""
+        return paper_text(self.rule, paper)
 
     @property
     def claim_id(self) -> str:
@@ -190,10 +208,28 @@ def online_rows(ctx: Context) -> pd.DataFrame:
 
 # The rules below take a claim's cells (a ``means`` table, score matrices or per-cell summaries) instead of the
 # runs, so that the power simulation (analysis.power) applies them, unchanged, to simulated cells.
-GAIN_BAR = 1.3  # online_avg_gain: about 1.4x, tolerance 0.1
+GAIN_TOLERANCE = 0.1  # online_avg_gain: how far short of the paper's "about 1.4x" the ratio may fall
+SPEED_TOLERANCE = 0.25  # speed: the FPS ratio within this fraction of the paper's "about 3.6x slower"
+SOLVED_FRACTION = 1 / 3  # manipulator: the fraction of TACO's seeds that must solve ("a third"; the paper: 3 of 6)
 REPR_TASKS = ("quadruped_run", "walker_run", "hopper_hop", "reacher_hard", "acrobot_swingup")
 OFFLINE_AVERAGED = ("TD3+BC+TACO", "TD3+BC", "CQL+TACO", "CQL")  # offline_average's methods: the +-TACO pairs
 MODEL_BASED = ("DreamerV3", "TD-MPC")
+
+
+def paper_gain(paper: PaperData) -> float:
+    """online_avg_gain's "about 1.4x" as the paper's prose gives it (repro_data/paper/claim_numbers.csv)."""
+    return paper.claim_number("online_avg_gain", "gain")
+
+
+def gain_bar(paper: PaperData) -> float:
+    """The ratio online_avg_gain needs: the paper's gain less :data:`GAIN_TOLERANCE` (1.4 - 0.1 = 1.3), rounded to
+    6 decimals so that the subtraction's last bit (1.4 - 0.1 is 1.2999999999999998 in floats) moves no verdict."""
+    return round(paper_gain(paper) - GAIN_TOLERANCE, 6)
+
+
+def _gain_rule_text(paper: PaperData) -> str:
+    return (f"mean over the 9 tasks of TACO / DrQ-v2 >= {gain_bar(paper):g} (about {paper_gain(paper):g}x, "
+            f"tolerance {GAIN_TOLERANCE:g}); CI by rliable bootstrap")
 
 
 def offline_printed(ctx: Context) -> dict[str, float]:
@@ -220,15 +256,18 @@ def avg_gain_rule(ctx: Context, x: np.ndarray, y: np.ndarray) -> tuple[str, str]
     """online_avg_gain on TACO's and DrQ-v2's (runs x 9 tasks) score matrices: the verdict reads the ratio of
     means, the CI is evidence (``ctx.reps`` 0: no CI)."""
     r, lo, hi = ratio_of_means(x, y, ctx.reps, ctx.seed)
-    verdict = SUPPORTED if r >= GAIN_BAR else REFUTED
-    return verdict, (f"TACO/DrQ-v2 = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); paper: 1.4x (Table 1 gives "
-                     f"{ctx.paper.online_gain:.3f})")
+    verdict = SUPPORTED if r >= gain_bar(ctx.paper) else REFUTED
+    return verdict, (f"TACO/DrQ-v2 = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); paper: {paper_gain(ctx.paper):g}x "
+                     f"(Table 1 gives {ctx.paper.online_gain:.3f})")
 
 
 PUBLISHED_GAIN_ID = "online_avg_gain_vs_published"  # the reading of online_avg_gain against the published curves
-PUBLISHED_GAIN_RULE = ("mean over the 9 tasks of TACO (your runs) / DrQ-v2 (the DrQ-v2 authors' published curves, "
-                       "at the same frame budget) >= 1.3; CI by rliable stratified bootstrap of both, each published "
-                       "task over its own seeds")
+
+
+def _published_gain_rule_text(paper: PaperData) -> str:
+    return ("mean over the 9 tasks of TACO (your runs) / DrQ-v2 (the DrQ-v2 authors' published curves, at the same "
+            f"frame budget) >= {gain_bar(paper):g}; CI by rliable stratified bootstrap of both, each published task "
+            "over its own seeds")
 
 
 def _online_avg_gain_published(ctx: Context) -> tuple[str, str]:
@@ -251,10 +290,10 @@ def published_gain_rule(ctx: Context, x: np.ndarray, ys: Sequence[np.ndarray]) -
     at the budget; the verdict reads the ratio, the CI is evidence (``ctx.reps`` 0: no CI)."""
     frame = float(ctx.budget)
     r, lo, hi = ratio_to_task_means(x, ys, ctx.reps, ctx.seed)
-    verdict = SUPPORTED if r >= GAIN_BAR else REFUTED
+    verdict = SUPPORTED if r >= gain_bar(ctx.paper) else REFUTED
     return verdict, (f"TACO/DrQ-v2 (published curves at {frames_text(frame)}) = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); "
-                     f"published DrQ-v2 9-task mean {np.mean([np.mean(y) for y in ys]):.1f}; paper: 1.4x (Table 1 "
-                     f"gives {ctx.paper.online_gain:.3f} with its own DrQ-v2)")
+                     f"published DrQ-v2 9-task mean {np.mean([np.mean(y) for y in ys]):.1f}; paper: "
+                     f"{paper_gain(ctx.paper):g}x (Table 1 gives {ctx.paper.online_gain:.3f} with its own DrQ-v2)")
 
 
 def _beats_drqv2(ctx: Context) -> tuple[str, str]:
@@ -534,12 +573,23 @@ def _action_dim(ctx: Context) -> tuple[str, str]:
     return (SUPPORTED if ok else REFUTED), ", ".join(f"d={d} {get(ctx, table, d):.0f}" for d in have)
 
 
+def paper_slowdown(paper: PaperData) -> float:
+    """The speed claim's "about 3.6x slower" as the paper's prose gives it (repro_data/paper/claim_numbers.csv)."""
+    return paper.claim_number("speed", "slowdown")
+
+
+def _speed_rule_text(paper: PaperData) -> str:
+    return (f"on one hardware, FPS(DrQ-v2 B256) / FPS(TACO B1024) within ±{SPEED_TOLERANCE:.0%} of "
+            f"{paper_slowdown(paper):g}, and TACO's FPS decreases with batch size where measured (from `repro bench` "
+            "files and runs of experiment 'speed'; other runs' FPS only in an indicative reading)")
+
+
 def speed_printed(paper: PaperData) -> tuple[str, str]:
-    """What the speed claim's evidence quotes from Tables 4-5 (the packaged paper data): the ratio's source and
+    """What the speed claim's evidence quotes from the packaged paper data: the prose's ratio with Tables 4-5's, and
     TACO's FPS per batch size."""
     taco = {b: paper.fps("TACO", b) for b in (256, 512, 1024)}
     drq = paper.fps("DrQ-v2", 256)
-    return (f"(paper 3.6, from its table {drq:g}/{taco[1024]:g} = {drq / taco[1024]:.2f})",
+    return (f"(paper {paper_slowdown(paper):g}, from its table {drq:g}/{taco[1024]:g} = {drq / taco[1024]:.2f})",
             "(paper " + ", ".join(f"B{b} {v:g}" for b, v in taco.items()) + ")")
 
 
@@ -554,7 +604,8 @@ def _speed(ctx: Context) -> tuple[str, str]:
             ratio = fps[("DrQ-v2", 256)] / fps[("TACO", 1024)]
             taco = [(b, fps[("TACO", b)]) for b in (256, 512, 1024) if ("TACO", b) in fps.index]
             decreasing = all(a[1] > b[1] for a, b in zip(taco, taco[1:]))
-            ok = 0.75 * 3.6 <= ratio <= 1.25 * 3.6 and decreasing
+            slowdown = paper_slowdown(ctx.paper)
+            ok = (1 - SPEED_TOLERANCE) * slowdown <= ratio <= (1 + SPEED_TOLERANCE) * slowdown and decreasing
             ev = (f"on {hw}: ratio {ratio:.2f} {speed_printed(ctx.paper)[0]}; TACO FPS "
                   + ", ".join(f"B{b} {v:.1f}" for b, v in taco) + f" {speed_printed(ctx.paper)[1]}")
             return (SUPPORTED if ok else REFUTED), ev
@@ -598,7 +649,7 @@ def manipulator_rule(ctx: Context, s: dict[str, dict]) -> tuple[str, str]:
     taco_frac = s["TACO"]["solved"] / s["TACO"]["runs"]
     ev = (f"TACO {int(s['TACO']['solved'])}/{int(s['TACO']['runs'])}, "
           f"DrQ-v2 0/{int(s['DrQ-v2']['runs'])} solved")
-    if taco_frac >= 1 / 3:
+    if taco_frac >= SOLVED_FRACTION:
         return SUPPORTED, ev
     last = min(v["last_frame"] for v in s.values())
     if last >= ctx.budget:
@@ -621,9 +672,7 @@ def _published_sources(ctx: Context, budget: float) -> list[CellSource]:
 
 
 def _manipulator_sources(ctx: Context, budget: float) -> list[CellSource]:
-    # appendix G's counts are in its text (claims.csv), not in a table of the paper data
-    return [CellSource(("TACO",), "bernoulli", 3 / 6, math.nan, source="appendix G: 3 of 6 seeds solve"),
-            CellSource(("DrQ-v2",), "bernoulli", 0.0, math.nan, source="appendix G: 0 of 6 seeds solve")]
+    return solved_cells(ctx, "manipulator", {"TACO": "taco_solved", "DrQ-v2": "drqv2_solved"})
 
 
 def _judge_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
@@ -725,7 +774,8 @@ def _gain_batch(ctx: Context, draws: Draws) -> np.ndarray:
     if not all(_enough(ctx, draws, k) for k in taco + drq):
         return _all(sims, NO_DATA)
     r = bs.RATIO_OF_MEANS.vector(_stacked_draws(draws, taco), _stacked_draws(draws, drq))[:, 0]
-    return _verdicts(sims, r >= GAIN_BAR, REFUTED, _near(r, GAIN_BAR))
+    bar = gain_bar(ctx.paper)
+    return _verdicts(sims, r >= bar, REFUTED, _near(r, bar))
 
 
 def _published_gain_batch(ctx: Context, draws: Draws) -> np.ndarray:
@@ -738,7 +788,8 @@ def _published_gain_batch(ctx: Context, draws: Draws) -> np.ndarray:
     if any(y.shape[1] < ctx.min_seeds for y in ys):
         return _all(sims, NO_DATA)
     r = bs.RATIO_TO_TASK_MEANS.vector(_stacked_draws(draws, taco), *(y[:, :, None] for y in ys))[:, 0]
-    return _verdicts(sims, r >= GAIN_BAR, REFUTED, _near(r, GAIN_BAR))
+    bar = gain_bar(ctx.paper)
+    return _verdicts(sims, r >= bar, REFUTED, _near(r, bar))
 
 
 def _model_based_batch(ctx: Context, draws: Draws) -> np.ndarray:
@@ -797,7 +848,7 @@ def _manipulator_batch(ctx: Context, draws: Draws) -> np.ndarray:
         out = _all(sims, NO_DATA)
     else:
         # every cell's last frame is the budget in the simulation: short of a third of TACO's seeds is refuted
-        out = np.where(solved["TACO"] / runs["TACO"] >= 1 / 3, SUPPORTED, REFUTED).astype(object)
+        out = np.where(solved["TACO"] / runs["TACO"] >= SOLVED_FRACTION, SUPPORTED, REFUTED).astype(object)
     out[drq_solves] = REFUTED
     return out
 
@@ -841,14 +892,31 @@ _OFFLINE_NOTE = ("the rule compares returns; the cells are Table 3's normalised 
                  "return, increasing in the return), so every comparison agrees")
 _FIGURE_ONLY = "the paper gives {} only as a figure ({}), with no numbers"
 
+
+def _manipulator_counts(paper: PaperData) -> tuple[float, float, float]:
+    """Appendix G's (TACO's solved seeds, DrQ-v2's, seeds per method), from its prose (claim_numbers.csv)."""
+    number = paper.claim_number
+    return number("manipulator", "taco_solved"), number("manipulator", "drqv2_solved"), number("manipulator", "seeds")
+
+
+def _manipulator_rule_text(paper: PaperData) -> str:
+    taco, _, seeds = _manipulator_counts(paper)
+    return ("within the budget (30M frames) TACO solves (an eval return >= 500) at least a third of its seeds "
+            f"(paper {taco:g}/{seeds:g}) and DrQ-v2 none")
+
+
+def _manipulator_note(paper: PaperData) -> str:
+    _, drq, seeds = _manipulator_counts(paper)
+    return (f"DrQ-v2's {drq:g} of {seeds:g} taken as a solve probability of {drq / seeds:g} (its 95% upper bound is "
+            f"{solve_upper_bound(int(drq), int(seeds)):.0%}): optimistic")
+
 # ---------------------------------------------------------------- the claims
 # Every claim of claims.csv, in its order, each once (tests/test_claim_sources.py).
 SPECS: tuple[ClaimSpec, ...] = (
     ClaimSpec("online_avg_gain", _online_avg_gain,
-              "mean over the 9 tasks of TACO / DrQ-v2 >= 1.3 (about 1.4x, tolerance 0.1); CI by rliable "
-              "bootstrap",
+              _gain_rule_text,
               Simulation(_online_sources, _judge_gain, _online_observed, DMC9, batch=_gain_batch)),
-    ClaimSpec(PUBLISHED_GAIN_ID, _online_avg_gain_published, PUBLISHED_GAIN_RULE,
+    ClaimSpec(PUBLISHED_GAIN_ID, _online_avg_gain_published, _published_gain_rule_text,
               Simulation(_published_sources, _judge_published_gain, _online_observed, DMC9,
                          notes=("DrQ-v2 is the published curves as published (fixed data, as `repro claims` reads "
                                 "them)",), batch=_published_gain_batch),
@@ -929,10 +997,7 @@ SPECS: tuple[ClaimSpec, ...] = (
               "on quadruped_run the means at dims 6 and 24 are below every intermediate dim's, and the "
               "intermediate dims' range is <= 15% of their mean",
               not_simulated=_FIGURE_ONLY.format("the latent-dimension results", "appendix E")),
-    ClaimSpec("speed", _speed,
-              "on one hardware, FPS(DrQ-v2 B256) / FPS(TACO B1024) within ±25% of 3.6, and TACO's FPS decreases "
-              "with batch size where measured (from `repro bench` files and runs of experiment 'speed'; other runs' "
-              "FPS only in an indicative reading)",
+    ClaimSpec("speed", _speed, _speed_rule_text,
               not_simulated="a timing on your hardware (`repro bench`), not a statistic over seeds"),
     ClaimSpec("seed_robustness", _seeds,
               "TACO's std over seeds < DrQ-v2's on >= 7 of the 9 tasks, and DrQ-v2 has >= 1 broken seed "
@@ -941,12 +1006,9 @@ SPECS: tuple[ClaimSpec, ...] = (
                          notes=("a broken seed is one below half its cell's median: normal cells almost never have "
                                 "one, so DrQ-v2's published values carry the claim's second half",),
                          batch=_seeds_batch)),
-    ClaimSpec("manipulator", _manipulator,
-              "within the budget (30M frames) TACO solves (an eval return >= 500) at least a third of its "
-              "seeds (paper 3/6) and DrQ-v2 none",
+    ClaimSpec("manipulator", _manipulator, _manipulator_rule_text,
               Simulation(_manipulator_sources, _judge_manipulator, None, ("manipulator_bring_ball",),
-                         notes=("DrQ-v2's 0 of 6 taken as a solve probability of 0 (its 95% upper bound is 39%): "
-                                "optimistic", "not conditioned on runs (the rule reads learning curves)"),
+                         notes=(_manipulator_note, "not conditioned on runs (the rule reads learning curves)"),
                          batch=_manipulator_batch)),
 )
 SPEC_OF = {s.id: s for s in SPECS}
@@ -1036,10 +1098,11 @@ def evaluate_claims(ctx: Context) -> list[Verdict]:
         claim = text[spec.claim_id] + (f" [{spec.note}]" if spec.note else "")
         budget = budgets.get(spec.claim_id)
         if budget is None:
-            out.append(Verdict(spec.id, claim, NO_DATA, "no budget for this claim in claim_budgets.csv", spec.rule))
+            out.append(Verdict(spec.id, claim, NO_DATA, "no budget for this claim in claim_budgets.csv",
+                               spec.rule_text(ctx.paper)))
             continue
         verdict, evidence, label = _reading(ctx, budget, _short_of_budget(ctx, budget), spec.check)
-        out.append(Verdict(spec.id, claim, verdict, evidence, spec.rule, budget.text(),
+        out.append(Verdict(spec.id, claim, verdict, evidence, spec.rule_text(ctx.paper), budget.text(),
                            max(budget.min_seeds, ctx.min_seeds), label))
     return out
 

@@ -1,6 +1,8 @@
 """The paper's own numbers (a copy of ``shared/paper`` in ``repro_data/paper``), as printed.
 
-Table 1 and Table 6, which the training code reads too, have their one packaged copy in
+``claim_numbers.csv`` beside them is this project's: the numbers the paper gives only in its prose (the "1.4x", the
+"3.6 times slower", appendix G's "3 out of 6 seeds"), each with the words it is quoted from
+(repro_data/README.md). Table 1 and Table 6, which the training code reads too, have their one packaged copy in
 ``repro/config/data/`` and are read from there (``repro.config.paper_defaults``)."""
 
 from __future__ import annotations
@@ -92,6 +94,19 @@ class PaperData:
     def claims(self) -> pd.DataFrame:
         """claims.csv: id, where, claim, evidence."""
         return self._csv("claims.csv")
+
+    @cached_property
+    def claim_numbers(self) -> pd.DataFrame:
+        """claim_numbers.csv: claim, name, value, written (the number as the quote writes it), quote (words of the
+        claim's text in claims.csv), tex (the same statement's words in taco_paper.tex), where (in the paper)."""
+        return self._csv("claim_numbers.csv")
+
+    def claim_number(self, claim: str, name: str) -> float:
+        """The number ``name`` the paper's prose gives for claim ``claim`` (claim_numbers.csv; KeyError if none)."""
+        rows = self.claim_numbers[(self.claim_numbers["claim"] == claim) & (self.claim_numbers["name"] == name)]
+        if rows.empty:
+            raise KeyError(f"no number {name!r} of claim {claim!r} in {self.root / 'claim_numbers.csv'}")
+        return float(rows["value"].iloc[0])
 
     @cached_property
     def tex(self) -> str:

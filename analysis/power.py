@@ -84,7 +84,7 @@ def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = N
         if sim is None:
             continue
         budget = budgets[spec.claim_id]
-        notes = list(sim.notes)
+        notes = sim.notes_text(ctx.paper)
         if sim.reps:
             notes.append(f"its verdict reads a bootstrap CI: rliable's bootstrap runs in every draw ({sim.reps} "
                          f"repetitions instead of {ctx.reps:,}; {sim.sims} draws)")
@@ -258,7 +258,7 @@ def power_rows(ctx: Context, sims: int = DEFAULT_SIMS, max_seeds: int = DEFAULT_
     by_verdict = {v.id: v for v in verdicts or []}
     rows = []
     for claim in cl.claim_specs(ctx.paper):
-        cid, rule, spec = claim.id, claim.rule, budgets.get(claim.claim_id)
+        cid, rule, spec = claim.id, claim.rule_text(ctx.paper), budgets.get(claim.claim_id)
         if spec is None:
             rows.append(PowerRow(cid, False, rule, 0, 0, reason="no budget in claim_budgets.csv"))
             continue
