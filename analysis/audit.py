@@ -21,7 +21,7 @@ from analysis.findings import Finding, agree, pm_text, result_text
 from analysis.paper import DMC9, PaperData
 from analysis.paper_tex import (
     T1_COLUMNS,
-    T2_COLUMNS,
+    header,
     parse_cql_table,
     parse_offline_table,
     parse_row_table,
@@ -227,7 +227,7 @@ def check_bold_marks(p: PaperData) -> Iterable[Finding]:
         best_mf = mf.loc[mf["mean"].idxmax(), "method"]
         yield Finding("t1_shading", "T1 (LaTeX)", f"{task}: the shaded TACO column = best model-free", "TACO", best_mf,
                       best_mf == "TACO")
-    t2 = parse_row_table(tex, "tab:spr_table", T2_COLUMNS)
+    t2 = parse_row_table(tex, "tab:spr_table", p.repr_methods)
     for task, rows in t2.groupby("task", sort=False):
         best = rows.loc[rows["mean"].astype(float).idxmax(), "method"]
         bold = list(rows.loc[rows["bold"] & rows["mean"].notna(), "method"])  # a bold "N/A" is not a best mark
@@ -244,11 +244,16 @@ def check_bold_marks(p: PaperData) -> Iterable[Finding]:
 
 
 def check_transcription(p: PaperData) -> Iterable[Finding]:
-    """The CSV files against the LaTeX tables, cell by cell (one summary row per table if all agree)."""
+    """The CSV files against the LaTeX tables, cell by cell (one summary row per table if all agree); Table 2's
+    columns, which its CSV names (the parser reads the LaTeX columns in the CSV's order), against the LaTeX header."""
     tex = p.tex
+    t2_header = header(tex, "tab:spr_table")
+    yield Finding("csv_vs_tex", "T2 CSV vs LaTeX", "method columns in order", ", ".join(p.repr_methods),
+                  ", ".join(t2_header), t2_header == list(p.repr_methods))
     pairs = [
         ("T1", parse_row_table(tex, "tab:online_table", T1_COLUMNS), p.online, ["task", "method"], "mean", "std"),
-        ("T2", parse_row_table(tex, "tab:spr_table", T2_COLUMNS), p.repr_objectives, ["task", "method"], "mean", "std"),
+        ("T2", parse_row_table(tex, "tab:spr_table", p.repr_methods), p.repr_objectives, ["task", "method"], "mean",
+         "std"),
         (
             "T3",
             parse_offline_table(tex)[0],

@@ -54,10 +54,15 @@ class PaperData:
         return self._csv("representation_objectives_table.csv")
 
     @property
+    def repr_methods(self) -> tuple[str, ...]:
+        """Table 2's methods in its column order (the order of each task's rows in its CSV)."""
+        return tuple(dict.fromkeys(self.repr_objectives["method"]))
+
+    @property
     def repr_others(self) -> tuple[str, ...]:
         """The representation objectives Table 2 sets against TACO (all but TACO and the DrQ-v2 baseline), in its
         order: read from the table, never listed in the code."""
-        return tuple(m for m in dict.fromkeys(self.repr_objectives["method"]) if m not in ("TACO", "DrQ-v2"))
+        return tuple(m for m in self.repr_methods if m not in ("TACO", "DrQ-v2"))
 
     @cached_property
     def online_gain(self) -> float:

@@ -1,10 +1,14 @@
 """The paper's LaTeX tables read from its source (``repro_data/paper/taco_paper.tex``): Tables 1 and 2 (a row per
 task), Table 3 with its printed average row, the one-row Tables 4 and 5 and Table 6 (CQL's alpha). Used by the audit
-(analysis/audit.py) to check the CSV transcription and the tables' marks against the source."""
+(analysis/audit.py) to check the CSV transcription and the tables' marks against the source.
+
+Table 2's columns are its CSV's methods in their order (``PaperData.repr_methods``); :func:`header` reads the
+LaTeX table's own header so that the audit checks the two agree."""
 
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 
 import pandas as pd
 
@@ -12,7 +16,6 @@ from analysis.paper import DMC9
 from repro.config.schema import normalize_dataset
 
 T1_COLUMNS = ["TACO", "DrQ-v2", "A-LIX", "DrQ", "CURL", "DreamerV3", "TD-MPC"]
-T2_COLUMNS = ["TACO", "SPR", "ATC", "DRIML", "DrQ-v2"]
 T3_COLUMNS = ["TD3+BC+TACO", "TD3+BC", "CQL+TACO", "CQL", "DT", "IQL", "BC"]
 _PM = re.compile(r"(-?\d+(?:\.\d+)?)\s*\\pm\s*(-?\d+(?:\.\d+)?)")
 _NUM = re.compile(r"-?\d+(?:\.\d+)?")
@@ -56,8 +59,23 @@ def _task_key(text: str) -> str:
     return name.lower().replace(" ", "_")
 
 
-def parse_row_table(tex: str, label: str, columns: list[str]) -> pd.DataFrame:
-    """A task-per-row LaTeX table (Tables 1 and 2) as rows: task, method, mean, std, bold."""
+def header(tex: str, label: str) -> list[str]:
+    """The column names of a task-per-row LaTeX table (the row above its first task), the task column's left out,
+    each as printed without its formatting and with the paper's own macros expanded: "\\textbf{\\ours}" -> "TACO"."""
+    macros = dict(re.findall(r"\\newcommand\{(\\[a-zA-Z]+)\}\{(.*)\}", tex))
+    rows = _rows(_tabular(tex, label))
+    first = next(i for i, cells in enumerate(rows) if _task_key(cells[0]) in DMC9)
+    names = []
+    for cell in rows[first - 1][1:]:
+        for macro, body in macros.items():
+            cell = re.sub(re.escape(macro) + r"(?![a-zA-Z])", body.replace("\\", "\\\\"), cell)
+        names.append(re.sub(r"\\[a-zA-Z]+|[{}]", "", cell).strip())
+    return names
+
+
+def parse_row_table(tex: str, label: str, columns: Sequence[str]) -> pd.DataFrame:
+    """A task-per-row LaTeX table (Tables 1 and 2) as rows: task, method, mean, std, bold; ``columns`` names its
+    method columns in their order."""
     out = []
     for cells in _rows(_tabular(tex, label)):
         task = _task_key(cells[0])

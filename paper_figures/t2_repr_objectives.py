@@ -29,8 +29,8 @@ def render(ctx: Context) -> ArtifactResult:
         reps=ctx.reps, seed=ctx.seed, note=note,
     )
     caption = (
-        "Return at the frame budget of TACO and other representation objectives (SPR, ATC, DRIML), all on "
-        "the DrQ-v2 backbone with action encoding (experiment 'repr_objectives'; TACO and DrQ-v2 fall back "
+        f"Return at the frame budget of TACO and other representation objectives ({', '.join(ctx.paper.repr_others)}), "
+        "all on the DrQ-v2 backbone with action encoding (experiment 'repr_objectives'; TACO and DrQ-v2 fall back "
         "to 'main' runs where the sweep has none)."
     )
     table = comparison_table(ctx, "T2", cells, caption, digits=0)

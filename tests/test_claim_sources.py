@@ -21,6 +21,7 @@ from analysis.claim_budget import BUDGETS_CSV
 from analysis.context import Context
 from analysis.load import Results
 from analysis.paper import PaperData
+from analysis.paper_tex import header
 
 
 def _ctx(paper: PaperData) -> Context:
@@ -65,6 +66,39 @@ def test_the_objectives_taco_is_compared_with_are_table_2s(tmp_path):
             table[(t, m)] = (3, 600.0 if m == "ATC" else 400.0)
     assert cl.vs_repr_rule(_ctx(packaged), table)[0] == cl.REFUTED
     assert cl.vs_repr_rule(_ctx(without_atc), table)[0] == cl.SUPPORTED
+    # T2's caption names the objectives of the table it reads
+    from paper_figures.t2_repr_objectives import render
+
+    captions = []
+    for i, paper in enumerate((packaged, without_atc)):
+        ctx = _ctx(paper)
+        ctx.out_dir = tmp_path / f"t2_{i}"
+        captions.append(render(ctx).caption)
+    assert "other representation objectives (SPR, ATC, DRIML), all on" in captions[0]
+    assert "other representation objectives (SPR, DRIML), all on" in captions[1]
+
+
+def test_table_2s_latex_columns_are_its_csvs_methods_in_order(tmp_path):
+    """The audit reads Table 2's LaTeX columns in the order of its CSV's methods; the LaTeX header says the same."""
+    packaged = PaperData()
+    assert header(packaged.tex, "tab:spr_table") == list(packaged.repr_methods) == ["TACO", "SPR", "ATC", "DRIML",
+                                                                                    "DrQ-v2"]
+    assert header(packaged.tex, "tab:online_table")[:2] == ["TACO", "DrQv2"]  # \ours expanded, as printed
+    columns = [f for f in audit.check_transcription(packaged) if f.description == "method columns in order"]
+    assert [f.match for f in columns] == [True]
+    # a CSV with SPR and ATC named the other way round: read in the CSV's order, the LaTeX cells agree with it, so
+    # only the header check finds the swap
+    root = tmp_path / "paper"
+    shutil.copytree(packaged.root, root)
+    t2 = packaged.repr_objectives
+    swap = {"SPR": "ATC", "ATC": "SPR"}
+    t2.assign(method=t2["method"].map(lambda m: swap.get(m, m))).to_csv(
+        root / "representation_objectives_table.csv", index=False)
+    findings = [f for f in audit.check_transcription(PaperData(root)) if f.where == "T2 CSV vs LaTeX"]
+    assert findings[0].description == "method columns in order" and not findings[0].match
+    assert (findings[0].printed, findings[0].recomputed) == ("TACO, ATC, SPR, DRIML, DrQ-v2",
+                                                             "TACO, SPR, ATC, DRIML, DrQ-v2")
+    assert [f.match for f in findings[1:]] == [True]
 
 
 # ---------------------------------------------------------------- one spec per claim, the same claims everywhere
