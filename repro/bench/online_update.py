@@ -1,6 +1,6 @@
 """One update of the online agent, timed (``repro bench``), and the pieces every update benchmark shares
-(``--roofline``, repro/bench/agreement.py): a synthetic batch, an agent built from its agent file, and timed updates
-of several paths alternated."""
+(``--roofline``, repro/bench/agreement.py): an agent built from its agent file and timed updates of several paths
+alternated; their batches come from repro/bench/batches.py, drawn from a replay as training draws them."""
 
 from __future__ import annotations
 
@@ -14,20 +14,6 @@ from repro.bench.clock import timed
 
 if TYPE_CHECKING:
     import torch
-
-
-def synthetic_batch(B: int, K: int, A: int, device: str, seed: int = 0, image: int = 84) -> dict[str, torch.Tensor]:
-    """A fixed batch (from ``seed``) of B uint8 frame stacks of ``image`` pixels and uniform actions, rewards and
-    action sequences, as the replay returns it, on ``device``."""
-    import torch
-
-    g = torch.Generator().manual_seed(seed)
-    u8 = lambda: torch.randint(0, 256, (B, 9, image, image), dtype=torch.uint8, generator=g).to(device)  # noqa: E731
-    return {"obs": u8(), "next_obs": u8(), "future_obs": u8(),
-            "action": (torch.rand(B, A, generator=g) * 2 - 1).to(device),
-            "action_seq": (torch.rand(B, K, A, generator=g) * 2 - 1).to(device),
-            "reward": torch.rand(B, 1, generator=g).to(device), "discount": torch.full((B, 1), 0.97, device=device),
-            "reward_ksum": torch.rand(B, 1, generator=g).to(device)}
 
 
 def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[str], image: int = 84
