@@ -209,18 +209,19 @@ def test_verify_tiny_end_to_end(tmp_path):
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "out2" / "verify.csv"), table)
 
 
-@pytest.mark.parametrize("record, verdict", [("bf16_heads", V.BELOW), ("", V.LEARNS)])
-def test_the_kept_cpu_runs_are_judged_as_recorded(record, verdict):
+@pytest.mark.parametrize("record, verdicts", [("bf16_heads", [V.BELOW]), ("", [V.LEARNS, V.LEARNED])])
+def test_the_kept_cpu_runs_are_judged_as_recorded(record, verdicts):
     """docs/verification/ holds the CPU check's run files and its verdicts, both written by `repro verify
     --judge-only --keep-runs`: judging the kept files again gives the recorded table (a change to the rule, the band
     or the kept files fails here). ``bf16_heads/``: the run with the actor and critic under bf16 autocast (issue 33's
-    bug), below the band; the top folder: the same run after the fix, as published."""
+    bug), below the band; the top folder: the same run after the fix, as published, and TACO's run beside it,
+    learned."""
     kept = Path(__file__).resolve().parents[1] / "docs" / "verification" / record
     rows = V.judge(load_results(kept / "runs"))
     recorded = pd.read_csv(kept / "verify.csv")
     recorded["note"] = recorded["note"].fillna("")  # an empty note (nothing outside the band) reads back as NaN
     pd.testing.assert_frame_equal(V.verdict_frame(rows).reset_index(drop=True), recorded, check_dtype=False)
-    assert list(recorded["verdict"]) == [verdict]
+    assert list(recorded["verdict"]) == verdicts
 
 
 def test_verify_dry_run_prices_the_runs_from_a_bench_file(tmp_path):
