@@ -13,6 +13,7 @@ import io
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,7 @@ import pandas as pd
 import yaml
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
+from pandas.api.types import is_numeric_dtype, is_object_dtype
 
 from analysis.cache import file_signature, lookup
 from analysis.identity import algo_key, enabled_objectives, method_label
@@ -251,18 +253,31 @@ def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
     if only is not None and len(set(header)) == len(header):
         keep = [c for c in header if c in required or c in only]
     df = pd.read_csv(io.StringIO(text), usecols=keep)
+    dtypes = df.dtypes
     for col in required:
-        converted = pd.to_numeric(df[col], errors="coerce")
+        # a column pandas parsed as numbers is what to_numeric returns; only the others are converted (and set)
+        numeric = is_numeric_dtype(dtypes[col])
+        converted = df[col] if numeric else pd.to_numeric(df[col], errors="coerce")
         if converted.isna().any():
             bad = int(converted.isna().idxmax()) + 2
             raise ValueError(f"non-numeric or empty {col!r} at line {bad}")
-        df[col] = converted
+        if not numeric:
+            df[col] = converted
     for col in df.columns:
-        if col not in required and col not in text_columns and df[col].dtype == object:
+        if col not in required and col not in text_columns and is_object_dtype(dtypes[col]):
             df[col] = pd.to_numeric(df[col], errors="coerce")
-    if len(df) > 1 and not df[order].is_monotonic_increasing or df[order].duplicated().any():
+    if not _strictly_increasing(df[order]):
         raise ValueError(f"{order} is not strictly increasing (duplicated or reordered rows)")
     return df
+
+
+def _strictly_increasing(values: pd.Series) -> bool:
+    """Every value above the one before (a NaN is not; pandas' ``is_monotonic_increasing`` and no duplicates),
+    compared as arrays for integer and float columns."""
+    if values.dtype.kind in "if":
+        a = values.to_numpy()
+        return bool((a[1:] > a[:-1]).all())
+    return not (len(values) > 1 and not values.is_monotonic_increasing or values.duplicated().any())
 
 
 def read_config(path: Path) -> Any:
@@ -387,9 +402,8 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
     row["speedup"] = path_of(_get(cfg, "agent") or {}, values.get("fast"))
     row.update(_provenance(_read_meta(run_dir / META, problems)))
 
-    eval_df = _read_eval(run_dir / EVAL, offline, problems)
-    if eval_df is not None:
-        eval_df = eval_df.assign(run_id=rel, budget_end=budget_end_rows(eval_df, cfg, run_dir, offline))
+    eval_df = _read_eval(run_dir / EVAL, offline, problems,
+                         lambda df: {"run_id": rel, "budget_end": budget_end_rows(df, cfg, run_dir, offline)})
     row["eval_rows"] = 0 if eval_df is None else len(eval_df)
     row["last_frame"] = row["last_update"] = math.nan
     if eval_df is not None and not eval_df.empty:
@@ -428,9 +442,11 @@ def _train_speed(train_path: Path, offline: bool, problems: list[Problem]) -> di
     return speed
 
 
-def _read_eval(path: Path, offline: bool, problems: list[Problem]) -> pd.DataFrame | None:
+def _read_eval(path: Path, offline: bool, problems: list[Problem],
+               extra: Callable[[pd.DataFrame], dict[str, Any]] | None = None) -> pd.DataFrame | None:
     """A run's eval.csv on the eval table's columns (EVAL_TABLE_COLUMNS; columns a learner adds beyond its
-    format are left out), or None (a problem recorded) if it is missing or malformed."""
+    format are left out) followed by the columns ``extra(its rows)`` gives, in one frame, or None (a problem
+    recorded) if it is missing or malformed."""
     if not path.exists():
         problems.append(Problem(str(path), "missing eval.csv; run has no scores", "warning"))
         return None
@@ -442,10 +458,11 @@ def _read_eval(path: Path, offline: bool, problems: list[Problem]) -> pd.DataFra
     except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
         problems.append(Problem(str(path), f"malformed eval.csv ({exc}); skipped"))
         return None
-    for col in EVAL_TABLE_COLUMNS:
-        if col not in df.columns:
-            df[col] = math.nan
-    return df[list(EVAL_TABLE_COLUMNS)]
+    columns: dict[str, Any] = {col: df[col] if col in df.columns else np.full(len(df), math.nan)
+                               for col in EVAL_TABLE_COLUMNS}
+    if extra is not None:
+        columns.update(extra(df))
+    return pd.DataFrame(columns, index=df.index)
 
 
 def load_benches(root: Path) -> tuple[list[BenchFile], list[Problem]]:

@@ -503,3 +503,26 @@ def test_train_speed_reads_only_its_columns_with_every_check(tmp_path):
         path.write_text(bad)
         problems: list = []
         assert math.isnan(_train_speed(path, False, problems)["fps"]) and len(problems) == 1
+
+
+def test_strict_csv_reader_checks_order_and_numbers_of_every_column_kind(tmp_path):
+    """read_csv_strict's checks whatever pandas parsed a column as: integer, float or text frames reordered or
+    repeated are refused, a non-numeric required value names its line, other text columns become NaN."""
+    from analysis.load import read_csv_strict
+
+    path = tmp_path / "eval.csv"
+    refused = {"frame,score\n0,1\n20,2\n10,3\n": "not strictly increasing",
+               "frame,score\n0,1\n10,2\n10,3\n": "not strictly increasing",
+               "frame,score\n0.5,1\n0.25,2\n": "not strictly increasing",
+               "frame,score\n0,1\n10,2\nx,3\n": "non-numeric or empty 'frame' at line 4",
+               "frame,score\n0,1\n,2\n": "non-numeric or empty 'frame' at line 3"}
+    for text, message in refused.items():
+        path.write_text(text)
+        with pytest.raises(ValueError, match=message):
+            read_csv_strict(path, ("frame",))
+    path.write_text("frame,score,note\n0,1,a\n10,x,b\n20.5,3,c\n")
+    df = read_csv_strict(path, ("frame",), text_columns=("note",))
+    assert list(df["frame"]) == [0.0, 10.0, 20.5] and df["frame"].dtype == float
+    assert df["score"].isna().tolist() == [False, True, False] and list(df["note"]) == ["a", "b", "c"]
+    path.write_text("frame,score\n5,1\n")
+    assert len(read_csv_strict(path, ("frame",))) == 1

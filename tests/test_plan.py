@@ -105,6 +105,24 @@ def test_observed_seeds_are_kept_and_only_the_missing_ones_drawn(ctx):
     assert 0.0 < more.supported < 1.0
 
 
+def test_a_normal_cells_draws_are_scipys_truncnorm_draws_bit_for_bit():
+    """CellSource.draw computes the truncation's constants once (analysis.cells._truncnorm_rvs): the same values
+    as scipy.stats.truncnorm.rvs from the same random state, in the left- and right-tail branches, a bound at
+    infinity, a mean outside the range and no bounds at all."""
+    from scipy.stats import truncnorm
+
+    cases = [(420.0, 80.0, 0.0, 1000.0), (995.0, 40.0, 0.0, 1000.0), (5.0, 30.0, 0.0, math.inf),
+             (0.0, 1.0, 0.0, math.inf), (-50.0, 10.0, 0.0, math.inf), (1500.0, 100.0, 0.0, 1000.0),
+             (3.0, 2.0, -math.inf, math.inf), (550.0, 300.0, 500.0, 600.0)]
+    for i, (mean, std, low, high) in enumerate(cases):
+        for sims, n in ((2000, 3), (7, 50), (1, 1)):
+            drawn = CellSource(("t", "m"), "normal", mean, std, low, high).draw(np.random.default_rng(i), sims, n)
+            a, b = (low - mean) / std, (high - mean) / std
+            scipy_draws = truncnorm.rvs(a, b, loc=mean, scale=std, size=(sims, n),
+                                        random_state=np.random.default_rng(i))
+            assert drawn.shape == (sims, n) and np.array_equal(drawn, scipy_draws), (mean, std, low, high, sims, n)
+
+
 def test_every_claim_is_simulated_or_says_why_not(ctx):
     simulated = {c.id for c in power.simulated_claims(ctx)}
     assert simulated == {s.id for s in cl.claim_specs(ctx.paper) if s.simulation is not None}
