@@ -1118,6 +1118,17 @@ def _judge(ctx: Context, fn: Check) -> tuple[str, str]:
         return NO_DATA, str(exc)
 
 
+def budget_words(paper: PaperData, claim: str, words: str) -> str:
+    """A ``holds`` / ``fails`` wording of claim_budgets.csv as shown: each ``{name}`` in it is the claim's number
+    ``name`` of claim_numbers.csv ("TACO about {gain}x DrQ-v2"), ``{gain_bar}`` online_avg_gain's bar
+    (:func:`gain_bar`). KeyError for a name the claim has no number for."""
+    numbers = paper.claim_numbers[paper.claim_numbers["claim"] == claim]
+    values = {str(n): float(v) for n, v in zip(numbers["name"], numbers["value"])}
+    if claim == "online_avg_gain":
+        values["gain_bar"] = gain_bar(paper)
+    return words.format_map({n: f"{v:g}" for n, v in values.items()})
+
+
 def _indicative(ctx: Context, spec: ClaimBudget, fn: Check) -> tuple[str, str]:
     """A reading at the frames every run of the claim reaches (the lowest last frame, capped at the
     claim's budget), one seed per cell allowed: (label, evidence), or ("", reason) if there is none."""
@@ -1134,7 +1145,7 @@ def _indicative(ctx: Context, spec: ClaimBudget, fn: Check) -> tuple[str, str]:
     verdict, evidence = _judge(_claim_context(ctx, spec, budget, below=True), fn)
     if verdict == NO_DATA:
         return "", f"no indicative reading at {where}: {evidence}"
-    words = spec.holds if verdict == SUPPORTED else spec.fails
+    words = budget_words(ctx.paper, spec.id, spec.holds if verdict == SUPPORTED else spec.fails)
     label = f"indicative: {words} ({where}, {seed_counts(runs)})"
     return label, f"indicative reading at {where}, below the claim's budget or seed count: {evidence}"
 
