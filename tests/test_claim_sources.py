@@ -364,3 +364,27 @@ def test_no_number_of_the_prose_is_a_literal_in_the_code():
         literals = {t.string for t in tokenize.generate_tokens(io.StringIO(source).readline)
                     if t.type == tokenize.NUMBER}
         assert not literals & forbidden, (module.__name__, literals & forbidden)
+
+
+def test_the_budgets_wordings_take_the_prose_numbers_from_the_paper_data(tmp_path):
+    """claim_budgets.csv's holds / fails wordings (shown in an indicative reading) name the prose's numbers as
+    {fields} of claim_numbers.csv, filled in from the paper data where they are shown."""
+    packaged = PaperData()
+    budgets = pd.read_csv(BUDGETS_CSV, keep_default_na=False)
+    decimals = {str(w) for w in packaged.claim_numbers["written"] if "." in str(w)}
+    for r in budgets.itertuples(index=False):
+        for words in (r.holds, r.fails):
+            shown = cl.budget_words(packaged, r.id, words)
+            assert "{" not in shown and "}" not in shown, (r.id, shown)
+            assert not any(re.search(rf"(?<![\w.]){re.escape(d)}(?!\d)", words) for d in decimals), (r.id, words)
+    gain = budgets.set_index("id").loc["online_avg_gain"]
+    speed = budgets.set_index("id").loc["speed"]
+    assert [cl.budget_words(packaged, "online_avg_gain", w) for w in (gain.holds, gain.fails)] == [
+        "TACO about 1.4x DrQ-v2", "TACO under 1.3x DrQ-v2"]
+    edited = _edited_paper(tmp_path, {("online_avg_gain", "gain"): 1.5, ("speed", "slowdown"): 5.0})
+    assert [cl.budget_words(edited, "online_avg_gain", w) for w in (gain.holds, gain.fails)] == [
+        "TACO about 1.5x DrQ-v2", "TACO under 1.4x DrQ-v2"]
+    assert [cl.budget_words(edited, "speed", w) for w in (speed.holds, speed.fails)] == [
+        "TACO B1024 about 5x slower", "ratio off 5x"]
+    with pytest.raises(KeyError, match="slowdown"):
+        cl.budget_words(packaged, "online_avg_gain", "about {slowdown}x")
