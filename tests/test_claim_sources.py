@@ -348,9 +348,10 @@ def test_the_action_repeat_claim_reads_the_best_k_of_appendix_b(tmp_path):
 def test_no_number_of_the_prose_is_a_literal_in_the_code():
     """The prose's non-integer numbers (1.4, 3.6, 0.75, 12.2, 70.4) and the factors its percentages give (1.122,
     1.18, 1.51, ...) appear in the code only as the paper data gives them: no number literal of analysis/claims.py,
-    cells.py, audit.py or power.py is one of them (comments and docstrings may quote them). DrQ-v2's "about 1.5M"
-    steps on reacher_hard is left out: 1.5 is also REACHER_DRQ_FACTOR, this project's own bar (the paper's 2x less
-    a margin), and test_the_claims_evidence_reads_reacher_speeds_steps... shows the evidence reads the paper's."""
+    cells.py, audit.py, power.py or the F3 and F9 figures is one of them (comments and docstrings may quote them).
+    DrQ-v2's "about 1.5M" steps on reacher_hard is left out: 1.5 is also REACHER_DRQ_FACTOR, this project's own bar
+    (the paper's 2x less a margin), and test_the_claims_evidence_reads_reacher_speeds_steps... shows the evidence
+    reads the paper's."""
     numbers = PaperData().claim_numbers
     decimals = {str(w) for w in numbers["written"] if "." in str(w)}
     assert decimals == {"1.4", "3.6", "0.75", "1.5", "12.2", "70.4"}
@@ -359,7 +360,9 @@ def test_no_number_of_the_prose_is_a_literal_in_the_code():
     assert {"1.122", "1.18", "1.51", "0.122", "0.704"} <= factors
     assert cl.REACHER_DRQ_FACTOR == 1.5
     forbidden = (decimals - {"1.5"}) | factors
-    for module in (cl, cells_module, audit, power):
+    from paper_figures import f3_action_repr, f9_action_repeat
+
+    for module in (cl, cells_module, audit, power, f3_action_repr, f9_action_repeat):
         source = Path(module.__file__).read_text(encoding="utf-8")
         literals = {t.string for t in tokenize.generate_tokens(io.StringIO(source).readline)
                     if t.type == tokenize.NUMBER}
@@ -388,3 +391,26 @@ def test_the_budgets_wordings_take_the_prose_numbers_from_the_paper_data(tmp_pat
         "TACO B1024 about 5x slower", "ratio off 5x"]
     with pytest.raises(KeyError, match="slowdown"):
         cl.budget_words(packaged, "online_avg_gain", "about {slowdown}x")
+
+
+def test_f3_and_f9_take_the_prose_numbers_from_the_paper_data(tmp_path):
+    """F3's implied values of TACO w/o action repr (Table 1 and section 5.1's percentages) and F9's caption (appendix
+    B's best K) follow the paper data."""
+    from paper_figures import f3_action_repr, f9_action_repeat
+
+    edited = _edited_paper(tmp_path, {("action_repr_gain", "gain_high_percent"): 80.0,
+                                      ("action_repeat", "best_k_at_repeat_4"): 3.0})
+    assert f3_action_repr.implied_no_repr(PaperData())["hopper_hop"][1] == "261/1.704"
+    assert f3_action_repr.implied_no_repr(edited)["hopper_hop"][1] == "261/1.8"
+    key = {"task": "hopper_hop", "label": "TACO w/o action repr"}
+    assert f3_action_repr.paper_value(_ctx(PaperData()), key) == (153.2, None)  # 261 / 1.704
+    assert f3_action_repr.paper_value(_ctx(edited), key) == (145.0, None)  # 261 / 1.8
+    captions = []
+    for i, paper in enumerate((PaperData(), edited)):
+        ctx = _ctx(paper)
+        ctx.out_dir = tmp_path / f"figures_{i}"
+        captions.append((f3_action_repr.render(ctx).caption, f9_action_repeat.render(ctx).caption))
+    assert "(quadruped_run 541/1.122, hopper_hop 261/1.704, reacher_hard 572 x 1.51)." in captions[0][0]
+    assert "(quadruped_run 541/1.122, hopper_hop 261/1.8, reacher_hard 572 x 1.51)." in captions[1][0]
+    assert "The paper's best K: 5 at action repeat 1, 3 at 2, 1 at 4." in captions[0][1]
+    assert "The paper's best K: 5 at action repeat 1, 3 at 2, 3 at 4." in captions[1][1]
