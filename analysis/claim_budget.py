@@ -8,7 +8,8 @@ Columns: ``id``; ``budget_kind`` — ``frames`` (environment frames, after actio
 timing, no training length); ``budget`` (frames, empty otherwise); ``min_seeds`` (seeds per cell before a
 verdict; the paper's count is ``paper_seeds``); ``experiments`` (the canonical experiments the claim reads,
 ``;``-separated, used to say how far the runs got); ``holds`` / ``fails`` (wording of an indicative
-reading); ``source`` (where the budget comes from).
+reading; a number of the paper's prose in it is a ``{name}`` of claim_numbers.csv, filled in where it is shown:
+analysis.claims.budget_words); ``source`` (where the budget comes from).
 """
 
 from __future__ import annotations

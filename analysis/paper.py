@@ -113,6 +113,14 @@ class PaperData:
             raise KeyError(f"no number {name!r} of claim {claim!r} in {self.root / 'claim_numbers.csv'}")
         return float(rows["value"].iloc[0])
 
+    def claim_integer(self, claim: str, name: str) -> int:
+        """:meth:`claim_number` for a number the prose gives as a whole number (a count, a horizon K); ValueError
+        if claim_numbers.csv gives it with a fraction."""
+        value = self.claim_number(claim, name)
+        if not value.is_integer():
+            raise ValueError(f"number {name!r} of claim {claim!r} is {value:g}, not a whole number")
+        return int(value)
+
     @cached_property
     def tex(self) -> str:
         """The paper's LaTeX source."""
