@@ -211,6 +211,8 @@ def online_rows(ctx: Context) -> pd.DataFrame:
 # runs, so that the power simulation (analysis.power) applies them, unchanged, to simulated cells.
 GAIN_TOLERANCE = 0.1  # online_avg_gain: how far short of the paper's "about 1.4x" the ratio may fall
 SPEED_TOLERANCE = 0.25  # speed: the FPS ratio within this fraction of the paper's "about 3.6x slower"
+MODEL_BASED_WINS = 6  # online_beats_model_based: tasks of 9 on which TACO must beat both model-based baselines
+LESS_SPREAD_TASKS = 7  # seed_robustness: tasks of 9 on which TACO's std over seeds must be below DrQ-v2's
 SOLVED_FRACTION = 1 / 3  # manipulator: the fraction of TACO's seeds that must solve ("a third"; the paper: 3 of 6)
 REPR_TASKS = ("quadruped_run", "walker_run", "hopper_hop", "reacher_hard", "acrobot_swingup")
 OFFLINE_AVERAGED = ("TD3+BC+TACO", "TD3+BC", "CQL+TACO", "CQL")  # offline_average's methods: the +-TACO pairs
@@ -332,7 +334,8 @@ def beats_model_based_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) 
         wins += taco > max(base)
         lines.append(f"{t} {taco:.0f} vs {max(base):.0f}")
     src = " (DreamerV3/TD-MPC values from the paper, not rerun)" if used_paper else ""
-    return (SUPPORTED if wins >= 6 else REFUTED), f"TACO beats both on {wins}/9{src}: " + "; ".join(lines)
+    verdict = SUPPORTED if wins >= MODEL_BASED_WINS else REFUTED
+    return verdict, f"TACO beats both on {wins}/9{src}: " + "; ".join(lines)
 
 
 def _mean_curves(ctx: Context, curves: pd.DataFrame, task: str) -> dict[str, pd.Series]:
@@ -662,8 +665,9 @@ def _speed(ctx: Context) -> tuple[str, str]:
             decreasing = all(a[1] > b[1] for a, b in zip(taco, taco[1:]))
             slowdown = paper_slowdown(ctx.paper)
             ok = (1 - SPEED_TOLERANCE) * slowdown <= ratio <= (1 + SPEED_TOLERANCE) * slowdown and decreasing
-            ev = (f"on {hw}: ratio {ratio:.2f} {speed_printed(ctx.paper)[0]}; TACO FPS "
-                  + ", ".join(f"B{b} {v:.1f}" for b, v in taco) + f" {speed_printed(ctx.paper)[1]}")
+            printed_ratio, printed_fps = speed_printed(ctx.paper)
+            ev = (f"on {hw}: ratio {ratio:.2f} {printed_ratio}; TACO FPS "
+                  + ", ".join(f"B{b} {v:.1f}" for b, v in taco) + f" {printed_fps}")
             return (SUPPORTED if ok else REFUTED), ev
     raise NotEnoughData("need TACO B1024 and DrQ-v2 B256 FPS measured on the same hardware")
 
@@ -684,7 +688,7 @@ def seed_robustness_rule(ctx: Context, spread: dict[tuple, dict]) -> tuple[str, 
         raise NotEnoughData(f"need >= {need} seeds of TACO and DrQ-v2 on all 9 tasks (have {len(tasks)})")
     less = sum(got[(t, "TACO")]["std"] < got[(t, "DrQ-v2")]["std"] for t in tasks)
     broken = int(sum(v["broken"] for k, v in got.items() if k[1] == "DrQ-v2"))
-    ok = less >= 7 and broken >= 1
+    ok = less >= LESS_SPREAD_TASKS and broken >= 1
     taco_broken = int(sum(v["broken"] for k, v in got.items() if k[1] == "TACO"))
     return (SUPPORTED if ok else REFUTED), (f"TACO's std lower on {less}/9 tasks; DrQ-v2 broken seeds: {broken}; "
                                             f"TACO broken seeds: {taco_broken}")
@@ -867,7 +871,7 @@ def _model_based_batch(ctx: Context, draws: Draws) -> np.ndarray:
         taco = draws[(t, "TACO")].mean(axis=1)
         wins += taco > best
         unsure |= _near(taco, best)
-    return _verdicts(sims, wins >= 6, REFUTED, unsure)
+    return _verdicts(sims, wins >= MODEL_BASED_WINS, REFUTED, unsure)
 
 
 def _seeds_batch(ctx: Context, draws: Draws) -> np.ndarray:
@@ -891,7 +895,7 @@ def _seeds_batch(ctx: Context, draws: Draws) -> np.ndarray:
         half = BROKEN_FRACTION * med
         broken += np.where(med > 0, (v < half[:, None]).sum(axis=1), 0)
         unsure |= _near(med, 0.0) | _near(v, half[:, None]).any(axis=1)
-    return _verdicts(sims, (less >= 7) & (broken >= 1), REFUTED, unsure)
+    return _verdicts(sims, (less >= LESS_SPREAD_TASKS) & (broken >= 1), REFUTED, unsure)
 
 
 def _manipulator_batch(ctx: Context, draws: Draws) -> np.ndarray:
@@ -983,7 +987,7 @@ SPECS: tuple[ClaimSpec, ...] = (
               Simulation(_online_sources, _on_table(beats_drqv2_rule), _online_observed, DMC9,
                          batch=universal_batch(lambda c: beats_drqv2_pairs()))),
     ClaimSpec("online_beats_model_based", _beats_model_based,
-              "TACO mean > both DreamerV3 and TD-MPC on >= 6 of 9 tasks (baselines from runs, "
+              f"TACO mean > both DreamerV3 and TD-MPC on >= {MODEL_BASED_WINS} of 9 tasks (baselines from runs, "
               "else the paper's Table 1)",
               Simulation(lambda ctx, budget: table1_cells(ctx, DMC9), _on_table(beats_model_based_rule),
                          _online_observed, DMC9,
@@ -1051,8 +1055,8 @@ SPECS: tuple[ClaimSpec, ...] = (
     ClaimSpec("speed", _speed, _speed_rule_text,
               not_simulated="a timing on your hardware (`repro bench`), not a statistic over seeds"),
     ClaimSpec("seed_robustness", _seeds,
-              "TACO's std over seeds < DrQ-v2's on >= 7 of the 9 tasks, and DrQ-v2 has >= 1 broken seed "
-              "(below half its cell's median)",
+              f"TACO's std over seeds < DrQ-v2's on >= {LESS_SPREAD_TASKS} of the 9 tasks, and DrQ-v2 has >= 1 broken "
+              "seed (below half its cell's median)",
               Simulation(_online_sources, _judge_seeds, _seeds_observed, DMC9,
                          notes=("a broken seed is one below half its cell's median: normal cells almost never have "
                                 "one, so DrQ-v2's published values carry the claim's second half",),
