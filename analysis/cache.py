@@ -7,12 +7,21 @@ A result is reused only when everything it depends on is unchanged; its key hold
 * ``intervals``: one bootstrap interval (:mod:`analysis.bootstrap`), keyed by its statistic, the values it was
   computed from (their bytes), the repetitions, the random state and the interval size: a table cell whose
   runs did not change reuses its CI however many other runs did;
-* ``frames``: F13's random-action frames of a task (they depend on no run).
+* ``frames``: F13's random-action frames of a task (they depend on no run);
+* ``tsne``: one of F6's embeddings, keyed by the points embedded (the raw panel depends on no run);
+  ``tsne_result``: F6's embeddings and scores, keyed by the checkpoint's path, size and modification time;
+* ``figures``: a figure's PNG and PDF as written, keyed by the figure's content (:func:`figure_key`): an unchanged
+  figure whose files are still on disk as written is not drawn again;
+* ``compose``: a sweep run's composed config (``repro plan --claims``), keyed by its overrides and the config files.
 
 Every key also holds the code version (:func:`code_version`: the analysis code's sources, the registered method
 labels and the numeric libraries' versions), so changed code recomputes everything. The file is
-``<out>/.cache/analysis.pkl`` (one per output folder), written atomically at the end of a command; entries not
-used by that command are dropped, so it holds one tree's results. ``--no-cache`` neither reads nor writes it.
+``<out>/.cache/analysis.pkl`` (one per output folder: ``repro report``, ``figures``, ``claims`` and ``plan --claims``
+share the default one), written atomically at the end of a command. What a command did not use is kept for the next
+(``repro claims`` after a report keeps the report's figures), except what it superseded: a run directory read
+again drops its older entries, a new learning-curve table or published-curve table the older one. A command that
+prunes (``repro report``: it uses everything a report needs) also drops the unused entries of each section it used,
+so the file holds one tree's results. ``--no-cache`` neither reads nor writes it.
 
 Within one process the same cache (or, with none, a process-wide memo) serves every artifact, claim, the
 calibration and the power table: nothing is computed twice.
@@ -38,7 +47,9 @@ FORMAT = 1
 ROOT = Path(__file__).resolve().parents[1]
 # the code whose output is cached: the analysis, the figures and the run-format readers and config it reads
 CODE_DIRS = ("analysis", "paper_figures", "repro_app", "repro/runs", "repro/config", "repro_data")
-LIBRARIES = ("numpy", "pandas", "scipy", "matplotlib", "rliable")
+LIBRARIES = ("numpy", "pandas", "scipy", "matplotlib", "seaborn", "scikit-learn", "rliable")
+# sections holding one entry per tree: a newly computed one supersedes the stored ones
+SINGLE = frozenset({"curves", "published"})
 
 
 @functools.cache
@@ -113,6 +124,14 @@ class AnalysisCache:
             return self.get(section, key, lambda: None)
         return None
 
+    def reuse(self, section: str, key: Hashable, check: Callable[[Any], bool]) -> Any | None:
+        """The value under ``key`` if this command or the stored cache has it and ``check(value)`` holds (counted as
+        reused), else None (not counted: the caller computes and :meth:`put` s it)."""
+        for entries in (self._new.get(section, {}), self._old.get(section, {})):
+            if key in entries and check(entries[key]):
+                return self.get(section, key, lambda: None)
+        return None
+
     def put(self, section: str, key: Hashable, value: Any) -> None:
         """Keep ``value`` under ``key`` (computed by the caller, e.g. several at once)."""
         self.misses[section] = self.misses.get(section, 0) + 1
@@ -123,19 +142,47 @@ class AnalysisCache:
         names = sorted({*self.hits, *self.misses})
         return "; ".join(f"{n} {self.hits.get(n, 0)} reused, {self.misses.get(n, 0)} computed" for n in names)
 
-    def save(self) -> None:
-        """Write the entries this command used (atomically); nothing without a path."""
+    def kept(self, prune: bool = False) -> dict[str, dict[Hashable, Any]]:
+        """What :meth:`save` writes: the entries this command used, and the stored ones it did not use unless
+        superseded (see the module docstring); ``prune``: none of the unused entries of a section this command
+        used."""
+        out = {name: dict(entries) for name, entries in self._new.items()}
+        for name, old in self._old.items():
+            new = self._new.get(name, {})
+            if prune and new:
+                continue
+            if name in SINGLE and new:
+                continue
+            superseded = {_folder(k) for k in new} if name == "runs" else set()
+            target = out.setdefault(name, {})
+            for key, value in old.items():
+                if key not in target and not (superseded and _folder(key) in superseded):
+                    target[key] = value
+        return out
+
+    def save(self, prune: bool = False) -> None:
+        """Write :meth:`kept` atomically; nothing without a path."""
         if self.path is None:
             return
         from repro.runs.fsutil import atomic_write
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        payload = {"format": FORMAT, "version": self.version, "sections": self._new}
+        payload = {"format": FORMAT, "version": self.version, "sections": self.kept(prune)}
         atomic_write(self.path, lambda f: pickle.dump(payload, f, protocol=pickle.HIGHEST_PROTOCOL))
+
+
+def _folder(key: Hashable) -> Hashable:
+    """A ``runs`` key's (results root, run directory), without its files' signature."""
+    return key[:2] if isinstance(key, tuple) else key
 
 
 _PROCESS = AnalysisCache()  # the memo when no command opened a cache
 _active: AnalysisCache | None = None
+
+
+def active() -> bool:
+    """Whether a command opened a cache (:func:`opened`) in this process."""
+    return _active is not None
 
 
 def current() -> AnalysisCache:
@@ -144,15 +191,15 @@ def current() -> AnalysisCache:
 
 
 @contextlib.contextmanager
-def opened(out_dir: Path | None) -> Iterator[AnalysisCache]:
+def opened(out_dir: Path | None, prune: bool = False) -> Iterator[AnalysisCache]:
     """The cache of ``out_dir`` for the duration of a command (``None``: in memory only, e.g. ``--no-cache``),
-    written back when the block ends without an exception."""
+    written back when the block ends without an exception (``prune``: see :meth:`AnalysisCache.kept`)."""
     global _active
     cache = AnalysisCache(out_dir / CACHE_DIR / CACHE_FILE if out_dir is not None else None)
     previous, _active = _active, cache
     try:
         yield cache
-        cache.save()
+        cache.save(prune)
     finally:
         _active = previous
 

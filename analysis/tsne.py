@@ -160,23 +160,44 @@ def find_tsne_run(runs) -> Any:
 
 
 def tsne_for_context(ctx) -> tuple[TsneResult, dict[str, Any]]:
-    """The F6 t-SNE for a :class:`analysis.context.Context` (cached in ``ctx.cache``).
+    """The F6 t-SNE for a :class:`analysis.context.Context` (cached in ``ctx.cache``, and in the command's cache
+    under the checkpoint's path, size and modification time and the settings: an unchanged checkpoint is neither
+    loaded nor scored again).
 
     Returns the result and info: ``run_id`` (None if no trained run), ``reason`` when the latent panel
     is missing.
     """
     if "tsne" in ctx.cache:
         return ctx.cache["tsne"]
+    run = find_tsne_run(ctx.results.runs)
+    settings = (ctx.tsne_n, ctx.seed, ctx.tsne_iter)
+    if run is None:
+        value = _tsne_of(None, None, settings)
+    else:
+        ckpt = ctx.results.root / run["run_id"] / "checkpoint.pt"
+        try:
+            st = ckpt.stat()
+            signature: tuple[int, int] | None = (st.st_size, st.st_mtime_ns)
+        except OSError:
+            signature = None
+        key = (str(ckpt.resolve()), signature, str(run["run_id"]), str(run["task"]), int(run["distracting_dims"]),
+               settings)
+        value = lookup("tsne_result", key, lambda: _tsne_of(run, ckpt, settings))
+    ctx.cache["tsne"] = value
+    return value
+
+
+def _tsne_of(run: Any, ckpt: Path | None, settings: tuple[int, int, int]) -> tuple[TsneResult, dict[str, Any]]:
+    """Embed and score for ``run`` (None: the raw panel only, the paper's cheetah_run with 20 distracting dims)."""
     from analysis.identity import action_dim
 
+    n, seed, max_iter = settings
     info: dict[str, Any] = {"run_id": None, "reason": None}
-    run = find_tsne_run(ctx.results.runs)
     mlp, true_dim, distract = None, 6, 20  # the paper's cheetah_run (|A| = 6) + 20 distracting dims
-    if run is None:
+    if run is None or ckpt is None:
         info["reason"] = ("no trained TACO run with distracting action dims (experiment 'tsne': cheetah_run, "
                           "env.distracting_dims=20) found")
     else:
-        ckpt = ctx.results.root / run["run_id"] / "checkpoint.pt"
         info["run_id"] = run["run_id"]
         try:
             mlp = load_step_mlp(ckpt)
@@ -189,6 +210,4 @@ def tsne_for_context(ctx) -> tuple[TsneResult, dict[str, Any]]:
             true_dim = action_dim(run["task"]) or in_dim - distract
             if true_dim + distract != in_dim:
                 true_dim = in_dim - distract
-    result = run_tsne(true_dim, distract, mlp, n=ctx.tsne_n, seed=ctx.seed, max_iter=ctx.tsne_iter)
-    ctx.cache["tsne"] = (result, info)
-    return result, info
+    return run_tsne(true_dim, distract, mlp, n=n, seed=seed, max_iter=max_iter), info

@@ -23,7 +23,7 @@ from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 from analysis.context import Context  # noqa: E402
 from analysis.identity import task_display  # noqa: E402
-from analysis.io import atomic_savefig  # noqa: E402
+from analysis.io import save_figure_files  # noqa: E402
 from analysis.stats import mean_cis  # noqa: E402
 from analysis.tables import Cell, TableOutput, comparison_frames, write_table  # noqa: E402
 
@@ -57,9 +57,9 @@ def palette(labels: Sequence[str]) -> dict[str, str]:
 
 
 def save_figure(fig: plt.Figure, ctx: Context, name: str) -> Path:
-    """Write ``{name}.png`` and ``{name}.pdf`` atomically and close the figure; returns the PNG path."""
-    png = atomic_savefig(fig, ctx.out_dir / f"{name}.png", bbox_inches="tight")
-    atomic_savefig(fig, ctx.out_dir / f"{name}.pdf", bbox_inches="tight")
+    """Write ``{name}.png`` and ``{name}.pdf`` atomically (not again when the figure and its files are unchanged:
+    :func:`analysis.io.save_figure_files`) and close the figure; returns the PNG path."""
+    png = save_figure_files(fig, [ctx.out_dir / f"{name}.png", ctx.out_dir / f"{name}.pdf"], bbox_inches="tight")[0]
     plt.close(fig)
     return png
 

@@ -16,7 +16,7 @@ from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 from analysis.calibration import SOURCE_TEXT, packaged_published, values_at  # noqa: E402
 from analysis.identity import task_display  # noqa: E402
-from analysis.io import atomic_savefig  # noqa: E402
+from analysis.io import save_figure_files  # noqa: E402
 from analysis.load import Results  # noqa: E402
 from analysis.verify import BAND_SD, VerdictRow, band, published_frames, verify_cells  # noqa: E402
 from paper_figures.common import palette, placeholder, setup_style  # noqa: E402
@@ -84,6 +84,6 @@ def plot_verify(results: Results, rows: Sequence[VerdictRow], out_dir: Path, nam
         ax.set_ylabel("evaluation return")
         ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
-    paths = [atomic_savefig(fig, out_dir / f"{name}.{ext}", bbox_inches="tight") for ext in ("png", "pdf")]
+    paths = save_figure_files(fig, [out_dir / f"{name}.{ext}" for ext in ("png", "pdf")], bbox_inches="tight")
     plt.close(fig)
     return paths

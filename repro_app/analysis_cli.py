@@ -115,12 +115,12 @@ class ContextOptions:
     cache: bool
 
     @contextlib.contextmanager
-    def opened_cache(self) -> Iterator[None]:
+    def opened_cache(self, prune: bool = False) -> Iterator[None]:
         """The command's cache (analysis/cache.py) of ``--out``, or an in-memory one with ``--no-cache``; a line
-        on what it reused."""
+        on what it reused. ``prune``: the command uses all a report needs, so what it did not use is dropped."""
         from analysis.cache import opened
 
-        with opened(self.out if self.cache else None) as cache:
+        with opened(self.out if self.cache else None, prune) as cache:
             yield
         if self.cache:
             typer.echo(f"Cache ({self.out / '.cache'}): {cache.summary() or 'nothing computed'}")
@@ -304,7 +304,7 @@ def report_cmd(*, opts: ContextOptions) -> None:
     """Render everything and write REPORT.md and REPORT.html (tables, figures, claims, audit, provenance)."""
     from repro_app.report import build_report
 
-    with opts.opened_cache():
+    with opts.opened_cache(prune=True):
         ctx = opts.load()
         md, html = build_report(ctx, progress=lambda aid: typer.echo(f"  rendering {aid}"))
     typer.echo(f"Wrote {md} and {html}")

@@ -4,13 +4,17 @@ input: one line, exit 2. Documented in docs/plan.md."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
 
 from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
 from repro.runs.console import console, fail
+
+if TYPE_CHECKING:
+    from omegaconf import DictConfig
 
 DEFAULT_RESULTS = Path("runs")
 
@@ -60,6 +64,9 @@ def plan_cmd(
     seed: int = typer.Option(DEFAULT_SEED, "--seed", help="Random state of the simulation (and of the bootstraps)."),
     reps: int = typer.Option(DEFAULT_REPS, "--reps", help="Bootstrap repetitions of the current verdicts' CIs."),
     min_seeds: int = typer.Option(2, "--min-seeds", help="As `repro claims --min-seeds`."),
+    cache: bool = typer.Option(True, "--cache/--no-cache", help="With --claims: reuse and keep what the last "
+                               "analysis into --out computed (its runs as loaded, F6's t-SNE, intervals, the sweeps' "
+                               "compositions); --no-cache recomputes all and writes no cache."),
 ) -> None:
     """Plan a reproduction before paying for it: each sweep's runs, frames, memory, device-hours and wall-clock
     on your hardware (from your `repro bench` JSON); with --claims each claim's power and the seeds it needs."""
@@ -86,7 +93,12 @@ def plan_cmd(
             _plan_sweeps(sweeps or [], all_, results, out, bench_file, device, devices, cluster_config,
                          device_memory_gb, selection)
         if claims:
-            _plan_claims(results, out, bench_file, device, sims, max_seeds, seed, reps, min_seeds)
+            from analysis.cache import opened
+
+            with opened(out if cache else None) as kept:
+                _plan_claims(results, out, bench_file, device, sims, max_seeds, seed, reps, min_seeds)
+            if cache:
+                typer.echo(f"Cache ({out / '.cache'}): {kept.summary() or 'nothing computed'}")
     except (PlanError, SweepError) as exc:
         fail(str(exc))
 
@@ -142,7 +154,8 @@ def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: O
     rows = power_rows(ctx, sims, max_seeds, verdicts, conditioned)
     by_experiment = {s.experiment: s for s in specs.load_all()}
     needed = sorted({by_experiment[e].name for r in rows if r.seeds_80 for e in r.experiments if e in by_experiment})
-    costs = plan_sweeps(needed, bench, results_root=results.expanduser().absolute(), memory=False)
+    costs = plan_sweeps(needed, bench, results_root=results.expanduser().absolute(), memory=False,
+                        composer=kept_composer())
     sweep_seeds = {by_experiment[e].name: len(by_experiment[e].seeds) for e in by_experiment}
     row_of = {r.id: r for r in rows}
 
@@ -156,6 +169,24 @@ def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: O
     table, cells = write_power(out, rows, sims, seed, max_seeds, cost, conditioned, extra)
     _print(table.display, table.caption, table.notes)
     typer.echo(f"Wrote {', '.join(str(p) for p in table.files + cells.files)}")
+
+
+def kept_composer() -> Callable[[Sequence[str]], DictConfig]:
+    """:func:`repro.config.compose.compose`, kept in the command's cache (analysis/cache.py) under the overrides and
+    :func:`repro.config.compose.config_digest` (computed once here); a fresh copy each call (the planner sets
+    values in it)."""
+    import copy
+
+    from analysis.cache import lookup
+    from repro.config.compose import compose, config_digest
+
+    digest = config_digest()
+
+    def kept(overrides: Sequence[str]) -> DictConfig:
+        key = (digest, tuple(overrides))
+        return copy.deepcopy(lookup("compose", key, lambda: compose(list(overrides)), process=False))
+
+    return kept
 
 
 def register(app: typer.Typer) -> None:

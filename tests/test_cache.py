@@ -107,3 +107,133 @@ def test_f13_random_action_frames_render_once_then_come_from_the_cache(tmp_path:
     for task in f13_frames.TASKS:
         np.testing.assert_array_equal(first[task][0], second[task][0])
         assert second[task][1].startswith("random actions")
+
+
+def test_a_partial_command_keeps_the_reports_entries_and_a_report_prunes(tmp_path: Path):
+    runs = _tree(tmp_path / "runs")
+    out = tmp_path / "out"
+    with opened(out, prune=True):  # a report: its runs and F13's frames
+        load_results(tmp_path / "runs")
+        cache_mod.lookup("frames", "cheetah_run", lambda: "frames")
+    eval_csv = runs[0] / "eval.csv"
+    last = eval_csv.read_text().splitlines()[-1].split(",")
+    eval_csv.write_text(eval_csv.read_text() + ",".join(["1100000", *last[1:]]) + "\n")
+    with opened(out) as claims:  # `repro claims` after it: reads the runs only
+        load_results(tmp_path / "runs")
+    assert claims.misses == {"runs": 1}
+    stored = cache_mod.AnalysisCache(out / ".cache" / "analysis.pkl")._old
+    assert list(stored["frames"]) == ["cheetah_run"]  # kept for the next report
+    assert len(stored["runs"]) == 4  # the changed run's older entry is superseded, not kept beside the new one
+    with opened(out, prune=True) as report:  # a report drops what it did not use of the sections it used
+        load_results(tmp_path / "runs")
+        cache_mod.lookup("frames", "walker_walk", lambda: "frames")
+    assert report.hits == {"runs": 4}
+    stored = cache_mod.AnalysisCache(out / ".cache" / "analysis.pkl")._old
+    assert list(stored["frames"]) == ["walker_walk"] and len(stored["runs"]) == 4
+
+
+def _figure(scale: float):
+    """A figure with a seaborn style, bars, a fill and a tick formatter whose closure holds ``scale``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    fig, axes = plt.subplots(1, 2, figsize=(5, 2))
+    x = np.arange(20)
+    axes[0].plot(x, np.sin(x / 3), label="a")
+    axes[0].fill_between(x, 0, np.cos(x / 4), alpha=0.3)
+    axes[0].legend()
+    axes[1].bar([1, 2], [3, 4], yerr=[0.1, 0.2])
+    axes[1].xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v * scale:g}"))
+    fig.suptitle("toy")
+    return fig
+
+
+def test_an_unchanged_figure_is_not_drawn_again_and_a_changed_one_is(tmp_path: Path):
+    import matplotlib.pyplot as plt
+
+    from analysis.io import figure_key, save_figure_files
+
+    paths = [tmp_path / "f.png", tmp_path / "f.pdf"]
+
+    def save(scale: float) -> tuple[int, ...]:
+        fig = _figure(scale)
+        save_figure_files(fig, paths, bbox_inches="tight")
+        plt.close(fig)
+        return tuple(p.stat().st_mtime_ns for p in paths)
+
+    assert figure_key(_figure(1.0)) == figure_key(_figure(1.0)) != figure_key(_figure(2.0))  # the closure counts
+    with opened(tmp_path / "out") as first:
+        written = save(1.0)
+    assert first.misses == {"figures": 1}
+    with opened(tmp_path / "out") as second:
+        assert save(1.0) == written  # same content, files as written: not drawn
+    assert second.hits == {"figures": 1} and not second.misses
+    with opened(tmp_path / "out") as third:
+        changed = save(2.0)  # another tick formatter: drawn again
+    assert third.misses == {"figures": 1} and changed != written
+    paths[1].unlink()
+    with opened(tmp_path / "out") as fourth:
+        save(2.0)  # a file removed by hand: drawn again
+    assert fourth.misses == {"figures": 1} and paths[1].exists()
+    os.utime(paths[0], ns=(0, 0))
+    with opened(tmp_path / "out") as fifth:
+        save(2.0)  # a file touched by hand: drawn again
+    assert fifth.misses == {"figures": 1}
+    before = save(2.0)  # no command's cache: always drawn
+    assert save(2.0) != before
+
+
+def _default_style_key() -> str | None:
+    """The key of ``_figure(1.0)`` under seaborn's colour codes (which set 'k' to another grey: a figure drawn after
+    seaborn's theme differs) and matplotlib's default settings (other tests change the process's)."""
+    import matplotlib
+    import seaborn as sns
+
+    from analysis.io import figure_key
+
+    sns.set_color_codes()
+    with matplotlib.rc_context():
+        matplotlib.rcdefaults()
+        return figure_key(_figure(1.0))
+
+
+def test_a_figures_key_is_the_same_in_another_process():
+    import subprocess
+    import sys
+
+    code = "import sys; sys.path[:0] = [sys.argv[1]]; from test_cache import _default_style_key as k; print(k())"
+    tests = str(Path(__file__).resolve().parent)
+    other = subprocess.run([sys.executable, "-c", code, tests], capture_output=True, text=True, check=True,
+                           env={**os.environ, "PYTHONHASHSEED": "123", "MPLBACKEND": "Agg"}).stdout.strip()
+    assert other == _default_style_key() is not None
+
+
+def test_an_unchanged_tsne_checkpoint_is_neither_loaded_nor_embedded_again(tmp_path: Path, monkeypatch):
+    from analysis import tsne
+    from analysis.context import Context
+    from analysis_fixtures import write_encoder_checkpoint
+
+    run = write_run(tmp_path / "runs", experiment="tsne", algo="taco", task="cheetah_run", seed=0,
+                    distracting_dims=20, final=500, latent_action_dim=8)
+    write_encoder_checkpoint(run)
+    loads: list[Path] = []
+    real = tsne.load_step_mlp
+    monkeypatch.setattr(tsne, "load_step_mlp", lambda p: loads.append(p) or real(p))
+
+    def f6() -> tsne.TsneResult:
+        ctx = Context(results=load_results(tmp_path / "runs"), tsne_n=15, tsne_iter=250)
+        return tsne.tsne_for_context(ctx)[0]
+
+    with opened(tmp_path / "out"):
+        first = f6()
+    with opened(tmp_path / "out") as second:
+        again = f6()
+    assert len(loads) == 1 and second.hits.get("tsne_result") == 1 and "tsne" not in second.misses
+    np.testing.assert_array_equal(first.latent_2d, again.latent_2d)
+    write_encoder_checkpoint(run, latent=4)  # a new checkpoint: loaded and embedded again
+    with opened(tmp_path / "out") as third:
+        f6()
+    assert len(loads) == 2 and third.misses.get("tsne_result") == 1

@@ -358,3 +358,46 @@ def test_t4_and_plan_read_one_fps_from_one_bench_file(tmp_path):
         for c in plan_sweeps(["tiny"], bench, specs_selection(sets), results_root=tmp_path, memory=False):
             assert c.frames_per_update == 4  # the tiny runs' own frames per update, as the bench's config
             assert c.fps == pytest.approx(table[({"taco": "TACO", "drqv2": "DrQ-v2"}[c.algo], c.path)])
+
+
+def test_plan_claims_reuses_the_analysis_cache_of_its_out_folder(tmp_path: Path):
+    from analysis_fixtures import write_run
+
+    for algo in ("taco", "drqv2"):
+        for s in range(2):
+            write_run(tmp_path / "runs", experiment="main", algo=algo, task="cheetah_run", seed=s, final=100.0 + s)
+    args = ["plan", "--claims", "--results", str(tmp_path / "runs"), "--sims", "20", "--max-seeds", "3",
+            "--reps", "50"]
+    first = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    assert first.exit_code == 0, first.output
+    assert "runs 0 reused, 4 computed" in first.output and "compose 0 reused" in first.output
+    tables = {name: (tmp_path / "out" / name).read_bytes() for name in ("plan_power.csv", "plan_power_cells.csv")}
+    second = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    assert second.exit_code == 0, second.output
+    assert "runs 4 reused, 0 computed" in second.output and "compose 0 reused" not in second.output
+    assert "compose" in second.output and " 0 computed" in second.output.split("compose")[1].split(";")[0]
+    for name, table in tables.items():  # what it reused gives the same tables
+        assert (tmp_path / "out" / name).read_bytes() == table
+    third = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "nc"), "--no-cache"])
+    assert third.exit_code == 0, third.output
+    assert not (tmp_path / "nc" / ".cache").exists() and "Cache (" not in third.output
+
+
+def test_a_kept_composition_equals_composing_and_is_a_fresh_copy(tmp_path: Path):
+    from omegaconf import OmegaConf
+
+    from analysis.cache import opened
+    from repro.config.compose import compose
+    from repro_app.plan_cli import kept_composer
+
+    overrides = ["agent=taco", "task=walker_run", "seed=3"]
+    with opened(tmp_path) as first:
+        kept = kept_composer()
+        cfg = kept(overrides)
+        cfg.seed = 99  # the planner sets values in what it gets
+        assert kept(overrides).seed == 3
+    assert first.misses == {"compose": 1} and first.hits == {"compose": 1}
+    with opened(tmp_path) as second:
+        again = kept_composer()(overrides)
+    assert second.hits == {"compose": 1}
+    assert OmegaConf.to_container(again) == OmegaConf.to_container(compose(overrides))

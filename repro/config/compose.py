@@ -56,6 +56,37 @@ def conf_dirs() -> tuple[Path, ...]:
         raise ConfigError(str(exc)) from None
 
 
+def config_digest() -> str:
+    """A digest of everything :func:`compose` reads: the conf folders' files (the plugins' included), this package's
+    code, and each registered plugin's entry point, distribution version and module source. Equal digests and equal
+    overrides compose equal configs (``repro plan --claims`` keeps compositions under it)."""
+    import hashlib
+    import importlib.util
+    from importlib.metadata import entry_points
+
+    from repro.config.plugins import LEARNER_GROUP, OBJECTIVE_GROUP
+
+    h = hashlib.sha1()
+    folders = [*conf_dirs(), Path(__file__).resolve().parent]
+    for folder in folders:
+        for path in sorted(folder.rglob("*")):
+            if path.is_file() and path.suffix in (".py", ".yaml", ".yml", ".json", ".csv"):
+                h.update(str(path).encode())
+                h.update(path.read_bytes())
+    for group in (LEARNER_GROUP, OBJECTIVE_GROUP):
+        for ep in sorted(entry_points(group=group), key=lambda e: e.name):
+            dist = getattr(ep, "dist", None)
+            release = f"{dist.name}={dist.version}" if dist is not None else ""
+            h.update(f"{group}|{ep.name}|{ep.value}|{release}".encode())
+            try:
+                spec = importlib.util.find_spec(ep.module)
+            except (ImportError, ValueError):
+                spec = None
+            if spec is not None and spec.origin and os.path.isfile(spec.origin):
+                h.update(Path(spec.origin).read_bytes())
+    return h.hexdigest()
+
+
 def group_options(group: str) -> list[str]:
     """Names of the YAML files in a config group (e.g. ``task`` or ``agent``), the plugins' included."""
     return sorted({p.stem for conf in conf_dirs() for p in (conf / group).glob("*.yaml")})

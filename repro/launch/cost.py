@@ -230,10 +230,11 @@ def price(cost: RunCost, bench: DeviceBench) -> None:
 
 # ---------------------------------------------------------------- sweeps
 def plan_sweeps(names: Sequence[str], bench: DeviceBench | None, selection: Any = None,
-                results_root: Path | None = None, memory: bool = True) -> list[RunCost]:
+                results_root: Path | None = None, memory: bool = True, composer: Any = None) -> list[RunCost]:
     """Every run of the sweeps ``names``, each expanded with ``selection`` (a :class:`repro.launch.spec.Selection`:
-    the grid options of ``repro sweep``) and composed as ``repro sweep`` does, with its cost; ``memory`` False:
-    without the network parameters (no agent is built; device memory 0)."""
+    the grid options of ``repro sweep``) and composed as ``repro sweep`` does (by ``composer``, see
+    :func:`repro.launch.spec.plan.compose_runs`), with its cost; ``memory`` False: without the network parameters
+    (no agent is built; device memory 0)."""
     from dataclasses import replace
 
     from repro.launch import spec as specs
@@ -245,7 +246,7 @@ def plan_sweeps(names: Sequence[str], bench: DeviceBench | None, selection: Any 
     out: list[RunCost] = []
     for name in names:
         spec = specs.load(name)
-        planned = specs.plan(specs.expand(spec, sel))
+        planned = specs.plan(specs.expand(spec, sel), composer)
         out += [run_cost(spec.name, p, bench, params) for p in planned]
     return out
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,11 +50,15 @@ def run_key(run_dir: Path, results_root: Path) -> str:
     return "__".join(Path(os.path.relpath(run_dir, results_root)).parts)
 
 
-def _compose(overrides: Sequence[str]) -> DictConfig:
-    try:
-        return compose(list(overrides))
-    except ConfigError as exc:
-        raise SweepError(str(exc).strip().splitlines()[0]) from None
+def _composer(composer: Composer | None) -> Composer:
+    """``composer`` (default :func:`compose`) with ConfigError as one-line SweepError."""
+    def run(overrides: Sequence[str]) -> DictConfig:
+        try:
+            return (composer or compose)(list(overrides))
+        except ConfigError as exc:
+            raise SweepError(str(exc).strip().splitlines()[0]) from None
+
+    return run
 
 
 def _with_seed(cfg: DictConfig, seed: int) -> DictConfig:
@@ -63,11 +67,16 @@ def _with_seed(cfg: DictConfig, seed: int) -> DictConfig:
     return out
 
 
-def compose_runs(runs: Sequence[Run]) -> list[DictConfig]:
-    """Composed configs of ``runs``.
+Composer = Callable[[Sequence[str]], DictConfig]
+
+
+def compose_runs(runs: Sequence[Run], composer: Composer | None = None) -> list[DictConfig]:
+    """Composed configs of ``runs`` (by ``composer``, default :func:`repro.config.compose.compose`: e.g. one that
+    keeps its results, given a fresh config for each call).
 
     Composing is slow (~0.3 s), so runs that differ only by seed share one composition when a check
     on the first cell shows the seed feeds nothing else in the config."""
+    _compose = _composer(composer)
     configs: list[DictConfig] = []
     by_cell: dict[tuple[str, str, str, str | None], tuple[Run, DictConfig]] = {}
     seed_is_plain: bool | None = None
@@ -89,12 +98,12 @@ def compose_runs(runs: Sequence[Run]) -> list[DictConfig]:
     return configs
 
 
-def plan(runs: Sequence[Run]) -> list[PlannedRun]:
-    """Compose every run, pin an absolute results root, and read each run directory's state and whether
-    an offline run's dataset is complete (``waiting`` says why not)."""
+def plan(runs: Sequence[Run], composer: Composer | None = None) -> list[PlannedRun]:
+    """Compose every run (see :func:`compose_runs`), pin an absolute results root, and read each run directory's
+    state and whether an offline run's dataset is complete (``waiting`` says why not)."""
     planned: list[PlannedRun] = []
     reasons: dict[DatasetNeed, str | None] = {}
-    for run, cfg in zip(runs, compose_runs(runs)):
+    for run, cfg in zip(runs, compose_runs(runs, composer)):
         root = Path(str(cfg.runtime.results_root)).expanduser().absolute()
         if str(root) != str(cfg.runtime.results_root):
             cfg.runtime.results_root = str(root)
