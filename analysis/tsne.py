@@ -16,8 +16,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sklearn.manifold import TSNE
-from sklearn.metrics import silhouette_score
 
 from analysis.cache import lookup
 
@@ -92,6 +90,8 @@ def tsne_2d(x: np.ndarray, seed: int = 0, max_iter: int = 1000) -> np.ndarray:
     """2-D t-SNE (scikit-learn, PCA init, perplexity 30 or less for small inputs); the same points, seed and
     iterations reuse the command's cache (analysis/cache.py: the embedding depends on no run but the checkpoint
     that encoded ``x``)."""
+    from sklearn.manifold import TSNE
+
     x = np.ascontiguousarray(x)
     perplexity = min(30.0, (len(x) - 1) / 3.0)
     key = hashlib.sha1(f"{x.dtype}|{x.shape}|{seed}|{max_iter}|{perplexity!r}".encode() + x.tobytes()).hexdigest()
@@ -118,6 +118,8 @@ class TsneResult:
 def run_tsne(true_dim: int, distracting_dims: int, mlp=None, n: int = 1000, seed: int = 0,
              max_iter: int = 1000) -> TsneResult:
     """Embed raw (and, with ``mlp``, latent) actions and score the clusters."""
+    from sklearn.metrics import silhouette_score
+
     actions, labels = make_actions(true_dim, distracting_dims, n, seed)
     raw_2d = tsne_2d(actions, seed, max_iter)
     latent = latent_2d = None

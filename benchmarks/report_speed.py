@@ -3,7 +3,9 @@ the paper's budgets (6 seeds, 1M frames, an evaluation every 10K frames, a train
 offline runs of 100K updates evaluated every 10K) and times ``repro report`` (with an empty cache, then again on
 the unchanged tree: the incremental report), ``repro figures --all``, ``repro claims`` and ``repro plan --claims``
 on it, each in its own process, with its CPU seconds and peak memory (the largest resident set of the process and
-the children it waited for). An existing output folder is emptied first, except for ``report-again``.
+the children it waited for). An existing output folder is emptied first, except for the commands that reuse the
+report's (``report-again``: the unchanged tree; ``report-batch``: a batch of six runs changed; ``plan-after-report``
+and ``plan-again``: ``repro plan --claims`` into the report's folder, as its default --out is).
 
     python benchmarks/report_speed.py --root /tmp/paper-scale            # writes the tree once, then times all
     python benchmarks/report_speed.py --root /tmp/paper-scale --only report --json /tmp/t.json
@@ -16,12 +18,14 @@ inherited environment (PYTHONPATH picks the code timed); ``OMP_NUM_THREADS=1`` i
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from repro.runs.rundir import cpu_model
@@ -30,14 +34,22 @@ REPO = Path(__file__).resolve().parents[1]
 PAPER_SCALE = {"frames": 1_000_000, "eval_every": 10_000, "train_rows": 1000, "updates": 100_000,
                "eval_every_updates": 10_000}
 # name: (arguments, output folder). ``report-again`` reruns the report into the same folder: the incremental report
-# on an unchanged tree (analysis/cache.py); the others start without a cache (their own folders).
+# on an unchanged tree (analysis/cache.py); ``report-batch`` the same after a batch of runs changed (BATCH: the last
+# evaluation of one cell's six seeds one point higher; restored afterwards); ``plan-after-report`` and
+# ``plan-again`` run ``repro plan --claims`` into the report's folder (its default --out is the report's) once and
+# again. The others start without a cache (their own folders, emptied first).
 COMMANDS = {
     "report": (["report"], "report"),
     "report-again": (["report"], "report"),
+    "report-batch": (["report"], "report"),
+    "plan-after-report": (["plan", "--claims"], "report"),
+    "plan-again": (["plan", "--claims"], "report"),
     "figures": (["figures", "--all"], "figures"),
     "claims": (["claims"], "claims"),
     "plan": (["plan", "--claims"], "plan"),
 }
+KEEPS_CACHE = ("report-again", "report-batch", "plan-after-report", "plan-again")
+BATCH = "main/taco/base/quadruped_run"  # the cell whose seeds' eval.csv the batch changes
 
 
 def write_tree(root: Path, seeds: int) -> int:
@@ -56,6 +68,28 @@ def write_tree(root: Path, seeds: int) -> int:
     return runs
 
 
+@contextlib.contextmanager
+def changed_batch(root: Path) -> Iterator[None]:
+    """A batch of runs lands: the last evaluation of :data:`BATCH`'s seeds one point higher while the block runs,
+    then the files as they were (their bytes and modification times)."""
+    files = sorted((root / BATCH).glob("seed_*/eval.csv"))
+    if not files:
+        raise SystemExit(f"no runs under {root / BATCH}")
+    kept = {f: (f.read_bytes(), f.stat()) for f in files}
+    try:
+        for f, (data, _) in kept.items():
+            lines = data.decode().splitlines()
+            head, last = lines[0].split(","), lines[-1].split(",")
+            col = head.index("episode_reward")
+            last[col] = repr(float(last[col]) + 1.0)
+            f.write_text("\n".join([*lines[:-1], ",".join(last)]) + "\n")
+        yield
+    finally:
+        for f, (data, st) in kept.items():
+            f.write_bytes(data)
+            os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
 def time_command(name: str, args: list[str], folder: str, root: Path, out: Path, extra: list[str]) -> dict:
     """Run ``repro <args>`` on the tree; wall and CPU seconds and peak resident memory (MB)."""
     cmd = [sys.executable, "-m", "repro", *args, "--results", str(root), "--out", str(out / folder), *extra]
@@ -63,7 +97,7 @@ def time_command(name: str, args: list[str], folder: str, root: Path, out: Path,
     load = os.getloadavg()[0]
     log = out / f"{name}.log"
     log.parent.mkdir(parents=True, exist_ok=True)
-    if name != "report-again" and (out / folder).exists():
+    if name not in KEEPS_CACHE and (out / folder).exists():
         shutil.rmtree(out / folder)  # no cache from an earlier timing
     start = time.perf_counter()
     with log.open("w") as f:
@@ -94,7 +128,8 @@ def main() -> None:
     results = {"cpu": cpu_model(), "cores": os.cpu_count(), "runs": runs, "scale": PAPER_SCALE, "commands": timed}
     for name in a.only or list(COMMANDS):
         args, folder = COMMANDS[name]
-        r = time_command(name, args, folder, a.root, out, a.extra)
+        with changed_batch(a.root) if name == "report-batch" else contextlib.nullcontext():
+            r = time_command(name, args, folder, a.root, out, a.extra)
         timed.append(r)
         print(f"{name:<14} {r['command']:<22} rc={r['rc']} wall {r['wall_s']:7.1f} s  cpu {r['cpu_s']:7.1f} s  "
               f"peak {r['peak_mb']:7.1f} MB  (load {r['load_before']})", flush=True)

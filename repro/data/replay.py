@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from repro.data.sizes import replay_bytes
+
 
 @dataclass
 class EpisodeRecord:
@@ -67,8 +69,7 @@ class ReplayBuffer:
     def bytes_for(capacity: int, frame_shape: tuple[int, int, int], action_dim: int) -> int:
         """What :meth:`nbytes` is for a buffer of ``capacity`` (allocated in full at construction), without
         building one: uint8 frames, float32 actions, rewards and discounts, int64 episode ids and positions."""
-        frame = int(np.prod(frame_shape))
-        return capacity * (frame + 4 * action_dim + 4 + 4 + 8 + 8)
+        return replay_bytes(capacity, frame_shape, action_dim)
 
     def frame_bytes(self) -> int:
         return self.frames.numel() * self.frames.element_size()

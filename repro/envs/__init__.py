@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from repro.config.schema import Suite
+from repro.config.schema import RunConfig, Suite
 from repro.envs.base import Env, EnvSpec, TimeStep
 from repro.envs.registry import TASKS, TaskInfo, UnknownTaskError, get_task
 from repro.envs.wrappers import DistractingActionDims, TimeLimit
@@ -22,9 +22,15 @@ __all__ = [
     "UnknownTaskError",
     "get_task",
     "make_env",
+    "run_action_dim",
     "DistractingActionDims",
     "TimeLimit",
 ]
+
+
+def run_action_dim(rc: RunConfig) -> int:
+    """|A| of a run's environment without building it (the task's plus any distracting dimensions)."""
+    return get_task(rc.task.name).action_dim + rc.env.distracting_dims
 
 
 def make_env(

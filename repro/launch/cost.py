@@ -174,16 +174,16 @@ class ParamCounts:
 def run_cost(sweep: str, planned: Any, bench: DeviceBench | None, params: ParamCounts | None) -> RunCost:
     """The :class:`RunCost` of one ``repro.launch.spec.PlannedRun`` (its composed config)."""
     from repro.config.compose import typed
-    from repro.data.replay import ReplayBuffer
+    from repro.data.sizes import replay_bytes
+    from repro.envs import run_action_dim
     from repro.launch.status import progress
-    from repro.train.build import run_action_dim
 
     rc = typed(planned.cfg)
     offline = planned.run.dataset is not None
     per_update = rc.train.update_every_steps * rc.env.action_repeat
     nets = params.count(planned.cfg, rc) * ADAM_BYTES_PER_PARAM if params is not None else 0
     frame_shape = (3, rc.env.image_size, rc.env.image_size)
-    replay = 0 if offline else ReplayBuffer.bytes_for(rc.replay.capacity, frame_shape, run_action_dim(rc))
+    replay = 0 if offline else replay_bytes(rc.replay.capacity, frame_shape, run_action_dim(rc))
     replay_on_device = replay if str(getattr(rc.replay.device, "value", rc.replay.device)) == "cuda" else 0
     note = "" if not offline else "offline: the dataset's replay (its size) not counted"
     done = planned.state == "done"

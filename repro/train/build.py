@@ -20,6 +20,7 @@ from repro.data.offline_replay import (
     load_offline_episodes,
     resolve_dataset,
 )
+from repro.envs import run_action_dim
 from repro.envs.base import Env
 from repro.learners import Learner, SequenceLearner, build_learner, max_episode_length, samples_episodes
 from repro.runs.video import VIDEO_DIR, EvalVideos
@@ -41,13 +42,6 @@ def build_agent(rc: RunConfig, obs_shape: tuple[int, int, int], action_dim: int,
     """The learner named by ``agent.learner`` (the online Agent by default), seeded by the run's seed."""
     torch.manual_seed(rc.seed)
     return build_learner(rc.agent, obs_shape, action_dim, device, explore_steps=rc.train.explore_steps)
-
-
-def run_action_dim(rc: RunConfig) -> int:
-    """|A| of the run's environment without building it (the task's plus any distracting dimensions)."""
-    from repro.envs import get_task
-
-    return get_task(rc.task.name).action_dim + rc.env.distracting_dims
 
 
 def eval_videos(rc: RunConfig, path: Path, unit: str) -> EvalVideos | None:
