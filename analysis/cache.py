@@ -94,6 +94,7 @@ class AnalysisCache:
         self._new: dict[str, dict[Hashable, Any]] = {}
         self.hits: dict[str, int] = {}
         self.misses: dict[str, int] = {}
+        self.scratch: dict[str, Any] = {}  # values for this command only (never written)
         if path is not None and path.exists():
             try:
                 with path.open("rb") as fh:

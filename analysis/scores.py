@@ -183,9 +183,9 @@ def learning_curves(results: Results, grid: np.ndarray | None = None, step: int 
             continue
         frames, vals = frames[ok], vals[ok]
         g = grid[(grid >= frames[0]) & (grid <= frames[-1])]
-        part = pd.DataFrame({"frame": g, "value": np.interp(g, frames, vals)})
-        for key in IDENTITY:
-            part[key] = rows[key].iloc[0]
+        # one constructor: the identity values broadcast as setting each column to its scalar would
+        part = pd.DataFrame({"frame": g, "value": np.interp(g, frames, vals),
+                             **{key: rows[key].iloc[0] for key in IDENTITY}})
         parts.append(part)
     if not parts:
         return pd.DataFrame(columns=cols)

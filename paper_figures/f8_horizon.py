@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import functools
-
 from analysis import select
 from analysis.context import Context
 from analysis.identity import task_display
@@ -14,14 +12,15 @@ from paper_figures.registry import ArtifactResult, register
 LABELS = ["K=1", "K=3", "DrQ-v2"]
 
 
-@functools.cache
 def default_k(task: str) -> int | None:
     """The K the paper's Table 1 uses, as the task's config file sets it (repro/conf/task/<task>.yaml: 1 on
-    quadruped_run and walker_run, 3 elsewhere, Appendix B); None for a task without a config file."""
-    from repro.config.compose import ConfigError, compose
+    quadruped_run and walker_run, 3 elsewhere, Appendix B); None for a task without a config file. The composition
+    is kept in the command's cache (analysis/composed.py)."""
+    from analysis.composed import composed
+    from repro.config.compose import ConfigError
 
     try:
-        return int(compose([f"task={task}"]).agent.K)
+        return int(composed([f"task={task}"]).agent.K)
     except ConfigError:
         return None
 

@@ -4,17 +4,13 @@ input: one line, exit 2. Documented in docs/plan.md."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import Optional
 
 import typer
 
 from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
 from repro.runs.console import console, fail
-
-if TYPE_CHECKING:
-    from omegaconf import DictConfig
 
 DEFAULT_RESULTS = Path("runs")
 
@@ -136,6 +132,7 @@ def _plan_sweeps(names: list[str], all_: bool, results: Path, out: Path, bench_f
 def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: Optional[str], sims: int, max_seeds: int,
                  seed: int, reps: int, min_seeds: int) -> None:
     from analysis.claims import evaluate_claims
+    from analysis.composed import composed
     from analysis.power import power_rows, write_power
     from repro.launch import spec as specs
     from repro.launch.cost import PlanError, find_bench, plan_sweeps
@@ -155,7 +152,7 @@ def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: O
     by_experiment = {s.experiment: s for s in specs.load_all()}
     needed = sorted({by_experiment[e].name for r in rows if r.seeds_80 for e in r.experiments if e in by_experiment})
     costs = plan_sweeps(needed, bench, results_root=results.expanduser().absolute(), memory=False,
-                        composer=kept_composer())
+                        composer=composed)
     sweep_seeds = {by_experiment[e].name: len(by_experiment[e].seeds) for e in by_experiment}
     row_of = {r.id: r for r in rows}
 
@@ -169,24 +166,6 @@ def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: O
     table, cells = write_power(out, rows, sims, seed, max_seeds, cost, conditioned, extra)
     _print(table.display, table.caption, table.notes)
     typer.echo(f"Wrote {', '.join(str(p) for p in table.files + cells.files)}")
-
-
-def kept_composer() -> Callable[[Sequence[str]], DictConfig]:
-    """:func:`repro.config.compose.compose`, kept in the command's cache (analysis/cache.py) under the overrides and
-    :func:`repro.config.compose.config_digest` (computed once here); a fresh copy each call (the planner sets
-    values in it)."""
-    import copy
-
-    from analysis.cache import lookup
-    from repro.config.compose import compose, config_digest
-
-    digest = config_digest()
-
-    def kept(overrides: Sequence[str]) -> DictConfig:
-        key = (digest, tuple(overrides))
-        return copy.deepcopy(lookup("compose", key, lambda: compose(list(overrides)), process=False))
-
-    return kept
 
 
 def register(app: typer.Typer) -> None:

@@ -387,17 +387,16 @@ def test_a_kept_composition_equals_composing_and_is_a_fresh_copy(tmp_path: Path)
     from omegaconf import OmegaConf
 
     from analysis.cache import opened
+    from analysis.composed import composed
     from repro.config.compose import compose
-    from repro_app.plan_cli import kept_composer
 
     overrides = ["agent=taco", "task=walker_run", "seed=3"]
     with opened(tmp_path) as first:
-        kept = kept_composer()
-        cfg = kept(overrides)
+        cfg = composed(overrides)
         cfg.seed = 99  # the planner sets values in what it gets
-        assert kept(overrides).seed == 3
+        assert composed(overrides).seed == 3
     assert first.misses == {"compose": 1} and first.hits == {"compose": 1}
     with opened(tmp_path) as second:
-        again = kept_composer()(overrides)
+        again = composed(overrides)
     assert second.hits == {"compose": 1}
     assert OmegaConf.to_container(again) == OmegaConf.to_container(compose(overrides))
