@@ -297,6 +297,31 @@ def same_shape_intervals(stat: Statistic, draws: Sequence[Sequence[np.ndarray]],
     return [percentile_cis(values_from(stat, m, chunks), size) for m in mats]
 
 
+def mean_intervals_many(mats: np.ndarray, reps: int, seed: int, size: float = CI_SIZE) -> np.ndarray:
+    """The percentile CI of :data:`MEAN` of each of several (runs, tasks) matrices ``mats`` (sets, runs, tasks) with
+    the same bootstrap indices as :func:`same_shape_intervals`, as one product: repetition r's mean is
+    sum_k,t counts[r, k, t] * x[k, t] / (runs * tasks), where counts[r, k, t] is how often run k was drawn for task t.
+    The sums run in another order than rliable's, so each bound may differ from :func:`same_shape_intervals` in its
+    last bits (at most the largest rounding of one repetition's mean: a percentile bound moves no more than the
+    values it interpolates): for a verdict that compares a bound with a number, a caller judges the sets where they
+    lie within a tie of each other by the exact interval. Returns (2, sets)."""
+    mats = np.ascontiguousarray(mats, dtype=float)
+    sets, runs, tasks = mats.shape
+    values = np.empty((sets, reps))
+    flat = mats.reshape(sets, runs * tasks).T  # (runs * tasks, sets)
+    done = 0
+    for (idx,) in index_chunks(MEAN, [mats[0]], reps, seed):
+        b = idx.shape[0]
+        # counts[r, k * tasks + t]: how often run k was drawn for task t in repetition r
+        cell = idx * tasks + np.arange(tasks)  # (b, runs, tasks): the drawn value's place in a flattened matrix
+        counts = np.zeros((b, runs * tasks))
+        np.add.at(counts, (np.arange(b)[:, None], cell.reshape(b, -1)), 1.0)
+        values[:, done:done + b] = (counts @ flat).T / (runs * tasks)
+        done += b
+    alpha = (1.0 - size) / 2
+    return np.percentile(values, [100 * alpha, 100 * (1.0 - alpha)], axis=1)
+
+
 def _pairs(arrays: Sequence[np.ndarray]) -> int:
     """Temporary values per resampled value of the pairwise statistics (runs of X x runs of Y)."""
     return max(a.shape[0] for a in arrays)

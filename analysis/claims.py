@@ -915,19 +915,20 @@ def _manipulator_batch(ctx: Context, draws: Draws) -> np.ndarray:
 
 def _offline_average_batch(ctx: Context, draws: Draws) -> np.ndarray:
     """analysis.claims.offline_average_rule in every draw: each printed average inside its method's bootstrap CI
-    (the same CIs: the bootstrap indices depend only on the shapes and the random state, so they are drawn once)."""
+    (the same bootstrap indices: they depend only on the shapes and the random state, so they are drawn once; the
+    means as one product, :func:`analysis.bootstrap.mean_intervals_many`, so a draw whose bound lies within
+    :data:`TIE` of the printed average is judged by the rule)."""
     sims = _sims(draws)
     pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
     keys = [(t, d, m) for t, d in pairs for m in OFFLINE_AVERAGED]
     if not all(_enough(ctx, draws, k) for k in keys):
         return _all(sims, NO_DATA)
-    ok = np.ones(sims, bool)
+    ok, unsure = np.ones(sims, bool), np.zeros(sims, bool)
     for m, p in offline_printed(ctx).items():
-        mats = _stacked_draws(draws, [(t, d, m) for t, d in pairs])
-        cis = bs.same_shape_intervals(bs.MEAN, [[mats[i]] for i in range(sims)], ctx.reps, ctx.seed)
-        lo, hi = np.array([c[0][0] for c in cis]), np.array([c[1][0] for c in cis])
+        lo, hi = bs.mean_intervals_many(_stacked_draws(draws, [(t, d, m) for t, d in pairs]), ctx.reps, ctx.seed)
         ok &= (lo <= p) & (p <= hi)
-    return _verdicts(sims, ok, REFUTED, False)
+        unsure |= _near(lo, p) | _near(hi, p)
+    return _verdicts(sims, ok, REFUTED, unsure)
 
 
 def _online_observed(ctx: Context) -> Cells:

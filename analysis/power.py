@@ -167,6 +167,10 @@ def _simulate(ctx: Context, claim: SimClaim, seeds: int, sims: int, seed: int, o
         arrays[cell.key] = np.concatenate([np.broadcast_to(have, (sims, len(have))), new], axis=1) \
             if cell.kind != "fixed" else new
     counts = {cl.SUPPORTED: 0, cl.REFUTED: 0, cl.NO_DATA: 0}
+    if arrays and all(a.shape[0] == sims and (a == a[:1]).all() for a in arrays.values()):
+        # every draw is the same data (no seed left to draw: the seeds done, or fixed cells): one verdict for all
+        counts[judge_draw(sctx, claim, {k: a[0] for k, a in arrays.items()})] = sims
+        return Power(seeds, counts[cl.SUPPORTED] / sims, counts[cl.REFUTED] / sims, sims)
     batch = claim.batch(sctx, arrays) if claim.batch is not None and arrays else None
     for i in range(sims):
         verdict = batch[i] if batch is not None else ""
