@@ -51,28 +51,31 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
     offline = runs["dataset"].notna()
     # every run's pick at once (one pass over the evaluations per kind of run, not one per run)
     on_last, on_pick = _picks(ev, runs.loc[~offline, "run_id"], "frame", lambda rows: pd.Series(float(budget),
-                                                                                                 index=rows.index))
+                                                                                                 index=rows.index),
+                              ["frame", "episode_reward", "success"])
     budgets = runs.loc[offline].set_index("run_id")["offline_updates"]
     off_last, off_pick = _picks(ev, runs.loc[offline, "run_id"], "update",
-                                lambda rows: pd.to_numeric(rows["run_id"].map(budgets), errors="coerce"))
+                                lambda rows: pd.to_numeric(rows["run_id"].map(budgets), errors="coerce"),
+                                ["episode_reward", "update", "normalized_score", "score_reference"])
     out = []
-    for run in runs.itertuples(index=False):
-        row = {k: getattr(run, k) for k in IDENTITY}
-        if not pd.isna(run.dataset):
-            row.update(_offline_score(run, off_last.get(run.run_id), off_pick.get(run.run_id)))
+    # each run's identity values as runs.itertuples() gives them (one list per column, not one getattr per value)
+    for values in zip(*(list(runs[k]) for k in IDENTITY)):
+        row = dict(zip(IDENTITY, values))
+        run_id = row["run_id"]
+        if not pd.isna(row["dataset"]):
+            row.update(_offline_score(row, off_last.get(run_id), off_pick.get(run_id)))
             out.append(row)
             continue
-        metric = metric_of(run.suite)
+        metric = metric_of(row["suite"])
         score, frame = math.nan, math.nan
-        last = on_last.get(run.run_id, math.nan)
-        pick = on_pick.get(run.run_id)
+        last = on_last.get(run_id, math.nan)
+        pick = on_pick.get(run_id)
         if pick is not None:
             frame = float(pick["frame"])
-            value = pd.to_numeric(pd.Series([pick[metric]]), errors="coerce").iloc[0]
-            score = float(value) * (100.0 if metric == "success" else 1.0)
-        train_frames = run.train_frames if run.train_frames is not None else -1
+            score = _number(pick[metric]) * (100.0 if metric == "success" else 1.0)
+        train_frames = row["train_frames"] if row["train_frames"] is not None else -1
         reached = (not math.isnan(last) and last >= budget) or (
-            run.status == "done" and not pd.isna(train_frames) and train_frames >= budget
+            row["status"] == "done" and not pd.isna(train_frames) and train_frames >= budget
         )
         row.update(metric=metric, score=score, frame=frame, reached=bool(reached), last_frame=last,
                    normalized=math.nan, score_reference=None, update=math.nan, last_update=math.nan)
@@ -80,14 +83,16 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
     return pd.DataFrame(out, columns=cols)
 
 
-def _picks(ev: pd.DataFrame, run_ids: pd.Series, x: str,
-           limits: Any) -> tuple[dict[str, float], dict[str, pd.Series]]:
-    """For the runs ``run_ids``: (run -> its largest ``x``, run -> its evaluation row at the largest ``x`` within
-    its budget prefix (:func:`_at_budget`; ``limits(rows)`` gives each row's run budget, NaN: no limit)). A run
-    without evaluations is in neither."""
+def _picks(ev: pd.DataFrame, run_ids: pd.Series, x: str, limits: Any,
+           columns: list[str]) -> tuple[dict[str, float], dict[str, dict[str, Any]]]:
+    """For the runs ``run_ids``: (run -> its largest ``x``, run -> the ``columns`` of its evaluation row at the largest
+    ``x`` within its budget prefix (:func:`_at_budget`; ``limits(rows)`` gives each row's run budget, NaN: no limit),
+    each value as ``DataFrame.iterrows`` gives it). A run without evaluations is in neither."""
     if ev.empty or run_ids.empty:
         return {}, {}
-    rows = ev[ev["run_id"].isin(set(run_ids))]
+    # only the columns used here: filtering the whole eval table would copy every column
+    used = [c for c in dict.fromkeys(["run_id", x, "budget_end", *columns]) if c in ev.columns]
+    rows = ev.loc[ev["run_id"].isin(set(run_ids)), used]
     if rows.empty:
         return {}, {}
     last = {str(k): float(v) for k, v in rows.groupby("run_id", sort=False)[x].max().items()}
@@ -99,26 +104,36 @@ def _picks(ev: pd.DataFrame, run_ids: pd.Series, x: str,
         return last, {}
     idx = within.groupby("run_id", sort=False)[x].idxmax()
     picked = within.loc[idx.to_numpy()]
-    return last, {str(r): row for r, (_, row) in zip(picked["run_id"], picked.iterrows())}
+    names = [c for c in columns if c in picked.columns]
+    # one list per column instead of one Series per row (iterrows): the same Python values
+    values = [list(picked[c]) for c in names]
+    return last, {str(r): dict(zip(names, vals)) for r, *vals in zip(picked["run_id"], *values)}
 
 
-def _offline_score(run: Any, last: float | None, pick: pd.Series | None) -> dict[str, Any]:
-    """The score columns of one offline run at its own budget (see :func:`final_scores`): ``last`` its largest
-    evaluated update, ``pick`` its evaluation at the largest update within its budget."""
+def _number(value: Any) -> float:
+    """``value`` as a float, as ``pd.to_numeric(pd.Series([value]), errors="coerce")`` reads it (a float as it is)."""
+    if type(value) is float:
+        return value
+    return float(pd.to_numeric(pd.Series([value]), errors="coerce").iloc[0])
+
+
+def _offline_score(run: dict[str, Any], last: float | None, pick: dict[str, Any] | None) -> dict[str, Any]:
+    """The score columns of one offline run (its identity values) at its own budget (see :func:`final_scores`):
+    ``last`` its largest evaluated update, ``pick`` its evaluation at the largest update within its budget."""
     out: dict[str, Any] = {"metric": "episode_reward", "score": math.nan, "frame": math.nan, "reached": False,
                            "last_frame": math.nan, "normalized": math.nan, "score_reference": None,
                            "update": math.nan, "last_update": math.nan}
     if last is None:
         return out
-    budget = run.offline_updates
+    budget = run["offline_updates"]
     out["last_update"] = last
     if pick is None:
         return out
     reference = pick["score_reference"]
     out.update(score=float(pick["episode_reward"]), update=float(pick["update"]),
-               normalized=float(pd.to_numeric(pd.Series([pick["normalized_score"]]), errors="coerce").iloc[0]),
+               normalized=_number(pick["normalized_score"]),
                score_reference=None if pd.isna(reference) else str(reference),
-               reached=bool(run.status == "done" and not pd.isna(budget) and last >= budget))
+               reached=bool(run["status"] == "done" and not pd.isna(budget) and last >= budget))
     return out
 
 
