@@ -12,6 +12,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from repro.runs.fsutil import atomic_write
 
 if TYPE_CHECKING:
@@ -38,8 +40,9 @@ def atomic_savefig(fig: Figure, path: Path | str, **kwargs) -> Path:
 
 class _ContentPickler(pickle.Pickler):
     """Pickles a figure as its content: without what differs between two drawings of the same figure (the ids
-    that key a transform's parents, the pyplot figure number) and with functions (tick formatters) as their name,
-    defaults and captured values (their code is the analysis code, which the cache's code version holds)."""
+    that key a transform's parents, the pyplot figure number, an array's memory order) and with functions (tick
+    formatters) as their name, defaults and captured values (their code is the analysis code, which the cache's code
+    version holds)."""
 
     def reducer_override(self, obj: Any) -> Any:
         from matplotlib.figure import Figure
@@ -56,6 +59,13 @@ class _ContentPickler(pickle.Pickler):
                     (obj.__defaults__, obj.__kwdefaults__, cells))
         if isinstance(obj, (set, frozenset)):
             return (type(obj), (sorted(obj, key=repr),))
+        if type(obj) is np.ma.MaskedArray and not obj.dtype.hasobject:
+            return (str, (f"masked {obj.dtype.str} {obj.shape}",),
+                    (np.ascontiguousarray(obj.data).tobytes(), np.ascontiguousarray(np.ma.getmaskarray(obj)).tobytes(),
+                     repr(obj.fill_value)))
+        if type(obj) is np.ndarray and not obj.dtype.hasobject:
+            # its values, not its memory layout (a computed array may be Fortran-ordered, the same one unpickled not)
+            return (str, (f"ndarray {obj.dtype.str} {obj.shape}",), np.ascontiguousarray(obj).tobytes())
         return NotImplemented
 
 

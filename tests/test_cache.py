@@ -165,6 +165,16 @@ def test_an_unchanged_figure_is_not_drawn_again_and_a_changed_one_is(tmp_path: P
         return tuple(p.stat().st_mtime_ns for p in paths)
 
     assert figure_key(_figure(1.0)) == figure_key(_figure(1.0)) != figure_key(_figure(2.0))  # the closure counts
+    image = np.arange(12.0).reshape(3, 4)
+
+    def shown(a: np.ndarray) -> str | None:
+        fig = _figure(1.0)
+        fig.axes[0].imshow(a)  # kept as a masked array
+        fig.axes[1].errorbar([1, 2, 3], a[:, 0], yerr=a[:, 1])
+        return figure_key(fig)
+
+    # the values count, not the memory order (a computed array, unpickled from the cache, is C-ordered)
+    assert shown(np.ascontiguousarray(image)) == shown(np.asfortranarray(image)) != shown(image + 1)
     with opened(tmp_path / "out") as first:
         written = save(1.0)
     assert first.misses == {"figures": 1}
