@@ -19,7 +19,8 @@ labels and the numeric libraries' versions), so changed code recomputes everythi
 ``<out>/.cache/analysis.pkl`` (one per output folder: ``repro report``, ``figures``, ``claims`` and ``plan --claims``
 share the default one), written atomically at the end of a command. What a command did not use is kept for the next
 (``repro claims`` after a report keeps the report's figures), except what it superseded: a run directory read
-again drops its older entries, a new learning-curve table or published-curve table the older one. A command that
+again drops its older entries, a figure drawn again its older entry, a new learning-curve table or published-curve
+table the older one. A command that
 prunes (``repro report``: it uses everything a report needs) also drops the unused entries of each section it used,
 so the file holds one tree's results. ``--no-cache`` neither reads nor writes it.
 
@@ -50,6 +51,8 @@ CODE_DIRS = ("analysis", "paper_figures", "repro_app", "repro/runs", "repro/conf
 LIBRARIES = ("numpy", "pandas", "scipy", "matplotlib", "seaborn", "scikit-learn", "rliable")
 # sections holding one entry per tree: a newly computed one supersedes the stored ones
 SINGLE = frozenset({"curves", "published"})
+# sections whose entries a newer entry of the same subject supersedes (:func:`_subject`)
+SUBJECTS = frozenset({"runs", "figures"})
 
 
 @functools.cache
@@ -154,10 +157,10 @@ class AnalysisCache:
                 continue
             if name in SINGLE and new:
                 continue
-            superseded = {_folder(k) for k in new} if name == "runs" else set()
+            superseded = {_subject(name, k) for k in new} if name in SUBJECTS else set()
             target = out.setdefault(name, {})
             for key, value in old.items():
-                if key not in target and not (superseded and _folder(key) in superseded):
+                if key not in target and not (superseded and _subject(name, key) in superseded):
                     target[key] = value
         return out
 
@@ -172,9 +175,12 @@ class AnalysisCache:
         atomic_write(self.path, lambda f: pickle.dump(payload, f, protocol=pickle.HIGHEST_PROTOCOL))
 
 
-def _folder(key: Hashable) -> Hashable:
-    """A ``runs`` key's (results root, run directory), without its files' signature."""
-    return key[:2] if isinstance(key, tuple) else key
+def _subject(section: str, key: Hashable) -> Hashable:
+    """What an entry is of, without the version of it its key names: a ``runs`` key's (results root, run directory),
+    a ``figures`` key's files."""
+    if not isinstance(key, tuple):
+        return key
+    return key[:2] if section == "runs" else key[0]
 
 
 _PROCESS = AnalysisCache()  # the memo when no command opened a cache

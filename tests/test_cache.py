@@ -184,6 +184,7 @@ def test_an_unchanged_figure_is_not_drawn_again_and_a_changed_one_is(tmp_path: P
     with opened(tmp_path / "out") as third:
         changed = save(2.0)  # another tick formatter: drawn again
     assert third.misses == {"figures": 1} and changed != written
+    assert len(cache_mod.AnalysisCache(tmp_path / "out" / ".cache" / "analysis.pkl")._old["figures"]) == 1  # superseded
     paths[1].unlink()
     with opened(tmp_path / "out") as fourth:
         save(2.0)  # a file removed by hand: drawn again
@@ -247,3 +248,17 @@ def test_an_unchanged_tsne_checkpoint_is_neither_loaded_nor_embedded_again(tmp_p
     with opened(tmp_path / "out") as third:
         f6()
     assert len(loads) == 2 and third.misses.get("tsne_result") == 1
+
+
+def test_the_compositions_key_changes_with_what_composing_reads(tmp_path: Path, monkeypatch):
+    from repro.config import compose as compose_mod
+
+    plugin = tmp_path / "conf" / "agent"
+    plugin.mkdir(parents=True)
+    (plugin / "mine.yaml").write_text("name: mine\n")
+    packaged = compose_mod.conf_dirs()[0]
+    monkeypatch.setattr(compose_mod, "conf_dirs", lambda: (packaged, tmp_path / "conf"))
+    first = compose_mod.config_digest()
+    assert compose_mod.config_digest() == first
+    (plugin / "mine.yaml").write_text("name: mine\nbatch_size: 512\n")  # a plugin's agent file changes
+    assert compose_mod.config_digest() != first
