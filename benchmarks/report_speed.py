@@ -1,11 +1,12 @@
-"""The analysis commands at the paper's scale: writes the full-coverage tree of tests/analysis_fixtures.py with
-the paper's budgets (6 seeds, 1M frames, an evaluation every 10K frames, a train.csv row per 1000-frame episode;
-offline runs of 100K updates evaluated every 10K) and times ``repro report`` (with an empty cache, then again on
-the unchanged tree: the incremental report), ``repro figures --all``, ``repro claims`` and ``repro plan --claims``
-on it, each in its own process, with its CPU seconds and peak memory (the largest resident set of the process and
-the children it waited for). An existing output folder is emptied first, except for the commands that reuse the
-report's (``report-again``: the unchanged tree; ``report-batch``: a batch of six runs changed; ``plan-after-report``
-and ``plan-again``: ``repro plan --claims`` into the report's folder, as its default --out is).
+"""The analysis commands at the paper's scale: writes the full-coverage tree of tests/analysis_fixtures.py with the
+paper's budgets (6 seeds, 1M frames, an evaluation every 10K frames, a train.csv row per 1000-frame episode, the
+final evaluation's frames as a trained run saves them; offline runs of 100K updates evaluated every 10K) and times
+``repro report`` (with an empty cache, then again on the unchanged tree: the incremental report), ``repro figures
+--all``, ``repro claims`` and ``repro plan --claims`` on it, each in its own process, with its CPU seconds and peak
+memory (the largest resident set of the process and the children it waited for). An existing output folder is
+emptied first, except for the commands that reuse the report's (``report-again``: the unchanged tree;
+``report-batch``: a batch of six runs changed; ``plan-after-report`` and ``plan-again``: ``repro plan --claims``
+into the report's folder, as its default --out is).
 
     python benchmarks/report_speed.py --root /tmp/paper-scale            # writes the tree once, then times all
     python benchmarks/report_speed.py --root /tmp/paper-scale --only report --json /tmp/t.json
@@ -31,8 +32,10 @@ from pathlib import Path
 from repro.runs.rundir import cpu_model
 
 REPO = Path(__file__).resolve().parents[1]
-PAPER_SCALE = {"frames": 1_000_000, "eval_every": 10_000, "train_rows": 1000, "updates": 100_000,
-               "eval_every_updates": 10_000}
+# save_frames: every done online run keeps its final evaluation's frames (frames.npz), as train.save_frames (on by
+# default) makes a trained run do; F13 reads them instead of rendering random-action frames
+PAPER_SCALE = {"frames": 1_000_000, "eval_every": 10_000, "train_rows": 1000, "save_frames": True,
+               "updates": 100_000, "eval_every_updates": 10_000}
 # name: (arguments, output folder). ``report-again`` reruns the report into the same folder: the incremental report
 # on an unchanged tree (analysis/cache.py); ``report-batch`` the same after a batch of runs changed (BATCH: the last
 # evaluation of one cell's six seeds one point higher; restored afterwards); ``plan-after-report`` and
@@ -56,7 +59,9 @@ def write_tree(root: Path, seeds: int) -> int:
     """The paper-scale tree under ``root`` (skipped when its marker says it is complete); returns its runs."""
     marker = root / ".paper_scale.json"
     if marker.exists():
-        return int(json.loads(marker.read_text())["runs"])
+        written = json.loads(marker.read_text())
+        if written.get("seeds") == seeds and all(written.get(k) == v for k, v in PAPER_SCALE.items()):
+            return int(written["runs"])
     if root.exists():
         shutil.rmtree(root)
     sys.path.insert(0, str(REPO))

@@ -26,6 +26,7 @@ from repro.data.reference import PAPER_TACO_RETURN, normalized_score, score_refe
 from repro.envs import get_task
 from repro.runs import rundir, runformat
 from repro.runs.logger import format_row, header_line
+from repro.runs.video import save_frames as write_frames
 
 METRICS = (*CRITIC_METRICS, *ACTOR_METRICS)  # the online learner's base update metrics (train.csv)
 FRAMES = 100_000  # the synthetic frame budget
@@ -113,6 +114,7 @@ def write_run(
     resolved_values: dict[str, Any] | None = None,
     curve: Sequence[float] | None = None,
     train_rows: int = 3,
+    save_frames: bool = False,
 ) -> Path:
     """Write one run directory and return it. Arguments left None keep the composed config's value; the
     config goes through the training schema, and resolved.json through the code training uses
@@ -125,7 +127,10 @@ def write_run(
     return repro.data.reference falls back to, the paper's TACO return of the task), and ``done`` writes
     DONE as the offline trainer does; ``cql_alpha`` None leaves CQL's alpha to the config (Table 6).
     ``curve``: an online run's evaluation returns at frames 0, eval_every, ... (instead of the ramp to ``final``).
-    ``train_rows``: train.csv rows of an online run (one per episode at the paper's scale, benchmarks/)."""
+    ``train_rows``: train.csv rows of an online run (one per episode at the paper's scale, benchmarks/).
+    ``save_frames``: a done online run also writes its final evaluation episode's frames (frames.npz, by the writer
+    training uses) where its config's train.save_frames says so (on by default), as a trained run does; synthetic
+    frames of the run's image size, one per action-repeated step of a 500-step episode."""
     cfg = run_config(
         algo, task, seed, root, experiment=experiment, variant=variant, **{
             "agent.K": K, "agent.batch_size": batch_size, "agent.latent_action_dim": latent_action_dim,
@@ -171,6 +176,11 @@ def write_run(
             "success": None, "buffer_size": i * 500, "stddev": 0.2, "fps": fps if i > 1 else fps * 10,
             "total_time": float(i), **{m: loss for m in METRICS}}))
     (run / runformat.TRAIN).write_text("".join(train))
+    if done and save_frames and bool(cfg.train.save_frames):
+        size, steps = int(cfg.env.image_size), 500 // repeat + 1
+        t = np.arange(steps, dtype=np.int64)[:, None, None, None]
+        yx = np.add.outer(np.arange(size), np.arange(size))[None, :, :, None]
+        write_frames(run, ((t * 3 + yx + np.arange(3) * 40 + seed) % 256).astype(np.uint8))
     if done:
         rundir.write_done(run, {"frame": frames})
     return run
@@ -218,7 +228,7 @@ def _seeds(root: Path, n: int, spread: float = 1.0, **kw) -> None:
         write_run(root, seed=s, **{**kw, "final": kw["final"] + spread * OFFSETS[s % 3]})
 
 
-_ONLINE_SCALE = ("frames", "eval_every", "train_rows")
+_ONLINE_SCALE = ("frames", "eval_every", "train_rows", "save_frames")
 _OFFLINE_SCALE = ("updates", "eval_every_updates")
 
 
@@ -234,8 +244,8 @@ def _scaled_seeds(scale: dict[str, Any], root: Path, n: int, spread: float = 1.0
 
 def full_coverage_root(root: Path, seeds: int = 2, **scale: Any) -> Path:
     """Runs for every artifact; returns ``root``. Values are chosen so that the claims hold. ``scale``: write_run's
-    budget and log-size arguments (``frames``, ``eval_every``, ``train_rows``, ``updates``, ``eval_every_updates``)
-    for every run, e.g. the paper's scale in benchmarks/report_speed.py."""
+    budget and log-size arguments (``frames``, ``eval_every``, ``train_rows``, ``save_frames``, ``updates``,
+    ``eval_every_updates``) for every run, e.g. the paper's scale in benchmarks/report_speed.py."""
     _seeds = functools.partial(_scaled_seeds, scale)
     write_run = functools.partial(_scaled_run, scale)
     main = {"TACO": 1.4, "DrQ-v2": 1.0, "A-LIX": 0.9}

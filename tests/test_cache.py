@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from analysis import cache as cache_mod
@@ -262,3 +263,18 @@ def test_the_compositions_key_changes_with_what_composing_reads(tmp_path: Path, 
     assert compose_mod.config_digest() == first
     (plugin / "mine.yaml").write_text("name: mine\nbatch_size: 512\n")  # a plugin's agent file changes
     assert compose_mod.config_digest() != first
+
+
+def test_f13_shows_the_frames_a_trained_run_saved_and_renders_nothing(tmp_path: Path, monkeypatch):
+    """A trained run writes its final evaluation's frames (train.save_frames, on by default; the fixture writes them
+    with the writer training uses): F13 shows them and starts no rendering, as at the paper's scale."""
+    from analysis.context import Context
+    from paper_figures import f13_frames
+
+    monkeypatch.setattr(f13_frames, "random_action_frames", lambda *a, **k: pytest.fail("rendered"))
+    run = write_run(tmp_path / "runs", experiment="main", algo="taco", task="hammer", seed=0, final=0.5,
+                    success=True, save_frames=True)
+    ctx = Context(results=load_results(tmp_path / "runs"), render_envs=False)
+    frames, source = f13_frames.all_frames(ctx)["hammer"]
+    assert frames is not None and frames.shape == (251, 84, 84, 3)  # 500 steps at action repeat 2, and the first
+    assert source == f"trained TACO agent, run {run.relative_to(tmp_path / 'runs')}"
