@@ -54,10 +54,17 @@ def packaged_published() -> Results:
 def values_at(results: Results, frame: float, task: str | None = None) -> pd.DataFrame:
     """Each run's ``episode_reward`` at ``frame`` by linear interpolation between its own evaluations: columns
     run_id, task, seed, value. A run whose evaluations do not span ``frame`` is left out (no extrapolation)."""
-    return _interpolate(_run_curves(results, task), frame)
+    curves = _packaged_curves(task) if results is packaged_published() else _run_curves(results, task)
+    return _interpolate(curves, frame)
 
 
 _Curve = tuple[object, object, object, np.ndarray, np.ndarray]  # run_id, task, seed, frames, values
+
+
+@functools.cache
+def _packaged_curves(task: str | None) -> list[_Curve]:
+    """:func:`_run_curves` of the packaged published curves, once per task and process (they do not change)."""
+    return _run_curves(packaged_published(), task)
 
 
 def _run_curves(results: Results, task: str | None) -> list[_Curve]:
