@@ -282,26 +282,12 @@ def percentile_cis(values: np.ndarray, size: float = CI_SIZE) -> np.ndarray:
     return np.percentile(values, [100 * alpha, 100 * (1.0 - alpha)], axis=0)
 
 
-def same_shape_intervals(stat: Statistic, draws: Sequence[Sequence[np.ndarray]], reps: int, seed: int,
-                         size: float = CI_SIZE) -> list[np.ndarray]:
-    """The CI (2, k) of :func:`interval_estimates` for each of several data sets of the same shapes (the power
-    simulation's draws): the bootstrap indices depend only on the shapes and the random state, so they are drawn
-    once; each CI is the one :func:`interval_estimates` gives for that data set alone."""
-    if not draws:
-        return []
-    mats = [[np.ascontiguousarray(a, dtype=float) for a in arrays] for arrays in draws]
-    shapes = {tuple(a.shape for a in m) for m in mats}
-    if len(shapes) > 1:
-        raise ValueError(f"the data sets differ in shape: {sorted(shapes)}")
-    chunks = list(index_chunks(stat, mats[0], reps, seed))
-    return [percentile_cis(values_from(stat, m, chunks), size) for m in mats]
-
-
 def mean_intervals_many(mats: np.ndarray, reps: int, seed: int, size: float = CI_SIZE) -> np.ndarray:
     """The percentile CI of :data:`MEAN` of each of several (runs, tasks) matrices ``mats`` (sets, runs, tasks) with
-    the same bootstrap indices as :func:`same_shape_intervals`, as one product: repetition r's mean is
+    the bootstrap indices :func:`interval_estimates` draws for one of them (they depend only on the shapes and the
+    random state, so they are drawn once), as one product: repetition r's mean is
     sum_k,t counts[r, k, t] * x[k, t] / (runs * tasks), where counts[r, k, t] is how often run k was drawn for task t.
-    The sums run in another order than rliable's, so each bound may differ from :func:`same_shape_intervals` in its
+    The sums run in another order than rliable's, so each bound may differ from :func:`interval_estimates` in its
     last bits (at most the largest rounding of one repetition's mean: a percentile bound moves no more than the
     values it interpolates): for a verdict that compares a bound with a number, a caller judges the sets where they
     lie within a tie of each other by the exact interval. Returns (2, sets)."""

@@ -124,9 +124,7 @@ class AnalysisCache:
 
     def peek(self, section: str, key: Hashable) -> Any | None:
         """The value under ``key`` if this command or the stored cache has it (counted as reused), else None."""
-        if key in self._new.get(section, {}) or key in self._old.get(section, {}):
-            return self.get(section, key, lambda: None)
-        return None
+        return self.reuse(section, key, lambda _: True)
 
     def reuse(self, section: str, key: Hashable, check: Callable[[Any], bool]) -> Any | None:
         """The value under ``key`` if this command or the stored cache has it and ``check(value)`` holds (counted as

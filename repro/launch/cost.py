@@ -17,11 +17,14 @@ from collections import defaultdict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from repro.bench import results as bench_results
 from repro.bench.results import BenchFile, BenchFormatError, offline_seconds, path_of, rate
 from repro.launch.spec.sharing import split_budget
+
+if TYPE_CHECKING:
+    from repro.launch.spec.plan import Composer
 
 GB = 1024**3
 ADAM_BYTES_PER_PARAM = 16  # fp32 weights, gradients and Adam's two moments
@@ -230,7 +233,8 @@ def price(cost: RunCost, bench: DeviceBench) -> None:
 
 # ---------------------------------------------------------------- sweeps
 def plan_sweeps(names: Sequence[str], bench: DeviceBench | None, selection: Any = None,
-                results_root: Path | None = None, memory: bool = True, composer: Any = None) -> list[RunCost]:
+                results_root: Path | None = None, memory: bool = True,
+                composer: Composer | None = None) -> list[RunCost]:
     """Every run of the sweeps ``names``, each expanded with ``selection`` (a :class:`repro.launch.spec.Selection`:
     the grid options of ``repro sweep``) and composed as ``repro sweep`` does (by ``composer``, see
     :func:`repro.launch.spec.plan.compose_runs`), with its cost; ``memory`` False: without the network parameters
