@@ -318,9 +318,6 @@ def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_
           and any((d / "checkpoint.pt").exists() and not (d / "DONE").exists() for d in dirs), 300, "a partial run")
     first.send_signal(signal.SIGKILL)
     first.wait()
-    done_before = {p.key for p in planned if (p.run_dir / "DONE").exists()}
-    partial = {p.key for p in planned if (p.run_dir / "checkpoint.pt").exists() and p.key not in done_before}
-    assert partial
     # the children die with the launcher (PDEATHSIG), so their locks become stale; a child still shutting down
     # holds its run's writer lock until it has exited, and a launcher started before then skips that run as held
     def children_gone() -> bool:
@@ -335,6 +332,10 @@ def test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once(tmp_
                 return False
         return True
     _wait(children_gone, 60, "the killed launcher's children to exit")
+    # what the two launchers find: a child of the killed launcher can still finish its run (write DONE) before it exits
+    done_before = {p.key for p in planned if (p.run_dir / "DONE").exists()}
+    partial = {p.key for p in planned if (p.run_dir / "checkpoint.pt").exists() and p.key not in done_before}
+    assert partial
 
     b = cli_proc("sweep", *common, "--max-parallel", "1")
     c = cli_proc("sweep", *common, "--max-parallel", "1")
