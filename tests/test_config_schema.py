@@ -196,6 +196,26 @@ def test_a_value_above_its_upper_bound_is_one_line_exit_2_before_anything_is_wri
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("overrides, message", [
+    # the chosen agent file's keys, not the default agent's (TACO has no td3bc section and no alpha)
+    (["agent=td3bc", "offline.dataset=medium", "agent.td3bc.alphaa=1"],
+     "unknown config key 'agent.td3bc.alphaa'. Did you mean: alpha?"),
+    (["agent=td3bc", "offline.dataset=medium", "agent.batchsize=1"],
+     "unknown config key 'agent.batchsize'. Did you mean: batch_size?"),
+    (["agent=dt", "offline.dataset=medium", "agent.dt.contxt=5"],
+     "unknown config key 'agent.dt.contxt'. Did you mean: context?"),
+    (["agent=td3bc", "offline.dataset=medium", "agent.alphaa=1"], "unknown config key 'agent.alphaa'. Known: name,"),
+])
+def test_a_misspelt_key_is_matched_against_the_chosen_agent_file(overrides, message):
+    from repro.config.compose import ConfigError, compose
+
+    with pytest.raises(ConfigError) as err:
+        compose(overrides)
+    assert str(err.value).startswith(message) and "\n" not in str(err.value), str(err.value)
+    if "Known:" in message:  # the known keys listed are TD3+BC's file's: its own section among them
+        assert str(err.value).endswith(", td3bc."), str(err.value)
+
+
 def test_a_run_holds_and_reads_its_own_learner_s_section_only():
     """A TACO run has no DT, CQL, IQL or TD3+BC section (issue 35): ``agent.dt.context=0`` is an unknown key there
     (as a plugin learner's would be), and one added with ``++`` (a sweep's override common to every agent) is dropped

@@ -184,6 +184,13 @@ def test_a_plugin_learner_s_section_is_typed_and_held_by_its_runs_only():
     assert "\n" not in str(err.value)
 
 
+def test_a_misspelt_key_of_a_plugin_learner_s_section_names_its_keys():
+    """The suggestions come from the plugin's agent file (its learner's section), not the default agent's."""
+    with pytest.raises(ConfigError) as err:
+        compose(["agent=toy_rwbc", "offline.dataset=medium", "agent.toy_rwbc.temprature=2"])
+    assert str(err.value) == "unknown config key 'agent.toy_rwbc.temprature'. Did you mean: temperature?"
+
+
 @pytest.mark.parametrize("override, message", [
     ("agent.learner=toy_rwbcc",
      "agent.learner=toy_rwbcc is not one of actor_critic, bc, td3bc, cql, iql, dt, alix, toy_rwbc, toy_utd."),

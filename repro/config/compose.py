@@ -195,7 +195,7 @@ def compose(overrides: list[str] | tuple[str, ...] = ()) -> DictConfig:
             key = ov.partition("=")[0].lstrip("+~")
             if f"'{key}'" in first or key in first:
                 _check_objective_key(ov)
-                base = compose_base()
+                base = _compose_choices(overrides)
                 try:
                     _check_keys([ov], base)
                 except ConfigError as err:
@@ -237,6 +237,23 @@ def _check_objective_key(override: str) -> None:
 
 
 _BASE: DictConfig | None = None
+_CHOICES: dict[tuple[str, ...], DictConfig] = {}
+_GROUPS = ("agent", "task", "profile")
+
+
+def _compose_choices(overrides: list[str]) -> DictConfig:
+    """The config of the agent, task and profile that ``overrides`` choose, with nothing else set (cached): the keys
+    a misspelt key is matched against are the chosen agent file's (``agent=td3bc agent.alphaa=1`` suggests TD3+BC's
+    keys, not the default agent's). The base config when those choices alone do not compose."""
+    choices = tuple(ov for ov in overrides if ov.partition("=")[0].lstrip("+~") in _GROUPS)
+    if not choices:
+        return compose_base()
+    if choices not in _CHOICES:
+        try:
+            _CHOICES[choices] = compose(list(choices))
+        except ConfigError:
+            return compose_base()
+    return _CHOICES[choices]
 
 
 def compose_base() -> DictConfig:
