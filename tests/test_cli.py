@@ -165,6 +165,10 @@ OBJECTIVE_EDGES = [
      "agent.objective_params.atc.predictor_hidden must be an integer (got 8.0)."),
     (["agent=spr", "agent.objective_params.spr.rollout=abc"],  # was read as true
      "agent.objective_params.spr.rollout must be true or false (got 'abc')."),
+    (["agent=spr", "agent.objective_params.spr.rollout=2"],  # OmegaConf reads a number as a flag: 2 was true
+     "agent.objective_params.spr.rollout must be true or false (got 2)."),
+    (["agent=spr", "agent.objective_params.spr.rollout=0"],  # and 0 false
+     "agent.objective_params.spr.rollout must be true or false (got 0)."),
     (["agent=spr", "+agent.objective_params.spr.projectoin_dim=4"],  # was a traceback from the objective's __init__
      "unknown setting agent.objective_params.spr.projectoin_dim of objective 'spr'. Did you mean: projection_dim?"),
     (["agent=taco", "+agent.objective_params.spr.projectoin_dim=4"],  # checked though spr is not trained

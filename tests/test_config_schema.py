@@ -216,6 +216,23 @@ def test_a_misspelt_key_is_matched_against_the_chosen_agent_file(overrides, mess
         assert str(err.value).endswith(", td3bc."), str(err.value)
 
 
+@pytest.mark.parametrize("overrides, message", [
+    (["agent.fast=2"], "agent.fast must be true or false (got 2)."),  # OmegaConf read it as true
+    (["train.save_frames=0"], "train.save_frames must be true or false (got 0)."),  # and this as false
+    (["runtime.tensorboard=1.0"], "runtime.tensorboard must be true or false (got 1.0)."),
+    (["agent=cql", "offline.dataset=medium", "agent.cql.importance_sampling=0"],  # a learner's own section
+     "agent.cql.importance_sampling must be true or false (got 0)."),
+])
+def test_a_number_for_a_flag_is_one_line(overrides, message):
+    from repro.config.compose import ConfigError, compose
+
+    with pytest.raises(ConfigError) as err:
+        compose(overrides)
+    assert str(err.value) == message
+    flags = compose(["agent.fast=true", "train.save_frames=false", "runtime.tensorboard=true"])  # words still read
+    assert flags.agent.fast is True and flags.train.save_frames is False and flags.runtime.tensorboard is True
+
+
 def test_a_run_holds_and_reads_its_own_learner_s_section_only():
     """A TACO run has no DT, CQL, IQL or TD3+BC section (issue 35): ``agent.dt.context=0`` is an unknown key there
     (as a plugin learner's would be), and one added with ``++`` (a sweep's override common to every agent) is dropped

@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Any, cast
 
 import yaml
-from omegaconf import DictConfig, OmegaConf, open_dict
-from omegaconf.errors import OmegaConfBaseException
+from omegaconf import BooleanNode, DictConfig, OmegaConf, open_dict
+from omegaconf.errors import OmegaConfBaseException, ValidationError
 
 from repro.config.plugins import Bound, PluginError, bound_text, in_bound, load_factory
 from repro.config.schema import (
@@ -269,7 +269,9 @@ def validate(raw: DictConfig) -> DictConfig:
     Enum there) and the values' ranges."""
     try:
         OmegaConf.resolve(raw)
-        cfg = cast(DictConfig, OmegaConf.merge(_structure(raw), raw))  # dict merged into dict
+        schema = _structure(raw)
+        _check_flags(schema, raw)
+        cfg = cast(DictConfig, OmegaConf.merge(schema, raw))  # dict merged into dict
     except OmegaConfBaseException as exc:
         key = getattr(exc, "full_key", None)
         allowed = choice_fields().get(str(key))
@@ -296,6 +298,22 @@ def validate(raw: DictConfig) -> DictConfig:
         raise ConfigError(f"train.video_size must be an even number >= 16 (got {cfg.train.video_size}).")
     _check_learner(cfg)
     return cfg
+
+
+def _check_flags(schema: DictConfig, raw: DictConfig, prefix: str = "") -> None:
+    """ConfigError for a number where the schema has a flag (``agent.fast=2``): OmegaConf would read any number but 0
+    as true and 0 as false."""
+    for key in map(str, schema):
+        node, given = schema._get_node(key), raw._get_node(key) if key in raw else None
+        kind = node._metadata.ref_type if isinstance(node, DictConfig) and node._is_missing() else None
+        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+            node = OmegaConf.structured(kind)  # a section the schema types and the YAML fills
+        if isinstance(node, DictConfig) and isinstance(given, DictConfig):
+            _check_flags(node, given, f"{prefix}{key}.")
+        elif isinstance(node, BooleanNode) and given is not None and not isinstance(given, DictConfig):
+            value = given._value()
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                raise ConfigError(f"{prefix}{key} must be true or false (got {value!r}).")
 
 
 def _check_objectives(cfg: DictConfig) -> None:
@@ -357,10 +375,17 @@ def objective_params(name: str, given: Any = None) -> Any:
     node = OmegaConf.structured(kind)
     for key, value in given.items():
         try:
+            if _is_bool(hints[key]) and isinstance(value, (int, float)) and not isinstance(value, bool):
+                raise ValidationError("a number for a flag")  # OmegaConf would read 2 as true and 0 as false
             node[key] = value
         except OmegaConfBaseException:
             raise ConfigError(f"{where}.{key} must be {_type_text(hints[key])} (got {value!r}).") from None
     return OmegaConf.to_object(node)
+
+
+def _is_bool(kind: Any) -> bool:
+    """Whether a parameter's type is ``bool`` or ``bool | None``."""
+    return kind is bool or set(typing.get_args(kind)) == {bool, type(None)}
 
 
 def _structure(raw: DictConfig) -> DictConfig:
