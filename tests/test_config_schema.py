@@ -233,6 +233,27 @@ def test_a_number_for_a_flag_is_one_line(overrides, message):
     assert flags.agent.fast is True and flags.train.save_frames is False and flags.runtime.tensorboard is True
 
 
+@pytest.mark.parametrize("overrides, message", [
+    (["agent.lr=nan"], "agent.lr must be in (0.0, inf) (got nan)."),  # was a traceback from torch's Adam
+    (["agent.lr=inf"], "agent.lr must be in (0.0, inf) (got inf)."),  # trained with NaN weights
+    (["agent.stddev_clip=nan"], "agent.stddev_clip must be >= 0.0 (got nan)."),  # NaN is in no range
+    (["agent=td3bc", "offline.dataset=medium", "agent.td3bc.alpha=nan"], "agent.td3bc.alpha must be >= 0.0 (got nan)."),
+    (["agent.objectives.taco=-1"], "agent.objectives.taco is a loss weight: a finite number >= 0, 0 disables it "
+                                   "(got -1.0)."),  # were accepted: the update maximised that loss
+    (["agent.objectives.curl=nan"], "agent.objectives.curl is a loss weight: a finite number >= 0, 0 disables it "
+                                    "(got nan)."),
+    (["agent.objectives.reward=inf"], "agent.objectives.reward is a loss weight: a finite number >= 0, 0 disables it "
+                                      "(got inf)."),
+])
+def test_a_value_no_run_can_train_with_is_one_line(overrides, message):
+    from repro.config.compose import ConfigError, compose
+
+    with pytest.raises(ConfigError) as err:
+        compose(overrides)
+    assert str(err.value) == message
+    assert compose(["agent.objectives.curl=0", "agent.lr=1e-3"]).agent.objectives.curl == 0.0  # 0 disables one
+
+
 def test_a_run_holds_and_reads_its_own_learner_s_section_only():
     """A TACO run has no DT, CQL, IQL or TD3+BC section (issue 35): ``agent.dt.context=0`` is an unknown key there
     (as a plugin learner's would be), and one added with ``++`` (a sweep's override common to every agent) is dropped

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 import os
 import re
 import typing
@@ -324,6 +325,10 @@ def _check_objectives(cfg: DictConfig) -> None:
         for name in cfg.agent[section]:
             if name not in objective_names():
                 raise ConfigError(unknown_objective(str(name), f"agent.{section}"))
+    for name, weight in cfg.agent.objectives.items():
+        if not (0.0 <= weight < math.inf):  # NaN included
+            raise ConfigError(f"agent.objectives.{name} is a loss weight: a finite number >= 0, 0 disables it "
+                              f"(got {weight}).")
     for name, given in cfg.agent.objective_params.items():
         objective_params(str(name), given)
 
@@ -425,7 +430,7 @@ RANGES: dict[str, Bound] = {
                                   "env.action_repeat", "env.frame_stack", "train.frames", "train.eval_every_frames",
                                   "train.update_every_steps", "replay.capacity", "agent.feature_dim",
                                   "agent.hidden_dim", "agent.action_hidden_dim", "agent.latent_action_dim")},
-    "agent.lr": (0.0, False),
+    "agent.lr": (0.0, False, math.inf, False),  # torch's optimizers refuse NaN; an infinite rate makes NaN weights
     "agent.stddev_clip": (0.0, True),
     "agent.discount": (0.0, True, 1.0, True),
     "agent.critic_target_tau": (0.0, True, 1.0, True),

@@ -165,7 +165,9 @@ def bound_text(bound: Bound) -> str:
 
 
 def in_bound(value: float, bound: Bound) -> bool:
-    """Whether ``value`` is allowed by ``bound``."""
+    """Whether ``value`` is allowed by ``bound`` (NaN never is)."""
+    if value != value:
+        return False
     low, low_in = bound[0], bound[1]
     if low is not None and (value < low or (value == low and not low_in)):
         return False
