@@ -254,6 +254,39 @@ def test_a_value_no_run_can_train_with_is_one_line(overrides, message):
     assert compose(["agent.objectives.curl=0", "agent.lr=1e-3"]).agent.objectives.curl == 0.0  # 0 disables one
 
 
+@pytest.mark.parametrize("overrides, message", [
+    # in the words the objectives' parameters use, not OmegaConf's ("Value 'abc' of type 'str' could not be ...")
+    (["agent.K=abc"], "agent.K must be an integer (got 'abc')."),
+    (["train.frames=1e6"], "train.frames must be an integer (got 1000000.0)."),
+    (["agent.lr=fast"], "agent.lr must be a number (got 'fast')."),
+    (["agent.fast=maybe"], "agent.fast must be true or false (got 'maybe')."),
+    (["agent.latent_action_dim=abc"], "agent.latent_action_dim must be an integer or null (got 'abc')."),
+    (["agent=iql", "offline.dataset=medium", "agent.iql.expectile=x"],
+     "agent.iql.expectile must be a number (got 'x')."),
+    # a task name no task file gives: was a traceback from the environment registry (dry run), and a sweep planned
+    # runs of it
+    (["task.name=cheeta_run"], "unknown task 'cheeta_run' in task.name (a task file of repro/conf/task/ names each "
+                               "task). Did you mean: cheetah_run, walker_run?"),
+])
+def test_a_value_of_the_wrong_type_is_named_in_one_line(overrides, message):
+    from repro.config.compose import ConfigError, compose
+
+    with pytest.raises(ConfigError) as err:
+        compose(overrides)
+    assert str(err.value) == message
+
+
+def test_a_task_name_no_task_file_gives_is_refused_before_a_sweep_plans_it(tmp_path):
+    from typer.testing import CliRunner
+
+    from repro_app.cli import app
+
+    out = CliRunner().invoke(app, ["sweep", "tiny", "--set", "task.name=foo", "--dry-run", "--results",
+                                      str(tmp_path)], terminal_width=400)
+    assert out.exit_code == 2 and out.output.startswith("error: unknown task 'foo' in task.name"), out.output
+    assert len(out.output.strip().splitlines()) == 1 and not list(tmp_path.iterdir())
+
+
 def test_a_run_holds_and_reads_its_own_learner_s_section_only():
     """A TACO run has no DT, CQL, IQL or TD3+BC section (issue 35): ``agent.dt.context=0`` is an unknown key there
     (as a plugin learner's would be), and one added with ``++`` (a sweep's override common to every agent) is dropped

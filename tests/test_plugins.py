@@ -179,7 +179,7 @@ def test_a_plugin_learner_s_section_is_typed_and_held_by_its_runs_only():
     assert run_keys(cfg)["agent"]["toy_rwbc"] == {"temperature": 0.5, "max_weight": 20.0}
     assert "toy_rwbc" not in run_keys(compose(["agent=cql", "offline.dataset=medium"]))["agent"]
     assert "agent.toy_rwbc" in unread_keys("cql") and "agent.cql" in unread_keys("toy_rwbc")
-    with pytest.raises(ConfigError, match=r"^agent\.toy_rwbc\.temperature: Value 'hot'") as err:
+    with pytest.raises(ConfigError, match=r"^agent\.toy_rwbc\.temperature must be a number \(got 'hot'\)\.$") as err:
         compose(["agent=toy_rwbc", "offline.dataset=medium", "agent.toy_rwbc.temperature=hot"])
     assert "\n" not in str(err.value)
 

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, cast
 
 import yaml
-from omegaconf import BooleanNode, DictConfig, OmegaConf, open_dict
+from omegaconf import BooleanNode, DictConfig, FloatNode, IntegerNode, OmegaConf, StringNode, open_dict
 from omegaconf.errors import OmegaConfBaseException, ValidationError
 
 from repro.config.plugins import Bound, PluginError, bound_text, in_bound, load_factory
@@ -279,6 +279,10 @@ def validate(raw: DictConfig) -> DictConfig:
         if key and allowed is not None:  # OmegaConf's own message names Enum members, not the values to write
             value = OmegaConf.select(raw, str(key), default=None)
             raise ConfigError(f"{key}={value} is not one of {', '.join(allowed.values())}.") from None
+        kind = _leaf_kind(schema, str(key)) if key and isinstance(exc, ValidationError) else None
+        if kind is not None:  # in this module's words (_type_text), as the objectives' parameters are
+            value = OmegaConf.select(raw, str(key), default=None)
+            raise ConfigError(f"{key} must be {_type_text(kind)} (got {value!r}).") from None
         first = str(exc).strip().splitlines()[0]
         raise ConfigError(f"{key}: {first}" if key else first) from None
     missing = sorted(OmegaConf.missing_keys(cfg))  # the schema has types only: the YAML gives every value
@@ -289,6 +293,7 @@ def validate(raw: DictConfig) -> DictConfig:
         value = str(OmegaConf.select(cfg, key))
         if not NAME_RE.match(value):
             raise ConfigError(f"{key}='{value}' may only contain letters, digits, '_', '.' and '-'.")
+    check_option("task", str(cfg.task.name), " in task.name (a task file of repro/conf/task/ names each task)")
     _check_objectives(cfg)
     _check_ranges(cfg)
     if cfg.seed < 0:
@@ -301,14 +306,33 @@ def validate(raw: DictConfig) -> DictConfig:
     return cfg
 
 
+def _section(node: Any) -> Any:
+    """A schema node, with a section the schema types but leaves to the YAML (``agent``: MISSING) as its type's."""
+    kind = node._metadata.ref_type if isinstance(node, DictConfig) and node._is_missing() else None
+    return OmegaConf.structured(kind) if isinstance(kind, type) and dataclasses.is_dataclass(kind) else node
+
+
+_LEAF_KINDS = {BooleanNode: bool, IntegerNode: int, FloatNode: float, StringNode: str}
+
+
+def _leaf_kind(schema: DictConfig, key: str) -> Any:
+    """The type the schema gives the value at ``key`` (``int``, ``float | None`` ...), None when it is not a plain
+    value there."""
+    node: Any = schema
+    for part in key.split("."):
+        node = _section(node)
+        if not isinstance(node, DictConfig) or part not in node.keys():  # ``in`` is False for a MISSING value
+            return None
+        node = node._get_node(part)
+    kind = _LEAF_KINDS.get(type(node))
+    return None if kind is None else kind | None if node._is_optional() else kind
+
+
 def _check_flags(schema: DictConfig, raw: DictConfig, prefix: str = "") -> None:
     """ConfigError for a number where the schema has a flag (``agent.fast=2``): OmegaConf would read any number but 0
     as true and 0 as false."""
     for key in map(str, schema):
-        node, given = schema._get_node(key), raw._get_node(key) if key in raw else None
-        kind = node._metadata.ref_type if isinstance(node, DictConfig) and node._is_missing() else None
-        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
-            node = OmegaConf.structured(kind)  # a section the schema types and the YAML fills
+        node, given = _section(schema._get_node(key)), raw._get_node(key) if key in raw else None
         if isinstance(node, DictConfig) and isinstance(given, DictConfig):
             _check_flags(node, given, f"{prefix}{key}.")
         elif isinstance(node, BooleanNode) and given is not None and not isinstance(given, DictConfig):
