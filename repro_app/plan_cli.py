@@ -139,15 +139,17 @@ def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: O
     from repro_app.analysis_cli import make_context
     from repro_app.plan import seeds_cost
 
-    ctx = make_context(results, out, 1_000_000, reps, seed, min_seeds)
-    conditioned = not ctx.no_runs
-    verdicts = evaluate_claims(ctx) if conditioned else None
     extra: list[str] = []
     try:
         bench = find_bench(results, device, bench_file)
     except PlanError as exc:
-        bench = None
+        if bench_file is not None:  # the file asked for is missing or unreadable: one line, before any work
+            raise
+        bench = None  # none found: the plan prices in frames and says so
         extra.append(f"Cost of those seeds in frames only: {exc}.")
+    ctx = make_context(results, out, 1_000_000, reps, seed, min_seeds)
+    conditioned = not ctx.no_runs
+    verdicts = evaluate_claims(ctx) if conditioned else None
     rows = power_rows(ctx, sims, max_seeds, verdicts, conditioned)
     by_experiment = {s.experiment: s for s in specs.load_all()}
     needed = sorted({by_experiment[e].name for r in rows if r.seeds_80 for e in r.experiments if e in by_experiment})

@@ -383,6 +383,23 @@ def test_plan_claims_reuses_the_analysis_cache_of_its_out_folder(tmp_path: Path)
     assert not (tmp_path / "nc" / ".cache").exists() and "Cache (" not in third.output
 
 
+def test_plan_claims_with_a_bench_file_it_cannot_read_is_one_line_and_exit_2(tmp_path: Path):
+    """--bench names the file to price with: a missing or malformed one is refused before any work (it was priced in
+    frames only, exit 0); with no --bench and no bench file found, the plan prices in frames and says so."""
+    from analysis_fixtures import write_run
+
+    write_run(tmp_path / "runs", experiment="main", algo="taco", task="cheetah_run", seed=0, final=100.0)
+    (tmp_path / "bad.json").write_text("{bad")
+    args = ["plan", "--claims", "--results", str(tmp_path / "runs"), "--sims", "20", "--max-seeds", "3", "--reps", "50"]
+    for bench, why in ((tmp_path / "bad.json", "cannot read bench file"), (tmp_path / "none.json", "does not exist")):
+        out = CliRunner().invoke(app, [*args, "--bench", str(bench), "--out", str(tmp_path / "out")],
+                                 terminal_width=400)
+        assert out.exit_code == 2 and out.output.startswith("error: ") and why in out.output, out.output
+        assert len(out.output.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+    found = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")], terminal_width=400)
+    assert found.exit_code == 0 and "Cost of those seeds in frames only: no `repro bench` file" in found.output
+
+
 def test_a_kept_composition_equals_composing_and_is_a_fresh_copy(tmp_path: Path):
     from omegaconf import OmegaConf
 
