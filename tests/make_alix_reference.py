@@ -26,6 +26,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import alix_reference as ref  # noqa: E402
+from repro.runs.rundir import cpu_model  # noqa: E402
 
 TARGET = Path(__file__).parent / "data" / "alix_reference.json"
 
@@ -122,8 +123,8 @@ def main() -> None:
                    "note": "the authors' files, run from a folder outside this repository (not copied here)"},
         "inputs": "tests/alix_reference.py (parameters, batches, seeds, steps)",
         "environment": {"torch": torch.__version__, "cpu_capability": torch.backends.cpu.get_cpu_capability(),
-                        "machine": platform.machine(), "python": platform.python_version(), "threads": 1,
-                        "numpy": np.__version__},
+                        "cpu": cpu_model(), "machine": platform.machine(), "python": platform.python_version(),
+                        "threads": 1, "numpy": np.__version__},
         "parameter_counts": counts,
         "updates": updates,
         "after_two_updates": after,
