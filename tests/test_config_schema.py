@@ -234,8 +234,8 @@ def test_a_number_for_a_flag_is_one_line(overrides, message):
 
 
 @pytest.mark.parametrize("overrides, message", [
-    (["agent.lr=nan"], "agent.lr must be in (0.0, inf) (got nan)."),  # was a traceback from torch's Adam
-    (["agent.lr=inf"], "agent.lr must be in (0.0, inf) (got inf)."),  # trained with NaN weights
+    (["agent.lr=nan"], "agent.lr must be > 0.0 (got nan)."),  # was a traceback from torch's Adam
+    (["agent.lr=inf"], "agent.lr must be a finite number > 0.0 (got inf)."),  # trained with NaN weights
     (["agent.stddev_clip=nan"], "agent.stddev_clip must be >= 0.0 (got nan)."),  # NaN is in no range
     (["agent=td3bc", "offline.dataset=medium", "agent.td3bc.alpha=nan"], "agent.td3bc.alpha must be >= 0.0 (got nan)."),
     (["agent.objectives.taco=-1"], "agent.objectives.taco is a loss weight: a finite number >= 0, 0 disables it "

@@ -454,12 +454,13 @@ RANGES: dict[str, Bound] = {
                                   "env.action_repeat", "env.frame_stack", "train.frames", "train.eval_every_frames",
                                   "train.update_every_steps", "replay.capacity", "agent.feature_dim",
                                   "agent.hidden_dim", "agent.action_hidden_dim", "agent.latent_action_dim")},
-    "agent.lr": (0.0, False, math.inf, False),  # torch's optimizers refuse NaN; an infinite rate makes NaN weights
+    "agent.lr": (0.0, False),  # and finite (FINITE)
     "agent.stddev_clip": (0.0, True),
     "agent.discount": (0.0, True, 1.0, True),
     "agent.critic_target_tau": (0.0, True, 1.0, True),
     "env.image_size": (16, True),
 }
+FINITE = ("agent.lr",)  # an infinite learning rate trains NaN weights (NaN is in no range: torch's Adam refuses it)
 
 
 def _check_ranges(cfg: DictConfig) -> None:
@@ -474,6 +475,8 @@ def _check_ranges(cfg: DictConfig) -> None:
             raise ConfigError(f"{key} must be a number {bound_text(bound)} (got {value!r}).")
         if not in_bound(value, bound):
             raise ConfigError(f"{key} must be {bound_text(bound)} (got {value}).")
+        if key in FINITE and math.isinf(value):
+            raise ConfigError(f"{key} must be a finite number {bound_text(bound)} (got {value}).")
 
 
 def _check_learner(cfg: DictConfig) -> None:
