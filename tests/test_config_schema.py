@@ -287,6 +287,50 @@ def test_a_task_name_no_task_file_gives_is_refused_before_a_sweep_plans_it(tmp_p
     assert len(out.output.strip().splitlines()) == 1 and not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("overrides, message", [
+    # drqv2's spelling of the schedule: was OmegaConf's "Invalid type assigned: str is not a subclass of StdSchedule"
+    (["agent.stddev_schedule='linear(1.0,0.1,500000)'"],
+     "agent.stddev_schedule is a section (start, end, duration, step_scale): set its values one by one, e.g. "
+     "agent.stddev_schedule.start=... (got 'linear(1.0,0.1,500000)')."),
+    (["train.seed_frames=-5"], "train.seed_frames must be >= 0 (got -5)."),  # were accepted
+    (["train.explore_steps=-3"], "train.explore_steps must be >= 0 (got -3)."),
+    (["train.checkpoint_every_episodes=0"],  # a ZeroDivisionError at the end of the first episode
+     "train.checkpoint_every_episodes must be >= 1 (got 0)."),
+    (["env.max_episode_frames=0"], "env.max_episode_frames must be >= 1 (got 0)."),
+])
+def test_a_value_no_online_run_can_use_is_one_line(overrides, message):
+    from repro.config.compose import ConfigError, compose
+
+    with pytest.raises(ConfigError) as err:
+        compose(overrides)
+    assert str(err.value) == message
+
+
+def test_the_horizon_fits_the_episodes_the_replay_samples_from():
+    """An online run's replay samples transitions with max(K, nstep) steps ahead in their episode: with episodes
+    cut at env.max_episode_frames (profile=tiny: 50 agent steps) a longer horizon left nothing to sample, a traceback
+    at the first update after the run directory was written. The check agrees with the replay's boundary."""
+    import numpy as np
+
+    from repro.config.compose import ConfigError, compose
+    from repro.data.replay import ReplayBuffer
+
+    assert compose(["profile=tiny", "agent.K=50"]).agent.K == 50
+    with pytest.raises(ConfigError) as err:
+        compose(["profile=tiny", "agent.K=51"])
+    assert str(err.value) == ("agent.K=51 and agent.nstep=3 look further ahead than an episode of 50 agent steps "
+                              "(env.max_episode_frames=100 / env.action_repeat=2): each must be <= 50.")
+    with pytest.raises(ConfigError, match=r"^agent\.K=3 and agent\.nstep=51 look further ahead"):
+        compose(["profile=tiny", "agent.nstep=51"])
+    for horizon, samples in ((50, True), (51, False)):  # one episode of 50 agent steps, as the tiny profile's
+        buf = ReplayBuffer(100, (3, 4, 4), 2, frame_stack=3, nstep=1, K=horizon, discount=0.9, seed=0)
+        buf.start_episode(np.zeros((3, 4, 4), np.uint8))
+        for _ in range(50):
+            buf.add(np.zeros(2, np.float32), reward=0.0, discount=1.0, next_frame=np.zeros((3, 4, 4), np.uint8))
+        buf.end_episode()
+        assert buf.num_valid() > 0 if samples else buf.num_valid() == 0
+
+
 def test_a_run_holds_and_reads_its_own_learner_s_section_only():
     """A TACO run has no DT, CQL, IQL or TD3+BC section (issue 35): ``agent.dt.context=0`` is an unknown key there
     (as a plugin learner's would be), and one added with ``++`` (a sweep's override common to every agent) is dropped

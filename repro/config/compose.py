@@ -279,6 +279,12 @@ def validate(raw: DictConfig) -> DictConfig:
         if key and allowed is not None:  # OmegaConf's own message names Enum members, not the values to write
             value = OmegaConf.select(raw, str(key), default=None)
             raise ConfigError(f"{key}={value} is not one of {', '.join(allowed.values())}.") from None
+        section = _section_kind(schema, str(key)) if key else None
+        given = OmegaConf.select(raw, str(key), default=None) if key else None
+        if section is not None and not isinstance(given, DictConfig):
+            names = [f.name for f in dataclasses.fields(section)]
+            raise ConfigError(f"{key} is a section ({', '.join(names)}): set its values one by one, e.g. "
+                              f"{key}.{names[0]}=... (got {given!r}).") from None
         kind = _leaf_kind(schema, str(key)) if key and isinstance(exc, ValidationError) else None
         if kind is not None:  # in this module's words (_type_text), as the objectives' parameters are
             value = OmegaConf.select(raw, str(key), default=None)
@@ -315,15 +321,28 @@ def _section(node: Any) -> Any:
 _LEAF_KINDS = {BooleanNode: bool, IntegerNode: int, FloatNode: float, StringNode: str}
 
 
-def _leaf_kind(schema: DictConfig, key: str) -> Any:
-    """The type the schema gives the value at ``key`` (``int``, ``float | None`` ...), None when it is not a plain
-    value there."""
+def _node_at(schema: DictConfig, key: str) -> Any:
+    """The schema's node at ``key`` (sections the YAML fills as their types'), None when the schema has none."""
     node: Any = schema
     for part in key.split("."):
         node = _section(node)
         if not isinstance(node, DictConfig) or part not in node.keys():  # ``in`` is False for a MISSING value
             return None
         node = node._get_node(part)
+    return node
+
+
+def _section_kind(schema: DictConfig, key: str) -> type | None:
+    """The dataclass the schema types a section at ``key`` with (``agent.stddev_schedule``: StdSchedule), else None."""
+    node = _node_at(schema, key)
+    kind = node._metadata.ref_type if isinstance(node, DictConfig) else None
+    return kind if isinstance(kind, type) and dataclasses.is_dataclass(kind) else None
+
+
+def _leaf_kind(schema: DictConfig, key: str) -> Any:
+    """The type the schema gives the value at ``key`` (``int``, ``float | None`` ...), None when it is not a plain
+    value there."""
+    node = _node_at(schema, key)
     kind = _LEAF_KINDS.get(type(node))
     return None if kind is None else kind | None if node._is_optional() else kind
 
@@ -459,6 +478,10 @@ RANGES: dict[str, Bound] = {
     "agent.discount": (0.0, True, 1.0, True),
     "agent.critic_target_tau": (0.0, True, 1.0, True),
     "env.image_size": (16, True),
+    "train.seed_frames": (0, True),
+    "train.explore_steps": (0, True),
+    "train.checkpoint_every_episodes": (1, True),  # the loop takes the episode count modulo it
+    "env.max_episode_frames": (1, True),  # null: the suite's own episode length
 }
 FINITE = ("agent.lr",)  # an infinite learning rate trains NaN weights (NaN is in no range: torch's Adam refuses it)
 
@@ -479,6 +502,21 @@ def _check_ranges(cfg: DictConfig) -> None:
             raise ConfigError(f"{key} must be a finite number {bound_text(bound)} (got {value}).")
 
 
+def _check_horizon(cfg: DictConfig) -> None:
+    """An online run samples transitions with ``max(agent.K, agent.nstep)`` steps ahead in their episode
+    (repro/data/replay.py): with episodes cut at ``env.max_episode_frames`` (``profile=tiny``: 50 agent steps) a
+    longer horizon leaves nothing to sample, which failed at the first update, after the run directory was written.
+    The suites' own episode lengths (DMC 500 agent steps at action repeat 2) are not checked here."""
+    frames = cfg.env.max_episode_frames
+    if frames is None:
+        return
+    steps = max(1, int(frames) // int(cfg.env.action_repeat))
+    if max(cfg.agent.K, cfg.agent.nstep) > steps:
+        raise ConfigError(f"agent.K={cfg.agent.K} and agent.nstep={cfg.agent.nstep} look further ahead than an "
+                          f"episode of {steps} agent steps (env.max_episode_frames={frames} / env.action_repeat="
+                          f"{cfg.env.action_repeat}): each must be <= {steps}.")
+
+
 def _check_learner(cfg: DictConfig) -> None:
     """``offline.*`` is consistent with ``agent.learner`` (a registered learner, checked by :func:`_structure`)."""
     learner = str(cfg.agent.learner)
@@ -487,6 +525,7 @@ def _check_learner(cfg: DictConfig) -> None:
         if dataset is not None:
             raise ConfigError(f"offline.dataset is read by offline learners only (agent.learner={learner} "
                               "trains online); pick an offline agent, e.g. agent=bc.")
+        _check_horizon(cfg)
         return
     if dataset is not None and is_folder_value(str(dataset)):
         # A folder is identity (the run directory's dataset tag): one folder, one spelling. ds/x, ds/x/, ./ds/x
