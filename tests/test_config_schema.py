@@ -329,6 +329,17 @@ def test_the_horizon_fits_the_episodes_the_replay_samples_from():
             buf.add(np.zeros(2, np.float32), reward=0.0, discount=1.0, next_frame=np.zeros((3, 4, 4), np.uint8))
         buf.end_episode()
         assert buf.num_valid() > 0 if samples else buf.num_valid() == 0
+    with pytest.raises(ConfigError) as err:
+        compose(["profile=tiny", "replay.capacity=5"])
+    assert str(err.value) == ("replay.capacity=5 holds no transition 3 steps ahead (max(agent.K, agent.nstep)) "
+                              "with its stack of 3 frames: it must be >= 6.")
+    assert compose(["profile=tiny", "replay.capacity=6"]).replay.capacity == 6
+    for capacity, samples in ((6, True), (5, False)):  # K = nstep = 3, three frames stacked, as the default
+        buf = ReplayBuffer(capacity, (3, 4, 4), 2, frame_stack=3, nstep=3, K=3, discount=0.9, seed=0)
+        buf.start_episode(np.zeros((3, 4, 4), np.uint8))
+        for _ in range(50):
+            buf.add(np.zeros(2, np.float32), reward=0.0, discount=1.0, next_frame=np.zeros((3, 4, 4), np.uint8))
+        assert buf.num_valid() > 0 if samples else buf.num_valid() == 0
 
 
 def test_a_run_holds_and_reads_its_own_learner_s_section_only():

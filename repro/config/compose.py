@@ -504,9 +504,15 @@ def _check_ranges(cfg: DictConfig) -> None:
 
 def _check_horizon(cfg: DictConfig) -> None:
     """An online run samples transitions with ``max(agent.K, agent.nstep)`` steps ahead in their episode
-    (repro/data/replay.py): with episodes cut at ``env.max_episode_frames`` (``profile=tiny``: 50 agent steps) a
+    (repro/data/replay.py), which needs a replay of at least that many slots and the frame stack, and with episodes
+    cut at ``env.max_episode_frames`` (``profile=tiny``: 50 agent steps) a
     longer horizon leaves nothing to sample, which failed at the first update, after the run directory was written.
     The suites' own episode lengths (DMC 500 agent steps at action repeat 2) are not checked here."""
+    horizon, stack = max(cfg.agent.K, cfg.agent.nstep), cfg.env.frame_stack
+    if cfg.replay.capacity < horizon + stack:  # the ring holds a transition with its stack and horizon from there
+        raise ConfigError(f"replay.capacity={cfg.replay.capacity} holds no transition {horizon} steps ahead "
+                          f"(max(agent.K, agent.nstep)) with its stack of {stack} frames: it must be >= "
+                          f"{horizon + stack}.")
     frames = cfg.env.max_episode_frames
     if frames is None:
         return
