@@ -297,6 +297,10 @@ def test_a_task_name_no_task_file_gives_is_refused_before_a_sweep_plans_it(tmp_p
     (["train.checkpoint_every_episodes=0"],  # a ZeroDivisionError at the end of the first episode
      "train.checkpoint_every_episodes must be >= 1 (got 0)."),
     (["env.max_episode_frames=0"], "env.max_episode_frames must be >= 1 (got 0)."),
+    (["agent.objectives=5"],  # was OmegaConf's "Cannot assign int to Dict[str, float]"
+     "agent.objectives is a mapping: set its entries one by one, e.g. agent.objectives.<name>=... (got 5)."),
+    (["runtime.results_root="],  # `runtime.results_root=$UNSET` in a script: the runs landed in the working folder
+     "runtime.results_root is empty: name the folder the runs go under (default: runs)."),
 ])
 def test_a_value_no_online_run_can_use_is_one_line(overrides, message):
     from repro.config.compose import ConfigError, compose

@@ -281,6 +281,10 @@ def validate(raw: DictConfig) -> DictConfig:
             raise ConfigError(f"{key}={value} is not one of {', '.join(allowed.values())}.") from None
         section = _section_kind(schema, str(key)) if key else None
         given = OmegaConf.select(raw, str(key), default=None) if key else None
+        node = _node_at(schema, str(key)) if key else None
+        if section is None and isinstance(node, DictConfig) and not isinstance(given, DictConfig):
+            raise ConfigError(f"{key} is a mapping: set its entries one by one, e.g. {key}.<name>=... (got "
+                              f"{given!r}).") from None
         if section is not None and not isinstance(given, DictConfig):
             names = [f.name for f in dataclasses.fields(section)]
             raise ConfigError(f"{key} is a section ({', '.join(names)}): set its values one by one, e.g. "
@@ -300,6 +304,8 @@ def validate(raw: DictConfig) -> DictConfig:
         if not NAME_RE.match(value):
             raise ConfigError(f"{key}='{value}' may only contain letters, digits, '_', '.' and '-'.")
     check_option("task", str(cfg.task.name), " in task.name (a task file of repro/conf/task/ names each task)")
+    if not str(cfg.runtime.results_root).strip():  # `runtime.results_root=$UNSET`: runs would land in the cwd
+        raise ConfigError("runtime.results_root is empty: name the folder the runs go under (default: runs).")
     _check_objectives(cfg)
     _check_ranges(cfg)
     if cfg.seed < 0:
