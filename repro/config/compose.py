@@ -268,6 +268,7 @@ def compose_base() -> DictConfig:
 def validate(raw: DictConfig) -> DictConfig:
     """Resolve interpolations, check types against the schema (a closed set of values is a :class:`Choice`
     Enum there) and the values' ranges."""
+    schema: DictConfig | None = None
     try:
         OmegaConf.resolve(raw)
         schema = _structure(raw)
@@ -279,9 +280,10 @@ def validate(raw: DictConfig) -> DictConfig:
         if key and allowed is not None:  # OmegaConf's own message names Enum members, not the values to write
             value = OmegaConf.select(raw, str(key), default=None)
             raise ConfigError(f"{key}={value} is not one of {', '.join(allowed.values())}.") from None
-        section = _section_kind(schema, str(key)) if key else None
+        typed_key = str(key) if key and schema is not None else None  # None: it failed before the schema was made
+        section = _section_kind(schema, typed_key) if schema is not None and typed_key else None
         given = OmegaConf.select(raw, str(key), default=None) if key else None
-        node = _node_at(schema, str(key)) if key else None
+        node = _node_at(schema, typed_key) if schema is not None and typed_key else None
         if section is None and isinstance(node, DictConfig) and not isinstance(given, DictConfig):
             raise ConfigError(f"{key} is a mapping: set its entries one by one, e.g. {key}.<name>=... (got "
                               f"{given!r}).") from None
@@ -289,7 +291,8 @@ def validate(raw: DictConfig) -> DictConfig:
             names = [f.name for f in dataclasses.fields(section)]
             raise ConfigError(f"{key} is a section ({', '.join(names)}): set its values one by one, e.g. "
                               f"{key}.{names[0]}=... (got {given!r}).") from None
-        kind = _leaf_kind(schema, str(key)) if key and isinstance(exc, ValidationError) else None
+        kind = _leaf_kind(schema, typed_key) if schema is not None and typed_key and isinstance(exc, ValidationError) \
+            else None
         if kind is not None:  # in this module's words (_type_text), as the objectives' parameters are
             value = OmegaConf.select(raw, str(key), default=None)
             raise ConfigError(f"{key} must be {_type_text(kind)} (got {value!r}).") from None
@@ -510,10 +513,10 @@ def _check_ranges(cfg: DictConfig) -> None:
 
 def _check_horizon(cfg: DictConfig) -> None:
     """An online run samples transitions with ``max(agent.K, agent.nstep)`` steps ahead in their episode
-    (repro/data/replay.py), which needs a replay of at least that many slots and the frame stack, and with episodes
-    cut at ``env.max_episode_frames`` (``profile=tiny``: 50 agent steps) a
-    longer horizon leaves nothing to sample, which failed at the first update, after the run directory was written.
-    The suites' own episode lengths (DMC 500 agent steps at action repeat 2) are not checked here."""
+    (repro/data/replay.py). That needs a replay of at least that many slots plus the frame stack, and episodes at
+    least that long where ``env.max_episode_frames`` cuts them (``profile=tiny``: 50 agent steps); otherwise nothing
+    can be sampled, which failed at the first update, after the run directory was written. The suites' own episode
+    lengths (DMC: 500 agent steps at action repeat 2) are not known here and not checked."""
     horizon, stack = max(cfg.agent.K, cfg.agent.nstep), cfg.env.frame_stack
     if cfg.replay.capacity < horizon + stack:  # the ring holds a transition with its stack and horizon from there
         raise ConfigError(f"replay.capacity={cfg.replay.capacity} holds no transition {horizon} steps ahead "
@@ -523,7 +526,7 @@ def _check_horizon(cfg: DictConfig) -> None:
     if frames is None:
         return
     steps = max(1, int(frames) // int(cfg.env.action_repeat))
-    if max(cfg.agent.K, cfg.agent.nstep) > steps:
+    if horizon > steps:
         raise ConfigError(f"agent.K={cfg.agent.K} and agent.nstep={cfg.agent.nstep} look further ahead than an "
                           f"episode of {steps} agent steps (env.max_episode_frames={frames} / env.action_repeat="
                           f"{cfg.env.action_repeat}): each must be <= {steps}.")
