@@ -237,8 +237,7 @@ def _check_objective_key(override: str) -> None:
         raise ConfigError(f"{key.lstrip('+~')} is not in the agent file's config: add it with +{key}={value}.")
 
 
-_BASE: DictConfig | None = None
-_CHOICES: dict[tuple[str, ...], DictConfig] = {}
+_CHOICES: dict[tuple[str, ...], DictConfig] = {}  # agent/task/profile overrides -> their config (() the base)
 _GROUPS = ("agent", "task", "profile")
 
 
@@ -247,22 +246,19 @@ def _compose_choices(overrides: list[str]) -> DictConfig:
     a misspelt key is matched against are the chosen agent file's (``agent=td3bc agent.alphaa=1`` suggests TD3+BC's
     keys, not the default agent's). The base config when those choices alone do not compose."""
     choices = tuple(ov for ov in overrides if ov.partition("=")[0].lstrip("+~") in _GROUPS)
-    if not choices:
-        return compose_base()
     if choices not in _CHOICES:
         try:
             _CHOICES[choices] = compose(list(choices))
         except ConfigError:
+            if not choices:  # the base itself does not compose: nothing to fall back to
+                raise
             return compose_base()
     return _CHOICES[choices]
 
 
 def compose_base() -> DictConfig:
     """The config with no overrides (cached), for key suggestions."""
-    global _BASE
-    if _BASE is None:
-        _BASE = compose([])
-    return _BASE
+    return _compose_choices([])
 
 
 def validate(raw: DictConfig) -> DictConfig:
@@ -280,22 +276,20 @@ def validate(raw: DictConfig) -> DictConfig:
         if key and allowed is not None:  # OmegaConf's own message names Enum members, not the values to write
             value = OmegaConf.select(raw, str(key), default=None)
             raise ConfigError(f"{key}={value} is not one of {', '.join(allowed.values())}.") from None
-        typed_key = str(key) if key and schema is not None else None  # None: it failed before the schema was made
-        section = _section_kind(schema, typed_key) if schema is not None and typed_key else None
+        # what the schema holds at the key (None when the error came before the schema was made: an interpolation)
+        node = _node_at(schema, str(key)) if key and schema is not None else None
         given = OmegaConf.select(raw, str(key), default=None) if key else None
-        node = _node_at(schema, typed_key) if schema is not None and typed_key else None
-        if section is None and isinstance(node, DictConfig) and not isinstance(given, DictConfig):
-            raise ConfigError(f"{key} is a mapping: set its entries one by one, e.g. {key}.<name>=... (got "
-                              f"{given!r}).") from None
-        if section is not None and not isinstance(given, DictConfig):
+        if isinstance(node, DictConfig) and not isinstance(given, DictConfig):
+            section = node._metadata.ref_type
+            if not (isinstance(section, type) and dataclasses.is_dataclass(section)):
+                raise ConfigError(f"{key} is a mapping: set its entries one by one, e.g. {key}.<name>=... (got "
+                                  f"{given!r}).") from None
             names = [f.name for f in dataclasses.fields(section)]
             raise ConfigError(f"{key} is a section ({', '.join(names)}): set its values one by one, e.g. "
                               f"{key}.{names[0]}=... (got {given!r}).") from None
-        kind = _leaf_kind(schema, typed_key) if schema is not None and typed_key and isinstance(exc, ValidationError) \
-            else None
+        kind = _leaf_kind(node) if isinstance(exc, ValidationError) else None
         if kind is not None:  # in this module's words (_type_text), as the objectives' parameters are
-            value = OmegaConf.select(raw, str(key), default=None)
-            raise ConfigError(f"{key} must be {_type_text(kind)} (got {value!r}).") from None
+            raise ConfigError(f"{key} must be {_type_text(kind)} (got {given!r}).") from None
         first = str(exc).strip().splitlines()[0]
         raise ConfigError(f"{key}: {first}" if key else first) from None
     missing = sorted(OmegaConf.missing_keys(cfg))  # the schema has types only: the YAML gives every value
@@ -341,17 +335,8 @@ def _node_at(schema: DictConfig, key: str) -> Any:
     return node
 
 
-def _section_kind(schema: DictConfig, key: str) -> type | None:
-    """The dataclass the schema types a section at ``key`` with (``agent.stddev_schedule``: StdSchedule), else None."""
-    node = _node_at(schema, key)
-    kind = node._metadata.ref_type if isinstance(node, DictConfig) else None
-    return kind if isinstance(kind, type) and dataclasses.is_dataclass(kind) else None
-
-
-def _leaf_kind(schema: DictConfig, key: str) -> Any:
-    """The type the schema gives the value at ``key`` (``int``, ``float | None`` ...), None when it is not a plain
-    value there."""
-    node = _node_at(schema, key)
+def _leaf_kind(node: Any) -> Any:
+    """The type a schema node gives its value (``int``, ``float | None`` ...), None when it is not a plain value."""
     kind = _LEAF_KINDS.get(type(node))
     return None if kind is None else kind | None if node._is_optional() else kind
 
@@ -366,7 +351,7 @@ def _check_flags(schema: DictConfig, raw: DictConfig, prefix: str = "") -> None:
         elif isinstance(node, BooleanNode) and given is not None and not isinstance(given, DictConfig):
             value = given._value()
             if isinstance(value, (int, float)) and not isinstance(value, bool):
-                raise ConfigError(f"{prefix}{key} must be true or false (got {value!r}).")
+                raise ConfigError(f"{prefix}{key} must be {_type_text(_leaf_kind(node))} (got {value!r}).")
 
 
 def _check_objectives(cfg: DictConfig) -> None:
@@ -430,19 +415,13 @@ def objective_params(name: str, given: Any = None) -> Any:
         return None
     hints = typing.get_type_hints(kind)
     node = OmegaConf.structured(kind)
+    _check_flags(node, OmegaConf.create(dict(given)), f"{where}.")
     for key, value in given.items():
         try:
-            if _is_bool(hints[key]) and isinstance(value, (int, float)) and not isinstance(value, bool):
-                raise ValidationError("a number for a flag")  # OmegaConf would read 2 as true and 0 as false
             node[key] = value
         except OmegaConfBaseException:
             raise ConfigError(f"{where}.{key} must be {_type_text(hints[key])} (got {value!r}).") from None
     return OmegaConf.to_object(node)
-
-
-def _is_bool(kind: Any) -> bool:
-    """Whether a parameter's type is ``bool`` or ``bool | None``."""
-    return kind is bool or set(typing.get_args(kind)) == {bool, type(None)}
 
 
 def _structure(raw: DictConfig) -> DictConfig:
