@@ -11,15 +11,17 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from analysis.cache import lookup
+from repro.runs.runformat import read_done
+from repro.train import action_tsne
+from repro.train.action_tsne import N_CENTROIDS, TsneResult, make_actions, perplexity_for
 
-N_CENTROIDS = 4
+__all__ = ["N_CENTROIDS", "TsneResult", "make_actions", "run_tsne", "tsne_2d", "tsne_for_context"]
 CLUSTER_THRESHOLD = 0.5  # silhouette at or above this counts as "forms clusters" (claim tsne_clusters)
 _PREFIXES = ("agent.action_encoder.step.", "action_encoder.step.", "step.")
 
@@ -73,74 +75,22 @@ def load_step_mlp(checkpoint: Path):
     return build_step_mlp(find_action_encoder_state(ckpt))
 
 
-def make_actions(true_dim: int, distracting_dims: int, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """4 centroids uniform in [-1, 1]^true_dim (zero in the distracting dims), n copies each with N(0, 1)
-    noise added to the distracting dims. Returns (actions (4n x (true+distracting)), labels)."""
-    rng = np.random.default_rng(seed)
-    centroids = rng.uniform(-1.0, 1.0, size=(N_CENTROIDS, true_dim))
-    blocks = []
-    for c in centroids:
-        noise = rng.standard_normal((n, distracting_dims))
-        blocks.append(np.hstack([np.repeat(c[None, :], n, axis=0), noise]))
-    labels = np.repeat(np.arange(N_CENTROIDS), n)
-    return np.vstack(blocks).astype(np.float32), labels
-
-
 def tsne_2d(x: np.ndarray, seed: int = 0, max_iter: int = 1000) -> np.ndarray:
-    """2-D t-SNE (scikit-learn, PCA init, perplexity 30 or less for small inputs); the same points, seed and
-    iterations reuse the command's cache (analysis/cache.py: the embedding depends on no run but the checkpoint
-    that encoded ``x``)."""
-    from sklearn.manifold import TSNE
-
+    """2-D t-SNE as a run makes it (:func:`repro.train.action_tsne.tsne_2d`); the same points, seed and iterations
+    reuse the command's cache (analysis/cache.py: the embedding depends on no run but the checkpoint that encoded
+    ``x``)."""
     x = np.ascontiguousarray(x)
-    perplexity = min(30.0, (len(x) - 1) / 3.0)
-    key = hashlib.sha1(f"{x.dtype}|{x.shape}|{seed}|{max_iter}|{perplexity!r}".encode() + x.tobytes()).hexdigest()
-    return lookup("tsne", key, lambda: TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed,
-                                            max_iter=max_iter).fit_transform(x))
-
-
-@dataclass
-class TsneResult:
-    """Embeddings and cluster scores; ``latent`` fields are None when no encoder was given."""
-
-    labels: np.ndarray
-    raw_2d: np.ndarray
-    latent_2d: np.ndarray | None
-    silhouette_raw_2d: float
-    silhouette_latent_2d: float | None
-    silhouette_raw: float
-    silhouette_latent: float | None
-    n_per_centroid: int
-    true_dim: int
-    distracting_dims: int
+    key = hashlib.sha1(f"{x.dtype}|{x.shape}|{seed}|{max_iter}|{perplexity_for(len(x))!r}".encode()
+                       + x.tobytes()).hexdigest()
+    return lookup("tsne", key, lambda: action_tsne.tsne_2d(x, seed, max_iter))
 
 
 def run_tsne(true_dim: int, distracting_dims: int, mlp=None, n: int = 1000, seed: int = 0,
              max_iter: int = 1000) -> TsneResult:
-    """Embed raw (and, with ``mlp``, latent) actions and score the clusters."""
-    from sklearn.metrics import silhouette_score
-
-    actions, labels = make_actions(true_dim, distracting_dims, n, seed)
-    raw_2d = tsne_2d(actions, seed, max_iter)
-    latent = latent_2d = None
-    if mlp is not None:
-        import torch
-
-        with torch.no_grad():
-            latent = mlp(torch.as_tensor(actions)).numpy()
-        latent_2d = tsne_2d(latent, seed, max_iter)
-    return TsneResult(
-        labels=labels,
-        raw_2d=raw_2d,
-        latent_2d=latent_2d,
-        silhouette_raw_2d=float(silhouette_score(raw_2d, labels)),
-        silhouette_latent_2d=None if latent_2d is None else float(silhouette_score(latent_2d, labels)),
-        silhouette_raw=float(silhouette_score(actions, labels)),
-        silhouette_latent=None if latent is None else float(silhouette_score(latent, labels)),
-        n_per_centroid=n,
-        true_dim=true_dim,
-        distracting_dims=distracting_dims,
-    )
+    """Embed raw (and, with ``mlp``: the encoder's per-step MLP, latent) actions and score the clusters, as a run
+    does (:func:`repro.train.action_tsne.embed`) with this command's cached t-SNE."""
+    latent = None if mlp is None else action_tsne.encoder_latent(mlp)
+    return action_tsne.embed(true_dim, distracting_dims, latent, n=n, seed=seed, max_iter=max_iter, embed_2d=tsne_2d)
 
 
 def find_tsne_run(runs) -> Any:
@@ -162,18 +112,24 @@ def find_tsne_run(runs) -> Any:
 
 
 def tsne_for_context(ctx) -> tuple[TsneResult, dict[str, Any]]:
-    """The F6 t-SNE for a :class:`analysis.context.Context` (cached in ``ctx.cache``, and in the command's cache
-    under the checkpoint's path, size and modification time and the settings: an unchanged checkpoint is neither
-    loaded nor scored again).
+    """The F6 t-SNE for a :class:`analysis.context.Context` (cached in ``ctx.cache``). The run's own embedding
+    (``tsne.npz``, written at its final evaluation: :mod:`repro.train.action_tsne`) when it was made at this
+    command's settings from the encoder the run ended with (its frame is the one in DONE); otherwise embedded here
+    from the checkpoint, kept in the command's cache under the checkpoint's path, size and modification time and
+    the settings (an unchanged checkpoint is neither loaded nor scored again).
 
     Returns the result and info: ``run_id`` (None if no trained run), ``reason`` when the latent panel
-    is missing.
+    is missing, ``source``: ``"run"`` (the run's tsne.npz, ``frame`` its encoder's frame) or ``"report"``.
     """
     if "tsne" in ctx.cache:
         return ctx.cache["tsne"]
     run = find_tsne_run(ctx.results.runs)
     settings = (ctx.tsne_n, ctx.seed, ctx.tsne_iter)
-    if run is None:
+    saved = None if run is None else saved_tsne(ctx.results.root / run["run_id"], run, settings)
+    if saved is not None:
+        value: tuple[TsneResult, dict[str, Any]] = (
+            saved.result, {"run_id": run["run_id"], "reason": None, "source": "run", "frame": saved.frame})
+    elif run is None:
         value = _tsne_of(None, None, settings)
     else:
         ckpt = ctx.results.root / run["run_id"] / "checkpoint.pt"
@@ -189,12 +145,27 @@ def tsne_for_context(ctx) -> tuple[TsneResult, dict[str, Any]]:
     return value
 
 
+def saved_tsne(run_dir: Path, run: Any, settings: tuple[int, int, int]) -> action_tsne.SavedTsne | None:
+    """The run's tsne.npz when it holds both panels at ``settings`` (n, seed, iterations) for the run's
+    distracting dims and was made at the frame the run finished at (DONE); None otherwise (an extended run's older
+    embedding, another --tsne-n or --seed, a run that is not done)."""
+    saved = action_tsne.read_tsne(run_dir)
+    if saved is None or saved.result.latent_2d is None or not saved.made_with(*settings):
+        return None
+    if saved.result.distracting_dims != int(run["distracting_dims"]):
+        return None
+    done = read_done(run_dir)
+    if not done or done.get("frame") != saved.frame:
+        return None
+    return saved
+
+
 def _tsne_of(run: Any, ckpt: Path | None, settings: tuple[int, int, int]) -> tuple[TsneResult, dict[str, Any]]:
     """Embed and score for ``run`` (None: the raw panel only, the paper's cheetah_run with 20 distracting dims)."""
     from analysis.identity import action_dim
 
     n, seed, max_iter = settings
-    info: dict[str, Any] = {"run_id": None, "reason": None}
+    info: dict[str, Any] = {"run_id": None, "reason": None, "source": "report"}
     mlp, true_dim, distract = None, 6, 20  # the paper's cheetah_run (|A| = 6) + 20 distracting dims
     if run is None or ckpt is None:
         info["reason"] = ("no trained TACO run with distracting action dims (experiment 'tsne': cheetah_run, "

@@ -34,8 +34,10 @@ from repro.runs.rundir import cpu_model
 REPO = Path(__file__).resolve().parents[1]
 # save_frames: every done online run keeps its final evaluation's frames (frames.npz), as train.save_frames (on by
 # default) makes a trained run do; F13 reads them instead of rendering random-action frames
+# save_tsne: the t-SNE run (distracting action dims) keeps F6's embedding of its final encoder (tsne.npz), as a trained
+# run with distracting dims writes it at its final evaluation (repro/train/action_tsne.py); F6 reads it
 PAPER_SCALE = {"frames": 1_000_000, "eval_every": 10_000, "train_rows": 1000, "save_frames": True,
-               "updates": 100_000, "eval_every_updates": 10_000}
+               "save_tsne": True, "updates": 100_000, "eval_every_updates": 10_000}
 # name: (arguments, output folder). ``report-again`` reruns the report into the same folder: the incremental report
 # on an unchanged tree (analysis/cache.py); ``report-batch`` the same after a batch of runs changed (BATCH: the last
 # evaluation of one cell's six seeds one point higher; restored afterwards); ``plan-after-report`` and

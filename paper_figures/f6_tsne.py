@@ -35,11 +35,13 @@ def render(ctx: Context) -> ArtifactResult:
         banner(fig, "no trained TACO action encoder found: raw actions only")
     png = save_figure(fig, ctx, "F6")
     src = f"the action encoder of run {info['run_id']}" if info["run_id"] else "no trained encoder (latent panel empty)"
+    made = (f"embedded by the run at its final evaluation (frame {info['frame']:,}; its tsne.npz)"
+            if info.get("source") == "run" else "embedded by this command")
     caption = (
         f"t-SNE (scikit-learn, PCA init, random state {ctx.seed}) of {4 * res.n_per_centroid} actions: 4 centroids "
         f"uniform in the true {res.true_dim}-D action space, {res.n_per_centroid} copies each with standard Gaussian "
         f"noise in the {res.distracting_dims} distracting dimensions; left raw actions, right their latent actions "
-        f"from {src}. Colours: centroid. Cluster quality: silhouette coefficient of the centroid labels "
+        f"from {src}, {made}. Colours: centroid. Cluster quality: silhouette coefficient of the centroid labels "
         f"(≥ {CLUSTER_THRESHOLD} counts as 'forms clusters')."
     )
     raw = pd.DataFrame(

@@ -219,6 +219,21 @@ def write_encoder_checkpoint(run: Path, true_dim: int = 6, distracting: int = 20
     torch.save({"agent": {"action_encoder": state}}, run / runformat.CHECKPOINT)
 
 
+def write_run_tsne(run: Path, n: int | None = None) -> Path:
+    """The run's tsne.npz as a trained run writes it at its final evaluation (repro/train/action_tsne.py), from the
+    action encoder of its checkpoint, at the frame of its DONE; ``n`` copies per centroid instead of the paper's."""
+    from analysis.tsne import load_step_mlp
+    from repro.train import action_tsne
+
+    mlp = load_step_mlp(run / runformat.CHECKPOINT)
+    frame = int((rundir.read_done(run) or {})["frame"])
+    distracting = int(OmegaConf.load(run / runformat.CONFIG).env.distracting_dims)
+    if n is None:
+        return action_tsne.save_final_tsne(run, mlp, mlp[0].in_features, distracting, frame)
+    result = action_tsne.embed(mlp[0].in_features - distracting, distracting, action_tsne.encoder_latent(mlp), n=n)
+    return action_tsne.write_tsne(run, result, frame, action_tsne.PAPER_SEED, action_tsne.PAPER_ITER)
+
+
 # Per-seed offsets: seeds 0, 1, 2 score final - 10, final, final + 10 (mean final, std 10).
 OFFSETS = (-10.0, 0.0, 10.0)
 
@@ -245,7 +260,8 @@ def _scaled_seeds(scale: dict[str, Any], root: Path, n: int, spread: float = 1.0
 def full_coverage_root(root: Path, seeds: int = 2, **scale: Any) -> Path:
     """Runs for every artifact; returns ``root``. Values are chosen so that the claims hold. ``scale``: write_run's
     budget and log-size arguments (``frames``, ``eval_every``, ``train_rows``, ``save_frames``, ``updates``,
-    ``eval_every_updates``) for every run, e.g. the paper's scale in benchmarks/report_speed.py."""
+    ``eval_every_updates``) for every run, e.g. the paper's scale in benchmarks/report_speed.py; ``save_tsne``: the
+    t-SNE run writes its tsne.npz at the paper's settings, as a trained run does (about 25 s)."""
     _seeds = functools.partial(_scaled_seeds, scale)
     write_run = functools.partial(_scaled_run, scale)
     main = {"TACO": 1.4, "DrQ-v2": 1.0, "A-LIX": 0.9}
@@ -300,6 +316,8 @@ def full_coverage_root(root: Path, seeds: int = 2, **scale: Any) -> Path:
     tsne = write_run(root, experiment="tsne", algo="taco", task="cheetah_run", seed=0, distracting_dims=20, final=500,
                      latent_action_dim=8)
     write_encoder_checkpoint(tsne)
+    if scale.get("save_tsne"):
+        write_run_tsne(tsne)
     for algo, b, fps in (("taco", 1024, 10.0), ("taco", 512, 18.0), ("taco", 256, 26.0), ("drqv2", 256, 36.0)):
         write_run(root, experiment="speed", algo=algo, task="quadruped_run", seed=0, batch_size=b, fps=fps,
                   variant=f"bs{b}", final=100)

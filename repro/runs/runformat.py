@@ -27,6 +27,7 @@ TRAIN = "train.csv"  # one row per training episode: TRAIN_COLUMNS + the learner
 CHECKPOINT = "checkpoint.pt"  # state for resume (atomic replace)
 DONE = "DONE"  # written last: the run reached its budget
 FRAMES = "frames.npz"  # the final evaluation's first episode (trajectory figures)
+TSNE = "tsne.npz"  # the final action encoder's F6 t-SNE embedding (runs with distracting action dims)
 REPLAY = "replay"  # folder of replay episodes, so that a resume does not rewrite the buffer
 TB = "tb"  # runtime.tensorboard: TensorBoard event files mirroring eval.csv and train.csv (repro/runs/tblog.py)
 WANDB = "wandb"  # runtime.wandb: the W&B run id and the offline W&B run folder mirroring the CSVs (repro/runs/wblog.py)

@@ -30,6 +30,7 @@ from repro.runs.logger import RunLogger
 from repro.runs.runformat import TRAIN
 from repro.runs.video import save_frames
 from repro.runs.wblog import WandbRun
+from repro.train.action_tsne import save_final_tsne
 from repro.train.build import (
     batch_source,
     build_agent,
@@ -135,7 +136,8 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
         loop = OnlineLoop(rc.train, rc.seed, rc.env.action_repeat, env, eval_env, agent, buffer, logger, episodes,
                           lambda s: save_checkpoint(ckpt_file, s), progress=bar.update if bar else None,
                           save_frames=partial(save_frames, path), recorder=recorder,
-                          videos=eval_videos(rc, path, "frame"), budget_ends=ends)
+                          videos=eval_videos(rc, path, "frame"), budget_ends=ends,
+                          final_embedding=final_embedding(rc, path, spec.action_dim))
 
         def resumed(saved: dict) -> None:
             episodes.prune({rec[0] for rec in saved["buffer"]["episodes"]})
@@ -149,6 +151,20 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
     finally:
         env.close()
         eval_env.close()
+
+
+def final_embedding(rc: RunConfig, path: Path, action_dim: int) -> Callable[[OnlineLearner, int], None] | None:
+    """A run with distracting action dims writes F6's embedding of its final action encoder (tsne.npz); None for the
+    others (and for a learner without an action encoder, which the callable skips)."""
+    distracting = int(rc.env.distracting_dims)
+    if distracting <= 0:
+        return None
+
+    def save(agent: OnlineLearner, frame: int) -> None:
+        if agent.action_encoder is not None:
+            save_final_tsne(path, agent.action_encoder, action_dim, distracting, frame)
+
+    return save
 
 
 def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, state: dict | None,

@@ -67,7 +67,8 @@ class OnlineLoop:
                  buffer: ReplayBuffer, logger: RunLogger, episodes: EpisodeStore,
                  save_checkpoint: Callable[[dict], None], progress=None,
                  save_frames: Callable[[np.ndarray], None] | None = None, recorder: Recorder | None = None,
-                 videos: EvalVideos | None = None, budget_ends: tuple[int, ...] = ()):
+                 videos: EvalVideos | None = None, budget_ends: tuple[int, ...] = (),
+                 final_embedding: Callable[[OnlineLearner, int], None] | None = None):
         self.cfg, self.seed, self.action_repeat = cfg, seed, action_repeat
         self.env, self.eval_env, self.agent, self.buffer = env, eval_env, agent, buffer
         self.logger, self.episodes, self._save = logger, episodes, save_checkpoint
@@ -75,6 +76,8 @@ class OnlineLoop:
         self.save_frames = save_frames
         self.recorder = recorder  # runtime.record: keeps every episode and a policy snapshot per evaluation
         self.videos = videos  # train.save_video: an MP4 of the first evaluation episode
+        # F6's embedding of the final action encoder (tsne.npz: repro/train/action_tsne.py), at the final evaluation
+        self.final_embedding = final_embedding
         # Budgets (frames) this run reached before it was extended: it evaluates there again, as it did when it
         # stopped there (an evaluation draws no training random number, so the trajectory is unchanged).
         self.budget_end_steps = frozenset(self._steps(f) for f in budget_ends)
@@ -127,6 +130,8 @@ class OnlineLoop:
             if self.recorder is not None:
                 assert self.last_eval is not None  # set by _evaluate
                 self.recorder.snapshot(self.agent, self.counters.step, self.frame, self.last_eval)
+            if final and self.final_embedding is not None:
+                self.final_embedding(self.agent, self.frame)
         finally:
             self._eval_seconds += time.time() - started
 
