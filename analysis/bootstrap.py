@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
@@ -251,17 +252,55 @@ def resample(arrays: Sequence[np.ndarray], indices: Sequence[np.ndarray]) -> lis
 def index_chunks(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, seed: int,
                  chunk_elements: int = CHUNK_ELEMENTS) -> Iterator[list[np.ndarray]]:
     """The bootstrap indices of ``reps`` repetitions of ``arrays`` (their shapes), chunk by chunk: each chunk one
-    (repetitions, runs, tasks) array per matrix (:meth:`IndexStream.take`)."""
+    (repetitions, runs, tasks) int64 array per matrix (:meth:`IndexStream.take`). They depend only on the shapes,
+    the random state and the chunking, so a command draws them once per such key (:data:`_INDICES`): a report asks
+    for the same shapes dozens of times (every cell of six seeds, every learning-curve point)."""
     stream = IndexStream([a.shape for a in arrays], seed)
     per_rep = stream.per_rep * max(1, stat.cost if stat.cost else _pairs(arrays))
     chunk = max(1, chunk_elements // per_rep)
     if stream.mixed:
         chunk = max(1, min(chunk, MIXED_WORDS // max(1, stream.words_per_rep)))
+    key = (tuple(stream.shapes), int(seed), int(reps), chunk)
+    kept = _INDICES.get(key)
+    if kept is not None:
+        _INDICES.move_to_end(key)
+        for part in kept:
+            yield [idx.astype(np.int64) for idx in part]
+        return
+    drawn: list[list[np.ndarray]] = []
     done = 0
     while done < reps:
         b = min(chunk, reps - done)
-        yield stream.take(b)
+        part = stream.take(b)
+        drawn.append(part)
+        yield part
         done += b
+    _INDICES.keep(key, drawn, max(n for n, _ in stream.shapes))
+
+
+class _IndexMemo(OrderedDict):
+    """Drawn bootstrap indices by (shapes, random state, repetitions, chunk), the least recently used dropped beyond
+    :data:`INDEX_MEMO_BYTES`; each kept in the smallest unsigned type that holds its run numbers."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__()
+        self.limit, self.bytes = limit, 0
+
+    def keep(self, key: tuple, chunks: list[list[np.ndarray]], runs: int) -> None:
+        small = np.min_scalar_type(max(runs - 1, 0))
+        compact = [[idx.astype(small) for idx in part] for part in chunks]
+        size = sum(idx.nbytes for part in compact for idx in part)
+        if size > self.limit // 4:
+            return
+        self[key] = compact
+        self.bytes += size
+        while self.bytes > self.limit:
+            _, old = self.popitem(last=False)
+            self.bytes -= sum(idx.nbytes for part in old for idx in part)
+
+
+INDEX_MEMO_BYTES = 64_000_000  # indices kept for reuse within one process (at most a quarter of it per key)
+_INDICES = _IndexMemo(INDEX_MEMO_BYTES)
 
 
 def values_from(stat: Statistic, arrays: Sequence[np.ndarray], chunks: Iterable[list[np.ndarray]]) -> np.ndarray:

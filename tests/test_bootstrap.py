@@ -121,3 +121,31 @@ def test_mean_intervals_of_many_data_sets_are_rliables_within_rounding():
             np.testing.assert_allclose(fast[:, i], exact[:, 0], rtol=1e-12, atol=1e-12)
         if runs > 1:  # one run: nothing to draw
             assert not np.allclose(bs.mean_intervals_many(mats, reps, 12), fast)  # the random state is used
+
+
+def test_indices_are_drawn_once_per_shapes_and_reused_equal(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The second interval of the same shapes, random state and repetitions draws nothing and resamples with the
+    indices a fresh stream draws (so its interval is rliable's too); other shapes or another state draw again; an
+    entry over a quarter of the memo's bytes is not kept."""
+    monkeypatch.setattr(bs, "_INDICES", bs._IndexMemo(bs.INDEX_MEMO_BYTES))
+    fresh = bs.IndexStream([(6, 3)], 5).take(3000)[0]
+    takes: list[tuple] = []
+    real_take = bs.IndexStream.take
+    monkeypatch.setattr(bs.IndexStream, "take", lambda self, reps: takes.append(tuple(self.shapes)) or
+                        real_take(self, reps))
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=(6, 3)), rng.normal(size=(6, 3))
+    first = bs.interval_estimates(bs.MEAN, [x], 3000, seed=5)
+    drawn = len(takes)
+    second = bs.interval_estimates(bs.MEAN, [y], 3000, seed=5)
+    assert drawn >= 1 and len(takes) == drawn  # nothing drawn again
+    assert np.array_equal(second[1], bs.percentile_cis(bs.MEAN.vector(y[fresh, np.arange(3)])))
+    assert not np.array_equal(first[1], second[1])
+    _equal(second, _rliable(y, lambda s: np.array([metrics.aggregate_mean(s)]), reps=3000, seed=5))
+    bs.interval_estimates(bs.MEAN, [y], 3000, seed=6)
+    bs.interval_estimates(bs.MEAN, [y[:5]], 3000, seed=5)
+    assert len(takes) == drawn + 2
+    monkeypatch.setattr(bs, "_INDICES", bs._IndexMemo(4 * 3000 * 18 - 1))  # a quarter is one byte short
+    bs.interval_estimates(bs.MEAN, [x + 1.0], 3000, seed=5)
+    bs.interval_estimates(bs.MEAN, [x + 2.0], 3000, seed=5)
+    assert len(takes) == drawn + 4
