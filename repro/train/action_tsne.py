@@ -31,8 +31,8 @@ PAPER_SEED = 0  # random state of the actions and of t-SNE (the report's default
 PAPER_ITER = 1000  # t-SNE iterations (scikit-learn's default)
 TSNE_FORMAT = 1  # the layout of tsne.npz below
 
-__all__ = ["N_CENTROIDS", "PAPER_ITER", "PAPER_N", "PAPER_SEED", "TsneResult", "embed", "make_actions",
-           "read_tsne", "tsne_2d", "write_tsne"]
+__all__ = ["N_CENTROIDS", "PAPER_ITER", "PAPER_N", "PAPER_SEED", "SavedTsne", "TsneResult", "embed", "encoder_latent",
+           "make_actions", "perplexity_for", "read_tsne", "save_final_tsne", "tsne_2d", "write_tsne"]
 
 
 @dataclass
