@@ -267,36 +267,42 @@ def index_chunks(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, seed:
         for part in kept:
             yield [idx.astype(np.int64) for idx in part]
         return
-    drawn: list[list[np.ndarray]] = []
+    # kept in the smallest unsigned type of the run numbers, each chunk as it is drawn, when the whole fits the memo
+    small = np.min_scalar_type(max(n for n, _ in stream.shapes) - 1)
+    drawn: list[list[np.ndarray]] | None = [] if _INDICES.fits(reps * stream.per_rep * small.itemsize) else None
     done = 0
     while done < reps:
         b = min(chunk, reps - done)
         part = stream.take(b)
-        drawn.append(part)
+        if drawn is not None:
+            drawn.append([idx.astype(small) for idx in part])
         yield part
         done += b
-    _INDICES.keep(key, drawn, max(n for n, _ in stream.shapes))
+    if drawn is not None:
+        _INDICES.keep(key, drawn)
 
 
 class _IndexMemo(OrderedDict):
     """Drawn bootstrap indices by (shapes, random state, repetitions, chunk), the least recently used dropped beyond
-    :data:`INDEX_MEMO_BYTES`; each kept in the smallest unsigned type that holds its run numbers."""
+    :data:`INDEX_MEMO_BYTES`; an entry over a quarter of it is not kept."""
 
     def __init__(self, limit: int) -> None:
         super().__init__()
         self.limit, self.bytes = limit, 0
 
-    def keep(self, key: tuple, chunks: list[list[np.ndarray]], runs: int) -> None:
-        small = np.min_scalar_type(max(runs - 1, 0))
-        compact = [[idx.astype(small) for idx in part] for part in chunks]
-        size = sum(idx.nbytes for part in compact for idx in part)
-        if size > self.limit // 4:
-            return
-        self[key] = compact
-        self.bytes += size
+    def fits(self, size: int) -> bool:
+        return size <= self.limit // 4
+
+    def keep(self, key: tuple, chunks: list[list[np.ndarray]]) -> None:
+        self[key] = chunks
+        self.bytes += _nbytes(chunks)
         while self.bytes > self.limit:
             _, old = self.popitem(last=False)
-            self.bytes -= sum(idx.nbytes for part in old for idx in part)
+            self.bytes -= _nbytes(old)
+
+
+def _nbytes(chunks: list[list[np.ndarray]]) -> int:
+    return sum(idx.nbytes for part in chunks for idx in part)
 
 
 INDEX_MEMO_BYTES = 64_000_000  # indices kept for reuse within one process (at most a quarter of it per key)
