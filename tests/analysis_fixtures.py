@@ -219,19 +219,16 @@ def write_encoder_checkpoint(run: Path, true_dim: int = 6, distracting: int = 20
     torch.save({"agent": {"action_encoder": state}}, run / runformat.CHECKPOINT)
 
 
-def write_run_tsne(run: Path, n: int | None = None) -> Path:
+def write_run_tsne(run: Path) -> Path:
     """The run's tsne.npz as a trained run writes it at its final evaluation (repro/train/action_tsne.py), from the
-    action encoder of its checkpoint, at the frame of its DONE; ``n`` copies per centroid instead of the paper's."""
+    action encoder of its checkpoint, at the frame of its DONE."""
     from analysis.tsne import load_step_mlp
-    from repro.train import action_tsne
+    from repro.train.action_tsne import save_final_tsne
 
     mlp = load_step_mlp(run / runformat.CHECKPOINT)
     frame = int((rundir.read_done(run) or {})["frame"])
     distracting = int(OmegaConf.load(run / runformat.CONFIG).env.distracting_dims)
-    if n is None:
-        return action_tsne.save_final_tsne(run, mlp, mlp[0].in_features, distracting, frame)
-    result = action_tsne.embed(mlp[0].in_features - distracting, distracting, action_tsne.encoder_latent(mlp), n=n)
-    return action_tsne.write_tsne(run, result, frame, action_tsne.PAPER_SEED, action_tsne.PAPER_ITER)
+    return save_final_tsne(run, mlp, mlp[0].in_features, distracting, frame)
 
 
 # Per-seed offsets: seeds 0, 1, 2 score final - 10, final, final + 10 (mean final, std 10).
