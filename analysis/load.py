@@ -27,6 +27,7 @@ from pandas.api.types import is_numeric_dtype, is_object_dtype
 
 from analysis.cache import file_signature, lookup
 from analysis.identity import algo_key, enabled_objectives, method_label
+from analysis.plaincsv import plain_columns
 from repro.bench.results import BenchFile, BenchFormatError, path_of
 from repro.bench.results import read as read_bench
 from repro.config.compose import ABSENT, get_key
@@ -237,11 +238,40 @@ def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
     numbers (an unparsable value becomes NaN). ``only``: parse only these columns (those present) besides the
     required ones, after the same checks of every row's field count.
     """
+    columns = read_columns_strict(path, required, order, text_columns, only)
+    return columns if isinstance(columns, pd.DataFrame) else pd.DataFrame(columns)
+
+
+def read_columns_strict(path: Path, required: tuple[str, ...], order: str = "frame",
+                        text_columns: tuple[str, ...] = (), only: tuple[str, ...] | None = None
+                        ) -> dict[str, np.ndarray] | pd.DataFrame:
+    """:func:`read_csv_strict`'s columns: a text of plain numbers (what the runs write; analysis/plaincsv.py) as
+    one array per column, without a frame, any other text as pandas reads it (its frame); the same checks, numbers
+    and problems either way (tests/test_plaincsv.py)."""
     text = path.read_text(encoding="utf-8", errors="strict")
     if not text.strip():
         raise ValueError("empty file (no header)")
     if not text.endswith("\n"):
         raise ValueError("truncated: the last line has no newline")
+    plain = plain_columns(text, None if only is None else {*required, *only}, words=text_columns)
+    if plain is not None:
+        header, arrays = plain
+        missing = [c for c in required if c not in header]
+        if missing:
+            raise ValueError(f"missing column(s) {', '.join(missing)}")
+        for col in required:
+            empty = np.isnan(arrays[col]) if arrays[col].dtype.kind == "f" else None
+            if empty is not None and empty.any():
+                raise ValueError(f"non-numeric or empty {col!r} at line {int(empty.argmax()) + 2}")
+        values = arrays[order]
+        if not bool((values[1:] > values[:-1]).all()):
+            raise ValueError(f"{order} is not strictly increasing (duplicated or reordered rows)")
+        return arrays
+    return _read_csv_pandas(text, required, order, text_columns, only)
+
+
+def _read_csv_pandas(text: str, required: tuple[str, ...], order: str, text_columns: tuple[str, ...],
+                     only: tuple[str, ...] | None) -> pd.DataFrame:
     header, counts = _field_counts(text)
     missing = [c for c in required if c not in header]
     if missing:
@@ -252,7 +282,8 @@ def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
     keep = None
     if only is not None and len(set(header)) == len(header):
         keep = [c for c in header if c in required or c in only]
-    df = pd.read_csv(io.StringIO(text), usecols=keep)
+    # correctly rounded, as the plain reader (pandas' default parser is off in the last bit for many numbers)
+    df = pd.read_csv(io.StringIO(text), usecols=keep, float_precision="round_trip")
     dtypes = df.dtypes
     for col in required:
         # a column pandas parsed as numbers is what to_numeric returns; only the others are converted (and set)
@@ -290,18 +321,18 @@ def read_config(path: Path) -> Any:
     return migrate_config(data) if isinstance(data, dict) else data
 
 
-def budget_end_rows(eval_df: pd.DataFrame, cfg: dict[str, Any], run_dir: Path, offline: bool) -> pd.Series:
-    """Which eval rows only the end of a shorter budget produced: at a budget the run reached before it was extended
-    (meta.json ``budgets``), off the evaluation grid, below the run's budget now. A run trained to the larger budget
-    in one go has every other row, equal; analysis at a budget uses such a row only at exactly that budget."""
-    x, every, budget = (("update", "offline.eval_every_updates", "offline.updates") if offline
-                        else ("frame", "train.eval_every_frames", "train.frames"))
+def budget_end_rows(at: np.ndarray, cfg: dict[str, Any], run_dir: Path, offline: bool) -> np.ndarray:
+    """Which eval rows (their frames ``at``; an offline run's updates) only the end of a shorter budget produced: at
+    a budget the run reached before it was extended (meta.json ``budgets``), off the evaluation grid, below the
+    run's budget now. A run trained to the larger budget in one go has every other row, equal; analysis at a budget
+    uses such a row only at exactly that budget."""
+    every, budget = (("offline.eval_every_updates", "offline.updates") if offline
+                     else ("train.eval_every_frames", "train.frames"))
     step, now = _int_or_none(_get(cfg, every)), _int_or_none(_get(cfg, budget))
     ends = [b for b in reached_budgets(run_dir) if now is None or b < now]
-    if not ends or not step or eval_df.empty:
-        return pd.Series(False, index=eval_df.index)
-    at = pd.to_numeric(eval_df[x], errors="coerce")
-    return at.isin(ends) & (at % step != 0)
+    if not ends or not step or not len(at):
+        return np.zeros(len(at), dtype=bool)
+    return np.isin(at, ends) & (at % step != 0)
 
 
 def _read_json(path: Path) -> dict[str, Any]:
@@ -328,15 +359,16 @@ def _provenance(meta: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _fps_summary(train: pd.DataFrame) -> float:
-    """Median FPS over training episodes once updates have started (all episodes if none did)."""
-    fps = pd.to_numeric(train["fps"], errors="coerce")
-    if "critic_loss" in train.columns:
-        updating = pd.to_numeric(train["critic_loss"], errors="coerce").notna()
+def _fps_summary(train: pd.DataFrame | dict[str, np.ndarray]) -> float:
+    """Median FPS over training episodes once updates have started (all episodes if none did), of train.csv's
+    columns (a frame, or :func:`read_columns_strict`'s arrays)."""
+    fps = np.asarray(pd.to_numeric(train["fps"], errors="coerce"), dtype=float)
+    if "critic_loss" in train:
+        updating = ~np.isnan(np.asarray(pd.to_numeric(train["critic_loss"], errors="coerce"), dtype=float))
         if updating.any():
             fps = fps[updating]
-    fps = fps.dropna()
-    return float(fps.median()) if len(fps) else math.nan
+    fps = fps[~np.isnan(fps)]
+    return float(np.median(fps)) if len(fps) else math.nan
 
 
 def find_run_dirs(root: Path) -> list[Path]:
@@ -369,8 +401,9 @@ def _resolved(run_dir: Path, cfg: dict[str, Any]) -> tuple[dict[str, Any], str, 
         "warning")
 
 
-def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataFrame | None, list[Problem]]:
-    """Load one run directory: (run row, eval rows, problems). Run row is None if the run is unusable."""
+def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, dict[str, np.ndarray] | None, list[Problem]]:
+    """Load one run directory: (run row, its eval rows as one array per column, problems). Run row is None if the
+    run is unusable."""
     problems: list[Problem] = []
     rel = str(run_dir.relative_to(root))
     cfg_path = run_dir / CONFIG
@@ -402,15 +435,17 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataF
     row["speedup"] = path_of(_get(cfg, "agent") or {}, values.get("fast"))
     row.update(_provenance(_read_meta(run_dir / META, problems)))
 
-    eval_df = _read_eval(run_dir / EVAL, offline, problems,
-                         lambda df: {"run_id": rel, "budget_end": budget_end_rows(df, cfg, run_dir, offline)})
-    row["eval_rows"] = 0 if eval_df is None else len(eval_df)
+    x = "update" if offline else "frame"
+    evals = _read_eval(run_dir / EVAL, offline, problems,
+                       lambda cols: {"run_id": np.full(len(cols[x]), rel, dtype=object),
+                                     "budget_end": budget_end_rows(cols[x], cfg, run_dir, offline)})
+    row["eval_rows"] = 0 if evals is None else len(evals[x])
     row["last_frame"] = row["last_update"] = math.nan
-    if eval_df is not None and not eval_df.empty:
-        row["last_update" if offline else "last_frame"] = float(eval_df["update" if offline else "frame"].max())
+    if evals is not None and len(evals[x]):
+        row["last_update" if offline else "last_frame"] = float(evals[x].max())
 
     row.update(_train_speed(run_dir / TRAIN, offline, problems))
-    return row, eval_df, problems
+    return row, evals, problems
 
 
 def _read_meta(meta_path: Path, problems: list[Problem]) -> dict[str, Any]:
@@ -436,33 +471,50 @@ def _train_speed(train_path: Path, offline: bool, problems: list[Problem]) -> di
                 rates = pd.to_numeric(train["updates_per_s"], errors="coerce").dropna()
                 speed["updates_per_s"] = float(rates.median()) if len(rates) else math.nan
             else:
-                speed["fps"] = _fps_summary(read_csv_strict(train_path, TRAIN_REQUIRED, only=("critic_loss",)))
+                speed["fps"] = _fps_summary(read_columns_strict(train_path, TRAIN_REQUIRED, only=("critic_loss",)))
         except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
             problems.append(Problem(str(train_path), f"malformed train.csv ({exc}); its speed not used"))
     return speed
 
 
 def _read_eval(path: Path, offline: bool, problems: list[Problem],
-               extra: Callable[[pd.DataFrame], dict[str, Any]] | None = None) -> pd.DataFrame | None:
-    """A run's eval.csv on the eval table's columns (EVAL_TABLE_COLUMNS; columns a learner adds beyond its
-    format are left out) followed by the columns ``extra(its rows)`` gives, in one frame, or None (a problem
+               extra: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None
+               ) -> dict[str, np.ndarray] | None:
+    """A run's eval.csv on the eval table's columns (EVAL_TABLE_COLUMNS, one array each; columns a learner adds
+    beyond its format are left out) followed by the columns ``extra(those columns)`` gives, or None (a problem
     recorded) if it is missing or malformed."""
     if not path.exists():
         problems.append(Problem(str(path), "missing eval.csv; run has no scores", "warning"))
         return None
     try:
         if offline:
-            df = read_csv_strict(path, OFFLINE_EVAL_REQUIRED, order="update", text_columns=OFFLINE_EVAL_TEXT)
+            read = read_columns_strict(path, OFFLINE_EVAL_REQUIRED, order="update", text_columns=OFFLINE_EVAL_TEXT)
         else:
-            df = read_csv_strict(path, EVAL_REQUIRED)
+            read = read_columns_strict(path, EVAL_REQUIRED)
     except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
         problems.append(Problem(str(path), f"malformed eval.csv ({exc}); skipped"))
         return None
-    columns: dict[str, Any] = {col: df[col] if col in df.columns else np.full(len(df), math.nan)
-                               for col in EVAL_TABLE_COLUMNS}
+    rows = len(read) if isinstance(read, pd.DataFrame) else len(next(iter(read.values())))
+    columns = {col: np.asarray(read[col]) if col in read else np.full(rows, math.nan) for col in EVAL_TABLE_COLUMNS}
     if extra is not None:
-        columns.update(extra(df))
-    return pd.DataFrame(columns, index=df.index)
+        columns.update(extra(columns))
+    return columns
+
+
+def _concat_columns(parts: list[dict[str, np.ndarray]]) -> pd.DataFrame:
+    """The frame ``pd.concat`` of one frame per part (``ignore_index``) gives, built one column at a time: arrays of
+    one type, of integers and floats (float64) or with an object one among them (object) joined by NumPy, any other
+    mix (booleans with numbers) by pandas, as frames (whose rules are not a Series')."""
+    numbers = {np.dtype(np.int64), np.dtype(np.float64)}
+    out: dict[str, Any] = {}
+    for col in parts[0]:
+        arrays = [part[col] for part in parts]
+        kinds = {a.dtype for a in arrays}
+        if len(kinds) == 1 or kinds <= numbers or np.dtype(object) in kinds:
+            out[col] = np.concatenate(arrays)
+        else:
+            out[col] = pd.concat([pd.DataFrame({col: a}) for a in arrays], ignore_index=True)[col]
+    return pd.DataFrame(out)
 
 
 def load_benches(root: Path) -> tuple[list[BenchFile], list[Problem]]:
@@ -483,12 +535,12 @@ def load_results(root: Path | str) -> Results:
         raise ResultsRootError(f"results root {root} does not exist or is not a directory")
     rows, evals, problems = [], [], []
     for run_dir in find_run_dirs(root):
-        row, eval_df, probs = _load_run_cached(run_dir, root)
+        row, columns, probs = _load_run_cached(run_dir, root)
         problems.extend(probs)
         if row is not None:
             rows.append(row)
-        if eval_df is not None and not eval_df.empty:
-            evals.append(eval_df)
+        if columns is not None and len(columns["run_id"]):
+            evals.append(columns)
     benches, bench_problems = load_benches(root)
     problems.extend(bench_problems)
     runs = pd.DataFrame(rows)
@@ -501,7 +553,7 @@ def load_results(root: Path | str) -> Results:
             problems.append(Problem(str(root / run_id), "same experiment/algo/variant/task/dataset/seed as another run",
                                     "warning"))
     if evals and not runs.empty:
-        eval_all = pd.concat(evals, ignore_index=True).merge(runs[list(IDENTITY)], on="run_id", how="left")
+        eval_all = _concat_columns(evals).merge(runs[list(IDENTITY)], on="run_id", how="left")
     else:
         eval_all = pd.DataFrame(columns=[*IDENTITY, *EVAL_TABLE_COLUMNS, "budget_end"])
     runs["source"] = SOURCE_RUNS
@@ -509,7 +561,8 @@ def load_results(root: Path | str) -> Results:
     return Results(root=root, runs=runs, eval=eval_all, problems=problems, benches=benches)
 
 
-def _load_run_cached(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, pd.DataFrame | None, list[Problem]]:
+def _load_run_cached(run_dir: Path, root: Path
+                     ) -> tuple[dict[str, Any] | None, dict[str, np.ndarray] | None, list[Problem]]:
     """:func:`load_run`, reused from the command's cache (analysis/cache.py) while none of the run's files changed
     in size or modification time."""
     key = (str(root.resolve()), str(run_dir.relative_to(root)), file_signature(run_dir))

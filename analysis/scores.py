@@ -187,21 +187,45 @@ def learning_curves(results: Results, grid: np.ndarray | None = None, step: int 
         return pd.DataFrame(columns=cols)
     if grid is None:
         grid = common_grid(online, step=step)
-    parts = []
-    for _, rows in online.groupby("run_id", sort=False):
-        rows = rows.sort_values("frame")
-        metric = metric_of(rows["suite"].iloc[0])
-        vals = _values(rows, metric).to_numpy(dtype=float)
-        frames = rows["frame"].to_numpy(dtype=float)
-        ok = ~np.isnan(vals)
+    # every run at once: the rows ordered by run (in order of first appearance) and frame, each run a slice
+    codes = pd.factorize(online["run_id"], sort=False)[0]
+    frames_all = online["frame"].to_numpy(dtype=float)
+    order = np.lexsort((frames_all, codes))
+    codes, frames_all = codes[order], frames_all[order]
+    metaworld = (online["suite"] == "metaworld").to_numpy()[order]
+    values_all = np.where(metaworld, _values(online, "success").to_numpy(dtype=float)[order],
+                          _values(online, "episode_reward").to_numpy(dtype=float)[order])
+    starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
+    ends = np.r_[starts[1:], len(codes)]
+    firsts, frames, values = [], [], []
+    for start, end in zip(starts.tolist(), ends.tolist()):
+        ok = ~np.isnan(values_all[start:end])
         if not ok.any():
             continue
-        frames, vals = frames[ok], vals[ok]
-        g = grid[(grid >= frames[0]) & (grid <= frames[-1])]
-        # one constructor: the identity values broadcast as setting each column to its scalar would
-        part = pd.DataFrame({"frame": g, "value": np.interp(g, frames, vals),
-                             **{key: rows[key].iloc[0] for key in IDENTITY}})
-        parts.append(part)
-    if not parts:
+        f, v = frames_all[start:end][ok], values_all[start:end][ok]
+        g = grid[(grid >= f[0]) & (grid <= f[-1])]
+        firsts.append(start)
+        frames.append(g)
+        values.append(np.interp(g, f, v))
+    if not firsts:
         return pd.DataFrame(columns=cols)
-    return pd.concat(parts, ignore_index=True)[cols]
+    counts = np.array([len(g) for g in frames])
+    first_rows = order[np.array(firsts)]
+    columns: dict[str, Any] = {key: _repeat_first(online[key], first_rows, counts) for key in IDENTITY}
+    columns.update(frame=np.concatenate(frames), value=np.concatenate(values))
+    return pd.DataFrame(columns)[cols]
+
+
+def _repeat_first(column: pd.Series, rows: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Each run's value of an identity ``column`` (at its position in ``rows``) repeated for its ``counts`` curve
+    points, in the type concatenating one frame per run (each built from the run's scalar) gives: an object column
+    whose runs all hold integers is int64, one of integers and floats float64, and so on."""
+    picked = column.to_numpy()[rows]
+    if picked.dtype != object:
+        return np.repeat(picked, counts)
+    kinds: dict[type, Any] = {}
+    for value in picked:
+        kinds.setdefault(type(value), value)
+    dtype = pd.concat([pd.DataFrame({"v": [value]}) for value in kinds.values()], ignore_index=True)["v"].dtype
+    repeated = np.repeat(picked, counts)
+    return repeated if dtype == np.dtype(object) else repeated.astype(dtype)

@@ -111,6 +111,49 @@ def test_learning_curves_interpolate_and_do_not_extrapolate(tmp_path):
     assert 50_000.0 not in by_seed[1]  # past its last evaluation
 
 
+def _curves_run_by_run(results, grid):
+    """learning_curves as it was written first: one frame per run, concatenated (the reference of the whole-table
+    version)."""
+    from analysis.load import IDENTITY
+    from analysis.scores import _values, metric_of, on_grid
+
+    online = on_grid(results.eval[results.eval["frame"].notna()])
+    parts = []
+    for _, rows in online.groupby("run_id", sort=False):
+        rows = rows.sort_values("frame")
+        vals = _values(rows, metric_of(rows["suite"].iloc[0])).to_numpy(dtype=float)
+        frames = rows["frame"].to_numpy(dtype=float)
+        ok = ~np.isnan(vals)
+        if not ok.any():
+            continue
+        g = grid[(grid >= frames[ok][0]) & (grid <= frames[ok][-1])]
+        parts.append(pd.DataFrame({"frame": g, "value": np.interp(g, frames[ok], vals[ok]),
+                                   **{key: rows[key].iloc[0] for key in IDENTITY}}))
+    return pd.concat(parts, ignore_index=True)[[*IDENTITY, "frame", "value"]]
+
+
+def test_learning_curves_equal_the_run_by_run_curves(tmp_path):
+    """Every run at once gives each run's curve and each identity column's type as one frame per run did: DMC and
+    Meta-world runs, a run with no score, an offline run (no curve), identity columns of Python objects."""
+    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=100.0)
+    write_run(tmp_path, experiment="main", algo="drqv2", task="hopper_hop", seed=1, final=70.0, frames=40_000)
+    write_run(tmp_path, experiment="metaworld", algo="taco", task="hammer", seed=0, final=0.8, success=True)
+    write_run(tmp_path, experiment="offline", algo="cql_taco", task="hopper_hop", seed=0, final=100.0,
+              dataset="medium_replay", reference=250.0)
+    res = load_results(tmp_path)
+    grid = np.arange(0.0, 110_000.0, 7_000.0)
+    pd.testing.assert_frame_equal(learning_curves(res, grid=grid), _curves_run_by_run(res, grid), check_exact=True)
+    nan_run = res.eval["seed"] == 1
+    res.eval.loc[nan_run, "episode_reward"] = np.nan  # a run without a score has no curve
+    res.eval["K"] = res.eval["K"].astype(object)  # Python integers: int64 as one frame per run made it
+    res.eval["variant"] = np.where(res.eval["suite"] == "dmc", None, res.eval["variant"])
+    res.eval["action_encoder"] = res.eval["action_encoder"].astype(object)
+    res.eval.loc[res.eval["suite"] == "metaworld", "action_encoder"] = None
+    new, old = learning_curves(res, grid=grid), _curves_run_by_run(res, grid)
+    assert new["K"].dtype == np.int64 and new["action_encoder"].dtype == object
+    pd.testing.assert_frame_equal(new, old, check_exact=True)
+
+
 def test_metaworld_score_is_success_percent(tmp_path):
     write_run(tmp_path, experiment="metaworld", algo="taco", task="hammer", seed=0, final=0.8, success=True)
     s = final_scores(load_results(tmp_path), FRAMES)
