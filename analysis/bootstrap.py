@@ -224,7 +224,7 @@ class IndexStream:
                     return None
                 position = word(last) + 1
         out = []
-        group_start = starts
+        group_start: np.ndarray = starts
         for (_, count), masked, acc, cum in zip(self.groups, values, accepted, cums):
             first = cum[group_start]
             where = acc[first[:, None] + np.arange(count)]
