@@ -234,24 +234,21 @@ class IndexStream:
         return out
 
 
-def resample(arrays: Sequence[np.ndarray], indices: Sequence[np.ndarray]) -> list[np.ndarray]:
-    """Each array's tasks resampled over its own runs: out[r, i, j] = array[idx[r, i, j], j], gathered from the
-    flattened array (one index per value: several times faster than indexing rows and columns)."""
-    out = []
-    for a, idx in zip(arrays, indices):
-        tasks = a.shape[1]
-        flat = np.multiply(idx, tasks, dtype=np.intp)
-        flat += np.arange(tasks)
-        out.append(np.ascontiguousarray(a).reshape(-1)[flat])
-    return out
+def resample(arrays: Sequence[np.ndarray], cells: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Each array's tasks resampled over its own runs: out[r, i, j] = array.flat[cells[r, i, j]], where
+    cells[r, i, j] = idx[r, i, j] * tasks + j for the run idx[r, i, j] drawn (:func:`index_chunks`): one index per
+    value, several times faster than indexing rows and columns, array[idx, arange(tasks)], with the same values."""
+    return [np.ascontiguousarray(a).reshape(-1)[cell] for a, cell in zip(arrays, cells)]
 
 
 def index_chunks(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, seed: int,
                  chunk_elements: int = CHUNK_ELEMENTS) -> Iterator[list[np.ndarray]]:
     """The bootstrap indices of ``reps`` repetitions of ``arrays`` (their shapes), chunk by chunk: each chunk one
-    (repetitions, runs, tasks) int64 array per matrix (:meth:`IndexStream.take`). They depend only on the shapes,
-    the random state and the chunking, so a command draws them once per such key (:data:`_INDICES`): a report asks
-    for the same shapes dozens of times (every cell of six seeds, every learning-curve point)."""
+    (repetitions, runs, tasks) array per matrix of the drawn values' places in the flattened matrix, run * tasks + task
+    for the run :meth:`IndexStream.take` draws (:func:`resample`), in the smallest unsigned type that holds them.
+    They depend only on the shapes, the random state and the chunking, so a command draws them once per such key
+    (:data:`_INDICES`): a report asks for the same shapes dozens of times (every cell of six seeds, every
+    learning-curve point)."""
     stream = IndexStream([a.shape for a in arrays], seed)
     per_rep = stream.per_rep * max(1, stat.cost if stat.cost else _pairs(arrays))
     chunk = max(1, chunk_elements // per_rep)
@@ -261,22 +258,32 @@ def index_chunks(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, seed:
     kept = _INDICES.get(key)
     if kept is not None:
         _INDICES.move_to_end(key)
-        for part in kept:
-            yield [idx.astype(np.int64) for idx in part]
+        yield from kept
         return
-    # kept in the smallest unsigned type of the run numbers, each chunk as it is drawn, when the whole fits the memo
-    small = np.min_scalar_type(max(n for n, _ in stream.shapes) - 1)
-    drawn: list[list[np.ndarray]] | None = [] if _INDICES.fits(reps * stream.per_rep * small.itemsize) else None
+    types = [np.min_scalar_type(n * m - 1) for n, m in stream.shapes]
+    # kept, each chunk as it is drawn, when the whole fits the memo
+    size = reps * sum(n * m * t.itemsize for (n, m), t in zip(stream.shapes, types))
+    drawn: list[list[np.ndarray]] | None = [] if _INDICES.fits(size) else None
     done = 0
     while done < reps:
         b = min(chunk, reps - done)
-        part = stream.take(b)
+        part = [_cells(idx, m, t) for idx, (_, m), t in zip(stream.take(b), stream.shapes, types)]
         if drawn is not None:
-            drawn.append([idx.astype(small) for idx in part])
+            drawn.append(part)
         yield part
         done += b
     if drawn is not None:
         _INDICES.keep(key, drawn)
+
+
+def _cells(runs: np.ndarray, tasks: int, kind: np.dtype) -> np.ndarray:
+    """The drawn ``runs`` (reps, runs, tasks) as places in the flattened matrix, run * tasks + task, of type
+    ``kind``, read-only."""
+    cells = runs * tasks if tasks > 1 else runs.copy()
+    cells += np.arange(tasks)
+    cells = cells.astype(kind, copy=False)
+    cells.flags.writeable = False  # kept in the memo and handed to every later caller
+    return cells
 
 
 class _IndexMemo(OrderedDict):
@@ -338,10 +345,9 @@ def mean_intervals_many(mats: np.ndarray, reps: int, seed: int, size: float = CI
     values = np.empty((sets, reps))
     flat = mats.reshape(sets, runs * tasks).T  # (runs * tasks, sets)
     done = 0
-    for (idx,) in index_chunks(MEAN, [mats[0]], reps, seed):
-        b = idx.shape[0]
+    for (cell,) in index_chunks(MEAN, [mats[0]], reps, seed):  # (b, runs, tasks): each drawn value's place
+        b = cell.shape[0]
         # counts[r, k * tasks + t]: how often run k was drawn for task t in repetition r
-        cell = idx * tasks + np.arange(tasks)  # (b, runs, tasks): the drawn value's place in a flattened matrix
         counts = np.zeros((b, runs * tasks))
         np.add.at(counts, (np.arange(b)[:, None], cell.reshape(b, -1)), 1.0)
         values[:, done:done + b] = (counts @ flat).T / (runs * tasks)
