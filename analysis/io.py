@@ -45,28 +45,48 @@ class _ContentPickler(pickle.Pickler):
     version holds)."""
 
     def reducer_override(self, obj: Any) -> Any:
-        from matplotlib.figure import Figure
-        from matplotlib.transforms import TransformNode
-
-        if isinstance(obj, (TransformNode, Figure)):
+        kind = _KINDS.get(type(obj))
+        if kind is None:
+            kind = _KINDS[type(obj)] = _kind(type(obj))
+        if kind == "state":
             reduced = obj.__reduce_ex__(5)
             if isinstance(reduced, tuple) and len(reduced) >= 3 and isinstance(reduced[2], dict):
                 state = {k: v for k, v in reduced[2].items() if k not in ("_parents", "_number")}
                 return (reduced[0], reduced[1], state, *reduced[3:])
-        if isinstance(obj, types.FunctionType):
+        elif kind == "function":
             cells = tuple(c.cell_contents for c in obj.__closure__ or ())
             return (str, (repr((obj.__module__, obj.__qualname__, obj.__code__.co_firstlineno)),),
                     (obj.__defaults__, obj.__kwdefaults__, cells))
-        if isinstance(obj, (set, frozenset)):
+        elif kind == "set":
             return (type(obj), (sorted(obj, key=repr),))
-        if type(obj) is np.ma.MaskedArray and not obj.dtype.hasobject:
+        elif kind == "masked" and not obj.dtype.hasobject:
             return (str, (f"masked {obj.dtype.str} {obj.shape}",),
                     (np.ascontiguousarray(obj.data).tobytes(), np.ascontiguousarray(np.ma.getmaskarray(obj)).tobytes(),
                      repr(obj.fill_value)))
-        if type(obj) is np.ndarray and not obj.dtype.hasobject:
+        elif kind == "array" and not obj.dtype.hasobject:
             # its values, not its memory layout (a computed array may be Fortran-ordered, the same one unpickled not)
             return (str, (f"ndarray {obj.dtype.str} {obj.shape}",), np.ascontiguousarray(obj).tobytes())
         return NotImplemented
+
+
+_KINDS: dict[type, str] = {}  # an object's type -> how _ContentPickler reduces it (decided once per type)
+
+
+def _kind(cls: type) -> str:
+    from matplotlib.figure import Figure
+    from matplotlib.transforms import TransformNode
+
+    if issubclass(cls, (TransformNode, Figure)):
+        return "state"
+    if cls is types.FunctionType:
+        return "function"
+    if issubclass(cls, (set, frozenset)):
+        return "set"
+    if cls is np.ma.MaskedArray:
+        return "masked"
+    if cls is np.ndarray:
+        return "array"
+    return ""
 
 
 def figure_key(fig: Figure, **savefig_kwargs: Any) -> str | None:

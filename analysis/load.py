@@ -318,7 +318,7 @@ def read_config(path: Path) -> Any:
     data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
     if "${" in text and isinstance(data, dict):
         data = OmegaConf.to_container(OmegaConf.create(data), resolve=True)
-    return migrate_config(data) if isinstance(data, dict) else data
+    return migrate_config(data, owned=True) if isinstance(data, dict) else data  # parsed here: no copy
 
 
 def budget_end_rows(at: np.ndarray, cfg: dict[str, Any], run_dir: Path, offline: bool) -> np.ndarray:

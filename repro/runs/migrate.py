@@ -183,9 +183,10 @@ def config_version(data: dict) -> int:
     return version
 
 
-def migrate_config(data: dict) -> dict:
-    """``data`` (a config.yaml's contents, not changed) in the current format, step by step."""
-    out = copy.deepcopy(data)
+def migrate_config(data: dict, owned: bool = False) -> dict:
+    """``data`` (a config.yaml's contents) in the current format, step by step. ``data`` is not changed, unless the
+    caller ``owned`` it (just parsed it, say): then it is not copied first, and may be changed or returned."""
+    out = data if owned else copy.deepcopy(data)
     version = config_version(out)
     if version > CONFIG_FORMAT:
         raise FormatError(f"config.yaml is format {version}; this version of taco-repro reads up to "
