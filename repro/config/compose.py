@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import math
 import os
 import re
@@ -316,9 +317,15 @@ def validate(raw: DictConfig) -> DictConfig:
 
 
 def _section(node: Any) -> Any:
-    """A schema node, with a section the schema types but leaves to the YAML (``agent``: MISSING) as its type's."""
+    """A schema node, with a section the schema types but leaves to the YAML (``agent``: MISSING) as its type's
+    (made once per type: the callers only read it)."""
     kind = node._metadata.ref_type if isinstance(node, DictConfig) and node._is_missing() else None
-    return OmegaConf.structured(kind) if isinstance(kind, type) and dataclasses.is_dataclass(kind) else node
+    return _structured(kind) if isinstance(kind, type) and dataclasses.is_dataclass(kind) else node
+
+
+@functools.cache
+def _structured(kind: type) -> DictConfig:
+    return OmegaConf.structured(kind)
 
 
 _LEAF_KINDS = {BooleanNode: bool, IntegerNode: int, FloatNode: float, StringNode: str}
