@@ -16,11 +16,11 @@ def default_k(task: str) -> int | None:
     """The K the paper's Table 1 uses, as the task's config file sets it (repro/conf/task/<task>.yaml: 1 on
     quadruped_run and walker_run, 3 elsewhere, Appendix B); None for a task without a config file. The composition
     is kept in the command's cache (analysis/composed.py)."""
-    from analysis.composed import composed
+    from analysis.composed import composed_value
     from repro.config.compose import ConfigError
 
     try:
-        return int(composed([f"task={task}"]).agent.K)
+        return int(composed_value([f"task={task}"], "agent.K"))
     except ConfigError:
         return None
 

@@ -164,3 +164,16 @@ def test_f1_performance_profiles_use_the_repetitions_asked_for(full_report):
     """--reps governs F1's profile bands too (capped at rliable's 2,000), and the caption says the number used."""
     _, md, _ = full_report
     assert f"performance profiles with 95% bootstrap bands (rliable, {REPS:,} repetitions)" in md.read_text()
+
+
+def test_f8_reads_each_tasks_default_k_from_its_composition():
+    """F8's diamond goes on the bar of the K each task's config sets (Appendix B: 1 on quadruped_run and walker_run,
+    3 elsewhere): read from the kept composition, the same as a fresh compose; no K for a task without a file."""
+    from analysis.paper import DMC9
+    from paper_figures.f8_horizon import default_k
+    from repro.config.compose import compose
+
+    ks = {task: default_k(task) for task in DMC9}
+    assert ks == {task: int(compose([f"task={task}"]).agent.K) for task in DMC9}
+    assert ks == {task: 1 if task in ("quadruped_run", "walker_run") else 3 for task in DMC9}
+    assert default_k("no_such_task") is None
