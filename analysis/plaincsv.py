@@ -96,18 +96,39 @@ def _column(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> np.nda
     if not _ALLOWED[chars].all():
         return None
     is_float = not filled.all() or bool(_FLOAT_MARKS[chars].any())
-    if not is_float and int(size.max()) > MAX_INT_CHARS:
-        return None
+    if not is_float:
+        return _integers(chars, ends - spans, ends) if int(size.max()) <= MAX_INT_CHARS else None
     values = _numbers(chars[:-1].tobytes().decode("ascii"), len(first))
     if values is None:
         return None
-    if not is_float:
-        return values.astype(np.int64)
     if filled.all():
         return values
     out = np.full(len(lengths), np.nan)
     out[filled] = values
     return out
+
+
+def _integers(chars: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | None:
+    """Fields of digits with an optional leading sign (each from ``starts`` to the separator before ``ends``, at most
+    :data:`MAX_INT_CHARS` characters) as int64, summed digit by digit at once (each digit times its power of ten);
+    None when a field has a sign elsewhere or no digit. What NumPy's parser reads from them, exactly."""
+    digit = (chars >= ord("0")) & (chars <= ord("9"))
+    sign = (chars == ord("+")) | (chars == ord("-"))
+    if sign.any():
+        at_start = np.zeros(len(chars), dtype=bool)
+        at_start[starts] = True
+        if (sign & ~at_start).any():
+            return None
+    if (np.add.reduceat(digit, starts) == 0).any():
+        return None
+    after = np.repeat(ends - 2, ends - starts) - np.arange(len(chars))  # characters after this one in its field
+    worth = np.where(digit, (chars.astype(np.int64) - ord("0")) * _POWERS[np.clip(after, 0, MAX_INT_CHARS)], 0)
+    values = np.add.reduceat(worth, starts)
+    values[chars[starts] == ord("-")] *= -1
+    return values
+
+
+_POWERS = 10 ** np.arange(MAX_INT_CHARS + 1, dtype=np.int64)
 
 
 def _numbers(text: str, count: int) -> np.ndarray | None:

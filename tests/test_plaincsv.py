@@ -194,3 +194,16 @@ def test_columns_join_as_pandas_concat_joins_frames(name):
     parts = CONCAT[name]
     expected = pd.concat([pd.DataFrame(p) for p in parts], ignore_index=True)
     pd.testing.assert_frame_equal(analysis.load._concat_columns(parts), expected, check_exact=True)
+
+
+def test_integers_of_every_length_read_as_pandas_reads_them():
+    """Integers of 1 to 15 characters, signed or not, with leading zeros: the digit-by-digit sum equals pandas."""
+    rng = np.random.default_rng(3)
+    digits = rng.integers(1, 15, size=3000)
+    tokens = [rng.choice(["", "-", "+"]) + "".join(map(str, rng.integers(0, 10, size=d))) for d in digits]
+    tokens = [t if len(t) <= 15 else t[:15] for t in tokens]
+    text = "frame,x\n" + "".join(f"{i},{t}\n" for i, t in enumerate(tokens))
+    _, columns = plain_columns(text)
+    expected = pd.read_csv(io.StringIO(text))["x"]
+    assert columns["x"].dtype == expected.dtype == np.int64
+    np.testing.assert_array_equal(columns["x"], expected.to_numpy())
