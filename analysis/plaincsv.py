@@ -15,7 +15,7 @@ import numpy as np
 from pandas._libs.parsers import STR_NA_VALUES
 
 COMMA, NEWLINE = ord(","), ord("\n")
-MAX_INT_CHARS = 15  # integers of at most 15 characters are exact as float64 (below 2**53); longer: pandas
+MAX_INT_CHARS = 15  # integers of at most 15 characters, sign included, are summed in int64; longer: pandas
 _ALLOWED = np.zeros(256, dtype=bool)  # a number's characters, and the separator after it
 _ALLOWED[np.frombuffer(b"0123456789.eE+-,", dtype=np.uint8)] = True
 _FLOAT_MARKS = np.zeros(256, dtype=bool)
@@ -38,7 +38,8 @@ def plain_columns(text: str, keep: Collection[str] | None = None, words: Collect
     if '"' in text or "\r" in text or "\0" in text:
         return None
     header = text[:head_end].split(",")
-    if len(set(header)) != len(header):
+    # pandas renames an empty or repeated name and drops a byte order mark: those headers are left to it
+    if len(set(header)) != len(header) or "" in header or not text[:head_end].isascii():
         return None
     body = text[head_end + 1:]
     try:

@@ -50,6 +50,8 @@ NOT_PLAIN = {
     "carriage return": "frame,x\r\n1,2\r\n",
     "non-ascii": "frame,x\n1,2\u00b9\n",
     "duplicate names": "frame,frame\n1,2\n",
+    "empty name": "frame,x,\n1,2,3\n",
+    "byte order mark": "\ufeffframe,x\n1,2\n",
     "true": "frame,x\n1,True\n",
     "quote in a column not kept": 'frame,x\n1,"a,\n2"\n',
 }
