@@ -279,7 +279,7 @@ def index_chunks(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, seed:
 def _cells(runs: np.ndarray, tasks: int, kind: np.dtype) -> np.ndarray:
     """The drawn ``runs`` (reps, runs, tasks) as places in the flattened matrix, run * tasks + task, of type
     ``kind``, read-only."""
-    cells = runs * tasks if tasks > 1 else runs.copy()
+    cells = runs * tasks  # a new array, whatever ``tasks``
     cells += np.arange(tasks)
     cells = cells.astype(kind, copy=False)
     cells.flags.writeable = False  # kept in the memo and handed to every later caller

@@ -238,44 +238,54 @@ def read_csv_strict(path: Path, required: tuple[str, ...], order: str = "frame",
     numbers (an unparsable value becomes NaN). ``only``: parse only these columns (those present) besides the
     required ones, after the same checks of every row's field count.
     """
-    columns = read_columns_strict(path, required, order, text_columns, only)
-    return columns if isinstance(columns, pd.DataFrame) else pd.DataFrame(columns)
+    return pd.DataFrame(read_columns_strict(path, required, order, text_columns, only))
 
 
 def read_columns_strict(path: Path, required: tuple[str, ...], order: str = "frame",
                         text_columns: tuple[str, ...] = (), only: tuple[str, ...] | None = None
-                        ) -> dict[str, np.ndarray] | pd.DataFrame:
-    """:func:`read_csv_strict`'s columns: a text of plain numbers (what the runs write; analysis/plaincsv.py) as
-    one array per column, without a frame, any other text as pandas reads it (its frame); the same checks, numbers
-    and problems either way (tests/test_plaincsv.py)."""
+                        ) -> dict[str, np.ndarray]:
+    """:func:`read_csv_strict`'s columns, one array each, without a frame: a text of plain numbers (what the runs
+    write; analysis/plaincsv.py) read by NumPy, any other text by pandas; the same checks, numbers and problems
+    either way (tests/test_plaincsv.py)."""
     text = path.read_text(encoding="utf-8", errors="strict")
     if not text.strip():
         raise ValueError("empty file (no header)")
     if not text.endswith("\n"):
         raise ValueError("truncated: the last line has no newline")
     plain = plain_columns(text, None if only is None else {*required, *only}, words=text_columns)
-    if plain is not None:
-        header, arrays = plain
-        missing = [c for c in required if c not in header]
-        if missing:
-            raise ValueError(f"missing column(s) {', '.join(missing)}")
-        for col in required:
-            empty = np.isnan(arrays[col]) if arrays[col].dtype.kind == "f" else None
-            if empty is not None and empty.any():
-                raise ValueError(f"non-numeric or empty {col!r} at line {int(empty.argmax()) + 2}")
-        values = arrays[order]
-        if not bool((values[1:] > values[:-1]).all()):
-            raise ValueError(f"{order} is not strictly increasing (duplicated or reordered rows)")
-        return arrays
-    return _read_csv_pandas(text, required, order, text_columns, only)
+    if plain is None:
+        df = _read_csv_pandas(text, required, order, text_columns, only)
+        return {col: df[col].to_numpy() for col in df.columns}
+    header, arrays = plain
+    _check_required(header, required)
+    for col in required:
+        if arrays[col].dtype.kind == "f":
+            _check_filled(col, np.isnan(arrays[col]))
+    _check_order(order, arrays[order])
+    return arrays
+
+
+def _check_required(header: list[str], required: tuple[str, ...]) -> None:
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise ValueError(f"missing column(s) {', '.join(missing)}")
+
+
+def _check_filled(col: str, empty: np.ndarray) -> None:
+    """ValueError naming the first line (the header is line 1) where the required column ``col`` has no number."""
+    if empty.any():
+        raise ValueError(f"non-numeric or empty {col!r} at line {int(empty.argmax()) + 2}")
+
+
+def _check_order(order: str, values: pd.Series | np.ndarray) -> None:
+    if not _strictly_increasing(values):
+        raise ValueError(f"{order} is not strictly increasing (duplicated or reordered rows)")
 
 
 def _read_csv_pandas(text: str, required: tuple[str, ...], order: str, text_columns: tuple[str, ...],
                      only: tuple[str, ...] | None) -> pd.DataFrame:
     header, counts = _field_counts(text)
-    missing = [c for c in required if c not in header]
-    if missing:
-        raise ValueError(f"missing column(s) {', '.join(missing)}")
+    _check_required(header, required)
     for lineno, count in enumerate(counts, start=2):
         if count != len(header):
             raise ValueError(f"line {lineno} has {count} fields, header has {len(header)}")
@@ -289,26 +299,24 @@ def _read_csv_pandas(text: str, required: tuple[str, ...], order: str, text_colu
         # a column pandas parsed as numbers is what to_numeric returns; only the others are converted (and set)
         numeric = is_numeric_dtype(dtypes[col])
         converted = df[col] if numeric else pd.to_numeric(df[col], errors="coerce")
-        if converted.isna().any():
-            bad = int(converted.isna().idxmax()) + 2
-            raise ValueError(f"non-numeric or empty {col!r} at line {bad}")
+        _check_filled(col, converted.isna().to_numpy())
         if not numeric:
             df[col] = converted
     for col in df.columns:
         if col not in required and col not in text_columns and is_object_dtype(dtypes[col]):
             df[col] = pd.to_numeric(df[col], errors="coerce")
-    if not _strictly_increasing(df[order]):
-        raise ValueError(f"{order} is not strictly increasing (duplicated or reordered rows)")
+    _check_order(order, df[order])
     return df
 
 
-def _strictly_increasing(values: pd.Series) -> bool:
+def _strictly_increasing(values: pd.Series | np.ndarray) -> bool:
     """Every value above the one before (a NaN is not; pandas' ``is_monotonic_increasing`` and no duplicates),
     compared as arrays for integer and float columns."""
     if values.dtype.kind in "if":
-        a = values.to_numpy()
+        a = np.asarray(values)
         return bool((a[1:] > a[:-1]).all())
-    return not (len(values) > 1 and not values.is_monotonic_increasing or values.duplicated().any())
+    series = pd.Series(values)
+    return not (len(series) > 1 and not series.is_monotonic_increasing or series.duplicated().any())
 
 
 def read_config(path: Path) -> Any:
@@ -494,8 +502,8 @@ def _read_eval(path: Path, offline: bool, problems: list[Problem],
     except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
         problems.append(Problem(str(path), f"malformed eval.csv ({exc}); skipped"))
         return None
-    rows = len(read) if isinstance(read, pd.DataFrame) else len(next(iter(read.values())))
-    columns = {col: np.asarray(read[col]) if col in read else np.full(rows, math.nan) for col in EVAL_TABLE_COLUMNS}
+    rows = len(next(iter(read.values())))
+    columns = {col: read[col] if col in read else np.full(rows, math.nan) for col in EVAL_TABLE_COLUMNS}
     if extra is not None:
         columns.update(extra(columns))
     return columns

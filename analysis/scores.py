@@ -192,17 +192,17 @@ def learning_curves(results: Results, grid: np.ndarray | None = None, step: int 
     frames_all = online["frame"].to_numpy(dtype=float)
     order = np.lexsort((frames_all, codes))
     codes, frames_all = codes[order], frames_all[order]
-    metaworld = (online["suite"] == "metaworld").to_numpy()[order]
-    values_all = np.where(metaworld, _values(online, "success").to_numpy(dtype=float)[order],
-                          _values(online, "episode_reward").to_numpy(dtype=float)[order])
+    suites = online["suite"].to_numpy()[order]
+    by_metric = {m: _values(online, m).to_numpy(dtype=float)[order] for m in ("episode_reward", "success")}
     starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
     ends = np.r_[starts[1:], len(codes)]
     firsts, frames, values = [], [], []
     for start, end in zip(starts.tolist(), ends.tolist()):
-        ok = ~np.isnan(values_all[start:end])
+        run_values = by_metric[metric_of(suites[start])][start:end]
+        ok = ~np.isnan(run_values)
         if not ok.any():
             continue
-        f, v = frames_all[start:end][ok], values_all[start:end][ok]
+        f, v = frames_all[start:end][ok], run_values[ok]
         g = grid[(grid >= f[0]) & (grid <= f[-1])]
         firsts.append(start)
         frames.append(g)
