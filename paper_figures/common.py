@@ -50,7 +50,8 @@ def setup_style() -> None:
     # the axes. Left unset, matplotlib measures every title against its axes' top-side ticks and the y axis's offset
     # text at every draw (each figure is laid out five times: tight_layout, then a measuring and a drawing pass per
     # file): about 1 s of a first report (docs/performance.md). No figure here draws ticks or labels on top; a y axis
-    # whose values needed an offset text (past 1e6, below 1e-5) would draw it beside a wide title, not push it up.
+    # with an offset text (values past 1e6, below 1e-5, or in a narrow range) would draw it under a title wide enough
+    # to reach the axes' left edge instead of pushing the title up.
     plt.rcParams.update({"figure.dpi": 100, "savefig.dpi": 150, "axes.titleweight": "bold", "axes.titley": 1.0})
 
 
