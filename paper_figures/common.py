@@ -47,11 +47,11 @@ NO_RUNS_TEXT = "no runs found: paper values only"
 def setup_style() -> None:
     sns.set_theme(context="notebook", style="whitegrid", font_scale=0.95)
     # axes.titley: each title at the top of its axes (plus axes.titlepad), as placed when nothing is drawn above
-    # the axes. Left unset, matplotlib measures every title against its axes' top-side ticks and the y axis's offset
-    # text at every draw (each figure is laid out five times: tight_layout, then a measuring and a drawing pass per
-    # file): about 1 s of a first report (docs/performance.md). No figure here draws ticks or labels on top; a y axis
-    # with an offset text (values past 1e6, below 1e-5, or in a narrow range) would draw it under a title wide enough
-    # to reach the axes' left edge instead of pushing the title up.
+    # the axes. Left unset, matplotlib measures every title against its axes' top-side ticks and the y axis's
+    # offset text at every draw (a figure is laid out four or five times: tight_layout where used, a measuring and
+    # a drawing pass per file): about 1 s of a first report (docs/performance.md). No figure here draws ticks or
+    # labels on top; a y axis with an offset text (values past 1e6, below 1e-5, or in a narrow range) would draw it
+    # under a title wide enough to reach the axes' left edge instead of pushing the title up.
     plt.rcParams.update({"figure.dpi": 100, "savefig.dpi": 150, "axes.titleweight": "bold", "axes.titley": 1.0})
 
 
