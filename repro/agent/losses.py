@@ -17,7 +17,11 @@ from torch import nn
 Metrics = dict[str, torch.Tensor]  # an update's metrics: detached 0-d tensors, keyed by train.csv column
 
 CRITIC_METRICS = ("critic_loss", "critic_q1", "critic_q2", "critic_target_q")
-ACTOR_METRICS = ("actor_loss", "actor_logprob", "actor_ent")
+# The actor's health (issue 49): the share of the batch's action-mean entries (state x action dimension) whose tanh is
+# exactly +-1 in float32, where the policy gradient through the tanh is exactly zero, and the mean |pre-tanh| of the
+# policy (float32's tanh reaches +-1 from |x| ~ 9.01 on). For a one-dimensional action the share is of states.
+SATURATION_METRICS = ("actor_saturated", "actor_pretanh")
+ACTOR_METRICS = ("actor_loss", "actor_logprob", "actor_ent", *SATURATION_METRICS)
 
 
 def critic_target(reward: torch.Tensor, discount: torch.Tensor, target_q1: torch.Tensor,
@@ -44,8 +48,17 @@ def actor_loss(q1: torch.Tensor, q2: torch.Tensor) -> torch.Tensor:
     return -torch.min(q1, q2).float().mean()
 
 
-def actor_metrics(loss: torch.Tensor, log_prob: torch.Tensor, entropy: torch.Tensor) -> Metrics:
-    """The actor's train.csv columns (``ACTOR_METRICS``): its loss, the mean log-probability of its samples and the
-    mean entropy of its distribution (``log_prob``, ``entropy``: summed over action dimensions)."""
+def saturation_metrics(mean: torch.Tensor, pre_tanh: torch.Tensor) -> Metrics:
+    """``SATURATION_METRICS`` of a tanh policy: the share of entries of ``mean`` (its tanh, (B, |A|)) exactly at +-1,
+    and the mean |``pre_tanh``|."""
+    at_bound = mean.detach().abs() >= 1.0
+    return {"actor_saturated": at_bound.float().mean(), "actor_pretanh": pre_tanh.detach().abs().float().mean()}
+
+
+def actor_metrics(loss: torch.Tensor, log_prob: torch.Tensor, entropy: torch.Tensor, mean: torch.Tensor,
+                  pre_tanh: torch.Tensor) -> Metrics:
+    """The actor's train.csv columns (``ACTOR_METRICS``): its loss, the mean log-probability of its samples, the
+    mean entropy of its distribution (``log_prob``, ``entropy``: summed over action dimensions) and its saturation
+    (:func:`saturation_metrics` of the policy's ``mean`` and ``pre_tanh``)."""
     return {"actor_loss": loss.detach(), "actor_logprob": log_prob.detach().mean(),
-            "actor_ent": entropy.detach().mean()}
+            "actor_ent": entropy.detach().mean(), **saturation_metrics(mean, pre_tanh)}

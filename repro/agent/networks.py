@@ -59,12 +59,14 @@ def mlp(in_dim: int, hidden_dim: int, out_dim: int, depth: int = 2) -> nn.Sequen
 
 
 class TruncatedNormal(torch.distributions.Normal):
-    """Normal clipped to [-1+eps, 1-eps] with a straight-through gradient (DrQ-v2's policy noise)."""
+    """Normal clipped to [-1+eps, 1-eps] with a straight-through gradient (DrQ-v2's policy noise). ``pre_tanh``: the
+    policy's output before its tanh, when the mean is one (the actor's health metrics read it: losses.py)."""
 
     def __init__(self, loc: torch.Tensor, scale: torch.Tensor, low: float = -1.0, high: float = 1.0,
-                 eps: float = 1e-6):
+                 eps: float = 1e-6, pre_tanh: torch.Tensor | None = None):
         super().__init__(loc, scale, validate_args=False)
         self.low, self.high, self.eps = low, high, eps
+        self.pre_tanh = pre_tanh
 
     def _clamp(self, x: torch.Tensor) -> torch.Tensor:
         clamped = torch.clamp(x, self.low + self.eps, self.high - self.eps)
@@ -90,8 +92,9 @@ class Actor(nn.Module):
         self.apply(orthogonal_init)
 
     def forward(self, h: torch.Tensor, std: float | torch.Tensor) -> TruncatedNormal:
-        mu = torch.tanh(self.policy(self.trunk(h)))
-        return TruncatedNormal(mu, torch.ones_like(mu) * std)
+        pre_tanh = self.policy(self.trunk(h))
+        mu = torch.tanh(pre_tanh)
+        return TruncatedNormal(mu, torch.ones_like(mu) * std, pre_tanh=pre_tanh)
 
 
 class Critic(nn.Module):

@@ -11,12 +11,12 @@ import torch
 
 from repro.agent.aug import RandomShift
 from repro.agent.backbone import optimize
-from repro.agent.losses import Metrics
+from repro.agent.losses import SATURATION_METRICS, Metrics, saturation_metrics
 from repro.agent.modules import LearnerBase, ModuleSet
 from repro.agent.networks import Actor, Encoder
 from repro.config.schema import AgentConfig
 
-METRICS = ("bc_loss",)
+METRICS = ("bc_loss", *SATURATION_METRICS)
 
 
 def bc_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -61,6 +61,8 @@ class BC(LearnerBase, ModuleSet):
         return self.policy(obs_t).cpu().numpy()[0].astype(np.float32)
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
-        loss = bc_loss(self.policy(self.aug(batch["obs"].float())), batch["action"])
+        dist = self.actor(self.encoder(self.aug(batch["obs"].float())), 1.0)
+        loss = bc_loss(dist.mean, batch["action"])
         optimize(loss, self.actor_opt, self.encoder_opt)
-        return {"bc_loss": loss.detach()}
+        assert dist.pre_tanh is not None  # the Actor's distribution carries it
+        return {"bc_loss": loss.detach(), **saturation_metrics(dist.loc, dist.pre_tanh)}

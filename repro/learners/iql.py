@@ -24,13 +24,13 @@ from torch import nn
 
 from repro.agent import fast
 from repro.agent.backbone import BackboneLearner, optimize
-from repro.agent.losses import CRITIC_METRICS, Metrics
+from repro.agent.losses import CRITIC_METRICS, SATURATION_METRICS, Metrics, saturation_metrics
 from repro.agent.networks import mlp, orthogonal_init, trunk
 from repro.config.schema import AgentConfig, IQLConfig, RewardScaling, ValueForTargets, learner_section
 from repro.learners.losses import iql as iql_loss
 
 VALUE_METRICS = ("value_loss", "value_v")
-ACTOR_METRICS = ("actor_loss", "actor_adv", "actor_weight", "actor_logprob")
+ACTOR_METRICS = ("actor_loss", "actor_adv", "actor_weight", "actor_logprob", *SATURATION_METRICS)
 
 
 class ValueNet(nn.Module):
@@ -142,12 +142,14 @@ class IQL(BackboneLearner):
             for group in bb.actor_opt.param_groups:
                 group["lr"] = iql_loss.cosine_lr(self.cfg.lr, step, c.actor_lr_cosine_updates)
         dist = bb.actor(h, bb.stddev(step))
+        assert dist.pre_tanh is not None  # the Actor's distribution carries it
+        health = saturation_metrics(dist.loc, dist.pre_tanh)
         if self.log_std is not None:  # the JAX actor: Normal(tanh mean, exp(clip(log_stds)))
             dist = torch.distributions.Normal(dist.loc, self.log_std().expand_as(dist.loc))
         log_prob = dist.log_prob(action).sum(-1, keepdim=True)
         loss, metrics = iql_loss.actor_loss(log_prob, tq1, tq2, v, beta=c.beta, max_weight=c.max_weight)
         optimize(loss, bb.actor_opt)
-        return metrics
+        return {**metrics, **health}
 
     def _critic_step(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor,
                      discount: torch.Tensor, next_v: torch.Tensor) -> Metrics:

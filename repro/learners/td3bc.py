@@ -18,11 +18,11 @@ from __future__ import annotations
 import torch
 
 from repro.agent.backbone import BackboneLearner, optimize
-from repro.agent.losses import CRITIC_METRICS, Metrics
+from repro.agent.losses import CRITIC_METRICS, SATURATION_METRICS, Metrics, saturation_metrics
 from repro.config.schema import TD3BCConfig, learner_section
 from repro.learners.losses import td3bc as td3bc_loss
 
-ACTOR_METRICS = ("actor_loss", "actor_lambda", "actor_bc", "actor_q")
+ACTOR_METRICS = ("actor_loss", "actor_lambda", "actor_bc", "actor_q", *SATURATION_METRICS)
 
 
 class TD3BC(BackboneLearner):
@@ -49,4 +49,5 @@ class TD3BC(BackboneLearner):
         loss, metrics = td3bc_loss.actor_loss(q1, q2, policy_action, data_action, alpha=c.alpha,
                                               lambda_from=c.lambda_from)
         optimize(loss, bb.actor_opt)
-        return metrics
+        assert dist.pre_tanh is not None  # the Actor's distribution carries it
+        return {**metrics, **saturation_metrics(dist.loc, dist.pre_tanh)}

@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from repro.runs.fsutil import named_os_error
+from repro.runs.fsutil import atomic_write_text, named_os_error
 from repro.runs.runformat import EVAL, EVAL_COLUMNS, TRAIN, TRAIN_COLUMNS, WALLCLOCK_COLUMNS, train_columns
 from repro.runs.tblog import TensorBoardMirror
 from repro.runs.wblog import WandbMirror, WandbRun
@@ -40,12 +40,29 @@ def format_row(columns: Sequence[str], row: dict[str, Any]) -> str:
     return ",".join(_fmt(row.get(c)) for c in columns) + "\n"
 
 
+def widen_rows(path: Path, text: str, columns: Sequence[str]) -> None:
+    """Write ``text`` (a CSV log's header and rows) to ``path`` atomically under the header ``columns``, each row's
+    cell moved to its column and the columns it lacks left empty. Raises ValueError when the old header names a
+    column ``columns`` lacks (another learner's log: nothing is written)."""
+    lines = text.splitlines()
+    old = lines[0].split(",") if lines else []
+    missing = [c for c in old if c not in columns]
+    if missing:
+        raise ValueError(f"{path}: header differs from the run's columns (it has {', '.join(missing)})")
+    out = [header_line(columns)]
+    for line in lines[1:]:
+        cells = dict(zip(old, line.split(",")))
+        out.append(",".join(cells.get(c, "") for c in columns) + "\n")
+    atomic_write_text(path, "".join(out))
+
+
 class CsvLog:
     """One CSV file with a fixed header; each row is flushed and fsynced as soon as it is written."""
 
     def __init__(self, path: str | os.PathLike, columns: Sequence[str], offset: int | None = None):
         """Open ``path`` for appending. ``offset`` (from a checkpoint) truncates rows written after it;
-        ``None`` starts the file afresh."""
+        ``None`` starts the file afresh. A file written with fewer columns (a run logged before a metric was added,
+        resumed or extended today) is rewritten once with today's header, its rows' new cells empty."""
         self.path = Path(path)
         self.columns = list(columns)
         header = header_line(self.columns)
@@ -55,8 +72,11 @@ class CsvLog:
             with open(self.path, "r+b") as f:
                 existing = f.readline().decode()
                 if existing != header:
-                    raise ValueError(f"{self.path}: header differs from the run's columns")
-                f.truncate(max(offset, len(header.encode())))
+                    f.seek(0)
+                    kept = f.read(max(offset, len(existing.encode()))).decode()
+                    widen_rows(self.path, kept, self.columns)
+                else:
+                    f.truncate(max(offset, len(header.encode())))
         self._f = open(self.path, "ab")
 
     def write(self, row: dict[str, Any]) -> None:
