@@ -42,6 +42,7 @@ from analysis.tables import TableOutput, fmt_num, write_table
 from repro.envs.dmc import random_policy_returns
 from repro.envs.registry import get_task
 from repro.runs import runformat
+from repro.runs.health import read_rows, saturation
 
 EXPERIMENT = "verify"  # sweeps/verify.yaml's experiment
 BASELINE = "DrQ-v2"  # the method judged against the published band
@@ -108,6 +109,8 @@ class VerdictRow:
     threshold: float = math.nan  # learned: the return to reach
     random_return: float = math.nan
     note: str = ""
+    health: str = ""  # the seeds whose actor is saturated (repro/runs/health.py), "" when none
+    health_logged: bool = True  # every seed's train.csv logs actor_saturated (runs before issue 49 do not)
     frames: list[FrameRow] = field(default_factory=list, repr=False)
 
     @property
@@ -190,7 +193,7 @@ def judge(results: Results, min_seeds: int = MIN_SEEDS, published: Results | Non
         frames = published_frames(task, reached)
         frame_rows = _frame_rows(cell_results, published, task, str(method), str(variant), frames)
         base = dict(task=task, method=str(method), variant=str(variant), seeds=len(cell), reached=reached,
-                    frames=frame_rows)
+                    frames=frame_rows, **cell_health(results.root, cell))
         if method == BASELINE:
             rows.append(_baseline_verdict(base, rule, published, frames, frame_rows, min_seeds))
         else:
@@ -199,6 +202,25 @@ def judge(results: Results, min_seeds: int = MIN_SEEDS, published: Results | Non
                                          functools.partial(random_return, task) if given is None
                                          else functools.partial(float, given)))
     return rows
+
+
+def cell_health(root: str | Path, cell: pd.DataFrame) -> dict[str, object]:
+    """``health``: "seed N: actor saturated since frame F: ..." for each run of ``cell`` whose actor is saturated at
+    the end of its train.csv (the rule of repro/runs/health.py), "" when none is; ``health_logged``: whether every
+    run logs the metric."""
+    out, logged = [], True
+    for run_id, seed in zip(cell["run_id"], cell["seed"]):
+        rows = read_rows(Path(root) / str(run_id))
+        logged = logged and bool(rows)
+        found = saturation(rows)
+        if found is not None:
+            out.append(f"seed {seed}: {found.message()}")
+    return {"health": "; ".join(out), "health_logged": logged}
+
+
+def health_text(row: VerdictRow) -> str:
+    """The verdict table's actor column: the saturated seeds, else whether the seeds' actors were watched."""
+    return row.health or ("not saturated" if row.health_logged else "not logged (a run written before issue 49)")
 
 
 def _frame_rows(cell: Results, published: Results, task: str, method: str, variant: str,
@@ -263,7 +285,7 @@ def _learned_verdict(base: dict, rule: TaskRule, frame_rows: Sequence[FrameRow],
 
 # ---------------------------------------------------------------------------------------------------- tables
 VERDICT_COLUMNS = ["task", "method", "variant", "seeds", "reached", "verdict", "false_alarm", "threshold",
-                   "random_return", "rule", "note"]
+                   "random_return", "rule", "note", "health", "health_logged"]
 FRAME_COLUMNS = list(FrameRow.__dataclass_fields__)
 
 
@@ -309,7 +331,8 @@ def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutp
     display = pd.DataFrame({
         "Task": raw["task"], "Method": raw["method"], "Variant": raw["variant"], "Seeds": raw["seeds"],
         "Frames reached": [frames_text(f) for f in raw["reached"]], "Verdict": raw["verdict"],
-        "False alarm": [_rate_text(v) for v in raw["false_alarm"]], "Note": raw["note"]})
+        "False alarm": [_rate_text(v) for v in raw["false_alarm"]], "Note": raw["note"],
+        "Actor": [health_text(r) for r in rows]})
     counts = {v: int((raw["verdict"] == v).sum()) for v in (LEARNS, BELOW, ABOVE, LEARNED, NOT_LEARNED, NOT_ENOUGH)}
     caption = ("repro verify: the verify runs against the DrQ-v2 authors' published curves (" +
                (", ".join(f"{n} {v}" for v, n in counts.items() if n) or "no verify runs") + ").")
@@ -352,5 +375,6 @@ def verdict_lines(rows: Sequence[VerdictRow]) -> list[str]:
     for r in rows:
         extra = f"; false alarm {_rate_text(r.false_alarm)}" if r.method == BASELINE and r.judged else ""
         out.append(f"{r.task} {r.method} ({r.variant}, {r.seeds} seed(s), {frames_text(r.reached)}): "
-                   f"{r.verdict}{extra}" + (f" — {r.note}" if r.note else ""))
+                   f"{r.verdict}{extra}" + (f" — {r.note}" if r.note else "")
+                   + (f" — {r.health}" if r.health else ""))
     return out

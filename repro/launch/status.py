@@ -13,6 +13,7 @@ from repro.launch import lock
 from repro.launch.slurm_query import FAILED, QUEUED, job_states
 from repro.launch.state import read_record, read_state
 from repro.launch.waiting import DatasetNeed, missing_reason
+from repro.runs.health import read_saturation
 from repro.runs.runformat import EVAL, STATE_DONE, STATE_PARTIAL, TRAIN, run_state
 
 STATUSES = ("done", "running", "queued", "failed", "pending", "waiting")
@@ -28,6 +29,7 @@ class RunStatus:
     job_id: str | None
     detail: str  # failed: the error; running: where; pending: partial or not started; waiting: the dataset
     log: str | None = None  # failed runs: the file holding the error (local log or SLURM stderr)
+    health: str = ""  # a saturated actor (repro/runs/health.py), whatever the status: "actor saturated since ..."
 
 
 def last_row(path: Path, tail_bytes: int = 8192) -> dict[str, str] | None:
@@ -82,9 +84,11 @@ def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
     state = run_state(run_dir, budget)
     owner = _lock_owner(results_root, run_dir)
     job = (owner.job_id if owner and owner.job_id else None) or (record.job_id if record else None)
+    saturated = read_saturation(run_dir) if frame is not None else None
+    sick = saturated.message() if saturated is not None else ""
 
     def make(status: str, detail: str) -> RunStatus:
-        return RunStatus(key, run_dir, status, frame, ret, job, detail)
+        return RunStatus(key, run_dir, status, frame, ret, job, detail, health=sick)
 
     if state == STATE_DONE:
         return make("done", "")

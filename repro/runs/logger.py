@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from repro.runs import health
 from repro.runs.fsutil import atomic_write_text, named_os_error
 from repro.runs.runformat import EVAL, EVAL_COLUMNS, TRAIN, TRAIN_COLUMNS, WALLCLOCK_COLUMNS, train_columns
 from repro.runs.tblog import TensorBoardMirror
@@ -151,13 +152,23 @@ class CsvPairLogger:
 
 
 class RunLogger(CsvPairLogger):
-    """The online run's logs: columns from repro.runs.runformat, TensorBoard and W&B step = frame."""
+    """The online run's logs: columns from repro.runs.runformat, TensorBoard and W&B step = frame. A train row that
+    completes a stretch of a saturated actor (repro/runs/health.py) prints one warning line."""
 
     def __init__(self, run_dir: str | os.PathLike, metric_names: Sequence[str],
                  offsets: dict[str, int] | None = None, echo: Callable[[str], None] = print,
                  tensorboard: bool = False, wandb: WandbRun | None = None):
         super().__init__(run_dir, EVAL_COLUMNS, train_columns(metric_names), offsets, echo, tensorboard, "frame",
                          wandb)
+        self.health = health.Watch()
+        self.health.extend(health.read_rows(run_dir))  # the rows kept by a resume: a stretch there is not said again
+
+    def log_train(self, row: dict[str, Any]) -> None:
+        super().log_train(row)
+        found = self.health.add(health.row_of(row))
+        if found is not None:
+            self.echo(f"warning: {found.message()} (actor_saturated {found.share:.2f} over the last "
+                      f"{found.frames:,} frames; docs/watching.md)")
 
     def log_eval(self, row: dict[str, Any]) -> None:
         self._write_eval(row)

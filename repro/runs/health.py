@@ -1,0 +1,132 @@
+"""A run's actor health, read from its train.csv: the one rule ``repro train``, ``repro status``, ``repro verify`` and
+the report share for "this seed's actor has died".
+
+Every actor update logs ``actor_saturated`` (the share of the batch's action-mean entries whose tanh is exactly +-1 in
+float32) and ``actor_pretanh`` (the mean |pre-tanh|) in its episode's train.csv row (repro/agent/losses.py). Where the
+tanh is exactly +-1 its gradient is exactly zero: the actor cannot move by its own loss, only by a drift of the
+encoder's features (DrQ-v2's actor trains on detached features, its trunk does not). The rule:
+
+    a run's actor is *saturated* when its last train.csv rows with updates, over at least ``SATURATED_FRAMES``
+    environment frames without a break, all have ``actor_saturated >= SATURATED_SHARE``;
+
+it is reported as "actor saturated since frame N: its policy gradient is zero", N the first frame of the stretch.
+A stretch of 10K frames is 10 episodes of cartpole_balance and 20% of the published curves' first 50K frames: at
+130 frames/s (the paper's DrQ-v2 on an A100) a GPU user reads it about a minute and a half after it starts. It says
+what the gradient is, not that the seed cannot recover: two of the ten published DrQ-v2 seeds on cartpole_balance sit
+at 135 at 20K frames and recover by 40K (docs/verification.md).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from repro.runs.runformat import TRAIN
+
+SATURATED_SHARE = 0.99  # "nearly every state": at least this share of action-mean entries exactly at +-1
+SATURATED_FRAMES = 10_000  # the stretch of environment frames the share must hold over
+COLUMNS = ("frame", "episode_length", "actor_saturated")  # what the rule reads from train.csv
+
+
+@dataclass(frozen=True)
+class Saturation:
+    """A stretch of saturated rows at the end of a run's train.csv."""
+
+    since: int  # the first environment frame of the stretch (the start of its first episode)
+    until: int  # the last row's frame
+    share: float  # the last row's actor_saturated
+
+    @property
+    def frames(self) -> int:
+        return self.until - self.since
+
+    def message(self) -> str:
+        return f"actor saturated since frame {self.since:,}: its policy gradient is zero"
+
+
+@dataclass(frozen=True)
+class Row:
+    """What the rule reads of one train.csv row: its frame, its episode's length in frames and its share (NaN
+    for an episode without updates)."""
+
+    frame: int
+    length: int
+    share: float
+
+
+def saturation(rows: Sequence[Row], min_share: float = SATURATED_SHARE,
+               min_frames: int = SATURATED_FRAMES) -> Saturation | None:
+    """The saturated stretch ending at the last row with updates, when it spans at least ``min_frames``; None
+    otherwise (also for a run that has logged no update yet)."""
+    updated = [r for r in rows if not math.isnan(r.share)]
+    if not updated or updated[-1].share < min_share:
+        return None
+    start = len(updated) - 1
+    while start > 0 and updated[start - 1].share >= min_share:
+        start -= 1
+    first, last = updated[start], updated[-1]
+    found = Saturation(since=first.frame - first.length, until=last.frame, share=last.share)
+    return found if found.frames >= min_frames else None
+
+
+class Watch:
+    """The rule over rows as a run writes them: :meth:`add` returns the saturation the first time a stretch
+    reaches the length (once per stretch; a recovery and a new stretch report again)."""
+
+    def __init__(self, min_share: float = SATURATED_SHARE, min_frames: int = SATURATED_FRAMES):
+        self.min_share, self.min_frames = min_share, min_frames
+        self.rows: list[Row] = []
+        self._said: int | None = None  # the ``since`` of the stretch already reported
+
+    def add(self, row: Row) -> Saturation | None:
+        self.rows.append(row)
+        found = saturation(self.rows, self.min_share, self.min_frames)
+        if found is None or found.since == self._said:
+            return None
+        self._said = found.since
+        return found
+
+    def extend(self, rows: Iterable[Row]) -> None:
+        """Rows already written (a resumed run): remembered, a stretch among them not reported again."""
+        for row in rows:
+            self.add(row)
+
+
+def _number(text: str | None) -> float:
+    try:
+        return float(text) if text not in (None, "") else math.nan
+    except ValueError:
+        return math.nan
+
+
+def row_of(values: dict[str, object]) -> Row:
+    """A :class:`Row` from a train.csv row (strings from the file, or the numbers a run writes)."""
+    def num(key: str) -> float:
+        v = values.get(key)
+        return math.nan if v is None else _number(str(v))
+
+    frame, length = num("frame"), num("episode_length")
+    return Row(int(frame) if not math.isnan(frame) else 0, int(length) if not math.isnan(length) else 0,
+               num("actor_saturated"))
+
+
+def read_rows(run_dir: str | os.PathLike[str]) -> list[Row]:
+    """The rule's rows of ``run_dir``'s train.csv; empty when the file is missing, unreadable or has no
+    ``actor_saturated`` column (a run logged before issue 49, or a learner without an actor)."""
+    try:
+        with open(Path(run_dir) / TRAIN, newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            if not reader.fieldnames or "actor_saturated" not in reader.fieldnames:
+                return []
+            return [row_of(r) for r in reader if r.get("frame")]
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return []
+
+
+def read_saturation(run_dir: str | os.PathLike[str]) -> Saturation | None:
+    """The rule applied to ``run_dir``'s train.csv (None: not saturated, or nothing to judge)."""
+    return saturation(read_rows(run_dir))
