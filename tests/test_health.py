@@ -8,7 +8,6 @@ from pathlib import Path
 
 import pytest
 import torch
-
 from typer.testing import CliRunner
 
 from helpers import OBS, launch_app, make_batch, write_sweep
@@ -121,10 +120,11 @@ def _train_csv(run: Path, shares: list[float]) -> None:
 
 def test_status_flags_a_saturated_actor(tmp_path: Path):
     sweep = write_sweep(tmp_path, "hs", ["cartpole_balance"], {"ok": [], "dead": []}, 1)
-    planned = specs.plan(specs.expand(specs.load(str(sweep)), specs.Selection(sets=(f"runtime.results_root={tmp_path}",))))
+    selection = specs.Selection(sets=(f"runtime.results_root={tmp_path}",))
+    planned = specs.plan(specs.expand(specs.load(str(sweep)), selection))
     root = specs.results_root_of(planned)
     sdir = state_dir(root, "hs")
-    ok, dead = sorted(planned, key=lambda p: "dead" not in str(p.run_dir))[::-1]
+    dead, ok = sorted(planned, key=lambda p: "/ok/" in str(p.run_dir))
     _train_csv(ok.run_dir, [math.nan] * 4 + [0.3] * 16)
     _train_csv(dead.run_dir, [math.nan] * 4 + [0.2] * 2 + [1.0] * 14)
     record_launch(sdir, "hs", sweep, "local", {p.key: {"run_dir": str(p.run_dir), "overrides": []} for p in planned})
