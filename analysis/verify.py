@@ -38,6 +38,7 @@ from analysis.calibration import SOURCE_TEXT, packaged_published, values_at
 from analysis.claim_budget import frames_text
 from analysis.io import atomic_write_text
 from analysis.load import Results
+from analysis.stats import poi_interval
 from analysis.tables import TableOutput, fmt_num, write_table
 from repro.envs.dmc import random_policy_returns
 from repro.envs.registry import get_task
@@ -95,6 +96,23 @@ class FrameRow:
 
 
 @dataclass
+class AdvantageRow:
+    """One judged frame of a method other than DrQ-v2 against the published DrQ-v2 seeds: the probability that one
+    of its seeds beats one published seed (rliable's probability of improvement, ties a half) with its 95%
+    stratified-bootstrap interval (analysis/stats.py). An observation at a small budget, not a verdict on a claim."""
+
+    task: str
+    method: str
+    variant: str
+    frame: int
+    n: int  # the method's seeds at the frame
+    published_n: int
+    poi: float
+    poi_low: float
+    poi_high: float
+
+
+@dataclass
 class VerdictRow:
     """The verdict of one cell (task, method, variant)."""
 
@@ -112,6 +130,7 @@ class VerdictRow:
     health: str = ""  # the seeds whose actor is saturated (repro/runs/health.py), "" when none
     health_logged: bool = True  # every seed's train.csv logs actor_saturated (runs before issue 49 do not)
     frames: list[FrameRow] = field(default_factory=list, repr=False)
+    advantage: list[AdvantageRow] = field(default_factory=list, repr=False)  # methods other than DrQ-v2
 
     @property
     def judged(self) -> bool:
@@ -198,10 +217,27 @@ def judge(results: Results, min_seeds: int = MIN_SEEDS, published: Results | Non
             rows.append(_baseline_verdict(base, rule, published, frames, frame_rows, min_seeds))
         else:
             given = (random_returns or {}).get(task)
-            rows.append(_learned_verdict(base, rule, frame_rows, min_seeds,
-                                         functools.partial(random_return, task) if given is None
-                                         else functools.partial(float, given)))
+            row = _learned_verdict(base, rule, frame_rows, min_seeds,
+                                   functools.partial(random_return, task) if given is None
+                                   else functools.partial(float, given))
+            row.advantage = _advantage_rows(cell_results, published, task, str(method), str(variant), frames)
+            rows.append(row)
     return rows
+
+
+def _advantage_rows(cell: Results, published: Results, task: str, method: str, variant: str,
+                    frames: Sequence[int]) -> list[AdvantageRow]:
+    """At each published frame every seed reaches: P(a seed of the cell > a published DrQ-v2 seed) with its
+    bootstrap interval (rliable's estimator and random state, :func:`analysis.stats.poi_interval`)."""
+    out = []
+    for f in frames:
+        vals = values_at(cell, f)["value"].to_numpy(dtype=float)
+        pub = values_at(published, f, task)["value"].to_numpy(dtype=float)
+        if not len(vals) or not len(pub):
+            continue
+        poi, low, high = poi_interval(vals[:, None], pub[:, None])
+        out.append(AdvantageRow(task, method, variant, int(f), len(vals), len(pub), poi, low, high))
+    return out
 
 
 def cell_health(root: str | Path, cell: pd.DataFrame) -> dict[str, object]:
@@ -287,6 +323,13 @@ def _learned_verdict(base: dict, rule: TaskRule, frame_rows: Sequence[FrameRow],
 VERDICT_COLUMNS = ["task", "method", "variant", "seeds", "reached", "verdict", "false_alarm", "threshold",
                    "random_return", "rule", "note", "health", "health_logged"]
 FRAME_COLUMNS = list(FrameRow.__dataclass_fields__)
+ADVANTAGE_COLUMNS = list(AdvantageRow.__dataclass_fields__)
+ADVANTAGE_NOTE = ("An observation at a small budget, never a verdict on the paper's claims (those are judged by "
+                  "`repro claims` at their own budgets and seeds): P(X > Y) is the probability that one seed of the "
+                  "method beats one published DrQ-v2 seed at that frame (rliable's probability of improvement, ties "
+                  "counting a half); the interval is its 95% stratified-bootstrap interval over both sets of seeds "
+                  "(rliable's, random state fixed). With one seed of the method it is the share of published seeds "
+                  "that seed beats.")
 
 
 def verdict_frame(rows: Sequence[VerdictRow]) -> pd.DataFrame:
@@ -295,6 +338,22 @@ def verdict_frame(rows: Sequence[VerdictRow]) -> pd.DataFrame:
 
 def frames_frame(rows: Sequence[VerdictRow]) -> pd.DataFrame:
     return pd.DataFrame([fr.__dict__ for r in rows for fr in r.frames], columns=FRAME_COLUMNS)
+
+
+def advantage_frame(rows: Sequence[VerdictRow]) -> pd.DataFrame:
+    return pd.DataFrame([a.__dict__ for r in rows for a in r.advantage], columns=ADVANTAGE_COLUMNS)
+
+
+def advantage_lines(rows: Sequence[VerdictRow]) -> list[str]:
+    """One line per method other than DrQ-v2: its P(X > Y) against the published seeds at each judged frame."""
+    out = []
+    for r in rows:
+        if r.advantage:
+            cells = ", ".join(f"{frames_text(a.frame)} {a.poi:.2f} [{a.poi_low:.2f}, {a.poi_high:.2f}]"
+                              for a in r.advantage)
+            out.append(f"{r.task} {r.method} ({r.variant}, {r.seeds} seed(s)) vs the published DrQ-v2 seeds, "
+                       f"P(X > Y) [95% CI]: {cells} (an observation at a small budget, not a verdict)")
+    return out
 
 
 def _rate_text(rate: float) -> str:
@@ -350,6 +409,16 @@ def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutp
         "Position": fr["position"]})
     frames_table = write_table(out_dir, "verify_frames", fr, "repro verify: each judged frame against the published "
                                f"band (the seeds' range ± {BAND_SD:g} sd).", fr_display, verdict_notes()[:2])
+    adv = advantage_frame(rows)
+    adv_display = pd.DataFrame({
+        "Task": adv["task"], "Method": adv["method"], "Variant": adv["variant"],
+        "Frames": [frames_text(f) for f in adv["frame"]],
+        "Seeds (method / published)": [f"{n} / {p}" for n, p in zip(adv["n"], adv["published_n"])],
+        "P(X > Y) [95% CI]": [f"{v:.2f} [{lo:.2f}, {hi:.2f}]" for v, lo, hi in
+                              zip(adv["poi"], adv["poi_low"], adv["poi_high"])]})
+    write_table(out_dir, "verify_advantage", adv, "repro verify: each method other than DrQ-v2 against the DrQ-v2 "
+                "authors' published seeds at every judged frame, probability of improvement.", adv_display,
+                [ADVANTAGE_NOTE, f"Published: {SOURCE_TEXT}."])
     return verdicts, frames_table
 
 

@@ -20,7 +20,16 @@ from analysis.context import Context
 from analysis.io import atomic_write_text
 from analysis.power import REPORT_MAX_SEEDS, REPORT_SIMS, next_runs_paragraph, power_rows, write_power
 from analysis.tables import TableOutput, to_markdown
-from analysis.verify import VerdictRow, judge, verdict_frame, verdict_notes, write_verdicts
+from analysis.verify import (
+    ADVANTAGE_NOTE,
+    VerdictRow,
+    advantage_frame,
+    health_text,
+    judge,
+    verdict_frame,
+    verdict_notes,
+    write_verdicts,
+)
 from paper_figures.catalog import resolve, sorted_ids
 from paper_figures.render import render_artifacts
 from paper_figures.verify_plot import plot_verify
@@ -166,11 +175,17 @@ def _calibration_section(ctx: Context, rows: list[CalibrationRow], notes: list[s
 
 
 def _verify_section(rows: Sequence[VerdictRow]) -> str:
-    body = to_markdown(verdict_frame(rows)[["task", "method", "variant", "seeds", "verdict", "false_alarm", "note"]])
+    table = verdict_frame(rows)[["task", "method", "variant", "seeds", "verdict", "false_alarm", "note"]].copy()
+    table["actor"] = [health_text(r) for r in rows]
+    body = to_markdown(table)
     body += "".join(f"\n_{n}_\n" for n in verdict_notes())
+    adv = advantage_frame(rows)
+    if not adv.empty:
+        body += ("\nEarly advantage against the published DrQ-v2 seeds (an observation at a small budget, not a "
+                 "verdict):\n\n" + to_markdown(adv) + f"\n_{ADVANTAGE_NOTE}_\n")
     return _section("repro verify: does this installation learn as the DrQ-v2 authors' code did?",
                     body + "\n![verify](verify.png)  \n[PDF](verify.pdf); tables: [verify.md](verify.md), "
-                    "[verify_frames.md](verify_frames.md)")
+                    "[verify_frames.md](verify_frames.md), [verify_advantage.md](verify_advantage.md)")
 
 
 def _artifact_section(art) -> str:

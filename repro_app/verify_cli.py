@@ -21,6 +21,7 @@ from repro.runs.console import console, fail
 SWEEP = "verify"
 CPU_AGENTS = ("drqv2",)  # the CPU check: DrQ-v2 alone (TACO to 40K frames takes hours more on a CPU)
 CPU_SEEDS = 1  # one seed at a time uses the 2 cores of the machine it was measured on (docs/verification.md)
+CPU_VARIANTS = ("base",)  # the CPU check: the fast path (the plain path, variant `plain`, is 3-5x its CPU time)
 
 
 def _has_cuda() -> bool:
@@ -39,6 +40,16 @@ def _agents(agents: Optional[str], sweep_agents: tuple[str, ...], cuda: bool) ->
     return chosen
 
 
+def _variants(variants: Optional[str], sweep_variants: tuple[str, ...], cuda: bool) -> tuple[str, ...]:
+    if variants is None:
+        return sweep_variants if cuda else tuple(v for v in CPU_VARIANTS if v in sweep_variants)
+    chosen = tuple(v.strip() for v in variants.split(",") if v.strip())
+    unknown = [v for v in chosen if v not in sweep_variants]
+    if unknown or not chosen:
+        fail(f"--variants: {', '.join(unknown) or 'none given'}; the verify sweep has {', '.join(sweep_variants)}")
+    return chosen
+
+
 def verify_cmd(
     seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Use seeds 1..N (default: the sweep's 3 on a "
                                         "GPU machine, 1 on a CPU)."),
@@ -48,7 +59,10 @@ def verify_cmd(
     results_root: Optional[Path] = typer.Option(None, *RESULTS_FLAGS, help="Results root of the runs (default: the "
                                                 "config's runtime.results_root)."),
     agents: Optional[str] = typer.Option(None, "--agents", help="Comma-separated agents of the sweep to run (default: "
-                                         "drqv2,taco on a GPU machine, drqv2 on a CPU)."),
+                                         "all of them on a GPU machine, drqv2 on a CPU)."),
+    variants: Optional[str] = typer.Option(None, "--variants", help="Comma-separated variants of the sweep to run "
+                                           "(base: agent.fast; plain: the default path, DrQ-v2 seed 1; default: "
+                                           "both on a GPU machine, base on a CPU)."),
     out: Path = typer.Option(Path("results/verify"), "--out", "-o", help="Folder for verify.{csv,md,tex}, "
                              "verify_frames.{csv,md,tex} and verify.{png,pdf}."),
     judge_only: bool = typer.Option(False, "--judge-only", help="Judge the verify runs already under the results "
@@ -82,18 +96,20 @@ def verify_cmd(
     if not judge_only:
         cuda = _has_cuda() or gpus is not None
         chosen = _agents(agents, spec.agents, cuda)
+        kinds = _variants(variants, tuple(spec.variants), cuda)
         if seeds is None and not cuda:
             seeds = CPU_SEEDS
         if agents is None or seeds == CPU_SEEDS:
-            say(f"{'GPU' if cuda else 'no GPU'}: agents {', '.join(chosen)}, seeds 1..{seeds or len(spec.seeds)}"
-                + ("" if cuda else " (the CPU check, docs/verification.md; --agents drqv2,taco --seeds 3 for the "
-                   "whole sweep)"), highlight=False)
+            say(f"{'GPU' if cuda else 'no GPU'}: agents {', '.join(chosen)}, variants {', '.join(kinds)}, seeds "
+                f"1..{seeds or len(spec.seeds)}"
+                + ("" if cuda else f" (the CPU check, docs/verification.md; --agents {','.join(spec.agents)} "
+                   f"--variants {','.join(spec.variants)} --seeds 3 for the whole sweep)"), highlight=False)
         options = LaunchOptions(launcher, max_parallel, force, cluster_config,
                                 warm_start and launcher == Launcher.local and gpus is None, gpus, runs_per_gpu)
         report = launch_sweep(SWEEP, Selection(seeds=seeds, frames=frames, sets=root_sets), options, dry_run,
-                              agents=chosen)
+                              agents=chosen, variants=kinds)
         if report is None:  # --dry-run
-            _print_cost(Selection(seeds=seeds, frames=frames, sets=root_sets), chosen,
+            _print_cost(Selection(seeds=seeds, frames=frames, sets=root_sets), chosen, kinds,
                         results_root if results_root is not None else _root_from(root_sets))
             return
         if report.interrupted:
@@ -160,7 +176,16 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = Fals
     """Judge the verify runs under ``root``, write the tables and the figure to ``out``, print one line per cell;
     the exit code: 1 when a verdict says the pipeline does not learn as published, else 0."""
     from analysis.load import ResultsRootError, load_results
-    from analysis.verify import ABOVE, BELOW, NOT_LEARNED, judge, keep_runs, verdict_lines, write_verdicts
+    from analysis.verify import (
+        ABOVE,
+        BELOW,
+        NOT_LEARNED,
+        advantage_lines,
+        judge,
+        keep_runs,
+        verdict_lines,
+        write_verdicts,
+    )
     from paper_figures.verify_plot import plot_verify
 
     try:
@@ -172,7 +197,7 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = Fals
     if not rows:
         con.print(f"no verify runs under {root}: run `repro verify`", highlight=False)
         return 0
-    for line in verdict_lines(rows):
+    for line in verdict_lines(rows) + advantage_lines(rows):
         con.print(line, highlight=False, soft_wrap=True)
     tables = write_verdicts(out, rows)
     figures = plot_verify(results, rows, out)
@@ -183,7 +208,7 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = Fals
     return 1 if any(r.verdict in (BELOW, ABOVE, NOT_LEARNED) for r in rows) else 0
 
 
-def _print_cost(sel: Selection, agents: tuple[str, ...], root: Path) -> None:
+def _print_cost(sel: Selection, agents: tuple[str, ...], variants: tuple[str, ...], root: Path) -> None:
     """What `repro plan` expects the planned runs to take on the device of the newest bench file under ``root``
     (``repro/launch/cost.py``), or the command that writes one."""
     from repro.launch.cost import PlanError, find_bench, makespan, plan_sweeps
@@ -194,7 +219,8 @@ def _print_cost(sel: Selection, agents: tuple[str, ...], root: Path) -> None:
     except PlanError as exc:
         con.print(f"expected time: unknown ({exc})", highlight=False, soft_wrap=True)
         return
-    costs = [c for c in plan_sweeps([SWEEP], bench, sel, memory=False) if c.algo in agents]
+    costs = [c for c in plan_sweeps([SWEEP], bench, sel, memory=False)
+             if c.algo in agents and c.run_dir.parent.parent.name in variants]  # root/verify/agent/VARIANT/task/seed_N
     hours = [c.hours(c.frames - c.trained) for c in costs if c.frames > c.trained]
     if any(h is None for h in hours):
         missing = sorted({c.missing for c in costs if c.fps is None and c.missing})

@@ -112,6 +112,23 @@ def test_taco_learned_against_the_random_policy(tmp_path):
     assert _judge(tmp_path / "early")["TACO"].verdict == V.NOT_ENOUGH
 
 
+def test_taco_against_the_published_seeds_by_hand(tmp_path):
+    """P(X > Y) of TACO's seeds over the published DrQ-v2 seeds at each judged frame, counted by hand: at 20K the
+    published seeds are 135, 136, 360, 365, 373, 450, 474, 477, 485, 492; 400 beats 5 of them and 480 beats 8:
+    (5 + 8) / 20 = 0.65. At 40K (429 ... 985) 990 beats all ten and 500 beats one: 11 / 20. DrQ-v2 has none."""
+    _runs(tmp_path, "taco", [[350, 400, 990], [350, 480, 500]])
+    _runs(tmp_path, "drqv2", [[350, 400, 990]])
+    rows = _judge(tmp_path)
+    adv = rows["TACO"].advantage
+    assert [(a.frame, a.n, a.published_n) for a in adv] == [(20_000, 2, 10), (40_000, 2, 10)]
+    assert adv[0].poi == pytest.approx(0.65) and adv[1].poi == pytest.approx(0.55)
+    assert all(a.poi_low <= a.poi <= a.poi_high and a.poi_low < a.poi_high for a in adv)
+    assert rows["DrQ-v2"].advantage == []
+    tables = V.advantage_frame(list(rows.values()))
+    assert list(tables["method"]) == ["TACO", "TACO"]
+    assert "not a verdict" in V.advantage_lines(list(rows.values()))[0]
+
+
 def test_only_the_verify_experiment_is_judged(tmp_path):
     write_run(tmp_path, experiment="main", algo="drqv2", task=TASK, seed=1, final=0.0, frames=60_000,
               eval_every=20_000, curve=[350, 135, 135, 135])
@@ -152,12 +169,14 @@ def test_random_policy_returns_equal_the_pixel_env():
 def test_the_verify_sweep_expands_to_the_check():
     spec = specs.load("verify")
     planned = specs.plan(specs.expand(spec, specs.Selection(sets=("runtime.results_root=/nonexistent",))))
-    assert sorted((p.run.agent, p.run.seed) for p in planned) == [(a, s) for a in ("drqv2", "taco") for s in (1, 2, 3)]
+    base = [(a, s) for a in ("alix", "drqv2", "taco") for s in (1, 2, 3)]
+    assert sorted((p.run.agent, p.run.variant, p.run.seed) for p in planned) == sorted(
+        [(a, "base", s) for a, s in base] + [("drqv2", "plain", 1)])  # the default path: DrQ-v2 seed 1
     for p in planned:
         cfg = p.cfg
         assert (cfg.task.name, cfg.train.frames, cfg.train.eval_every_frames, cfg.train.eval_episodes) == \
             (TASK, 60_000, 20_000, 10)
-        assert cfg.agent.batch_size == 256 and cfg.agent.fast is True and cfg.agent.nstep == 3
+        assert cfg.agent.batch_size == 256 and cfg.agent.fast is (p.run.variant == "base") and cfg.agent.nstep == 3
         # DrQ-v2's easy schedule: std linear(1.0, 0.1, 100000) in agent steps
         assert dict(cfg.agent.stddev_schedule) == {"start": 1.0, "end": 0.1, "duration": 100_000, "step_scale": 1}
         assert cfg.env.action_repeat == 2
@@ -172,7 +191,9 @@ def _verify(*args: str) -> subprocess.CompletedProcess:
 def test_verify_bad_input_is_one_line(tmp_path):
     out = _verify("--agents", "dreamer", "-r", str(tmp_path), "--dry-run")
     assert out.returncode == 2 and "Traceback" not in out.stderr + out.stdout
-    assert "the verify sweep has drqv2, taco" in out.stderr + out.stdout
+    assert "the verify sweep has drqv2, taco, alix" in out.stderr + out.stdout
+    out = _verify("--variants", "bf16", "-r", str(tmp_path), "--dry-run")
+    assert out.returncode == 2 and "the verify sweep has base, plain" in out.stderr + out.stdout
 
 
 @pytest.mark.slow
@@ -185,7 +206,7 @@ def test_verify_tiny_end_to_end(tmp_path):
     dry = _verify("--set", "profile=tiny", "-r", str(tmp_path / "runs"), "--dry-run")
     assert dry.returncode == 0, dry.stderr
     if not torch.cuda.is_available():
-        assert "no GPU: agents drqv2, seeds 1..1" in dry.stdout
+        assert "no GPU: agents drqv2, variants base, seeds 1..1" in dry.stdout
     assert "train.frames=400" in dry.stdout and "agent.batch_size=8" in dry.stdout  # the profile's, after the sweep's
     args = ("--set", "profile=tiny", "--frames", "200", "--agents", "drqv2,taco", "--seeds", "1",
             "-r", str(tmp_path / "runs"), "-o", str(tmp_path / "out"), "--keep-runs")
@@ -219,7 +240,8 @@ def test_the_kept_cpu_runs_are_judged_as_recorded(record, verdicts):
     kept = Path(__file__).resolve().parents[1] / "docs" / "verification" / record
     rows = V.judge(load_results(kept / "runs"))
     recorded = pd.read_csv(kept / "verify.csv")
-    recorded["note"] = recorded["note"].fillna("")  # an empty note (nothing outside the band) reads back as NaN
+    for col in ("note", "health"):  # an empty note or health (nothing to say) reads back as NaN
+        recorded[col] = recorded[col].fillna("")
     pd.testing.assert_frame_equal(V.verdict_frame(rows).reset_index(drop=True), recorded, check_dtype=False)
     assert list(recorded["verdict"]) == verdicts
 

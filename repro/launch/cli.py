@@ -199,9 +199,9 @@ class LaunchOptions:
 
 
 def launch_sweep(name: str, sel: Selection, options: LaunchOptions, dry_run: bool = False,
-                 agents: Sequence[str] | None = None) -> LaunchReport | None:
-    """Expand sweep ``name`` with ``sel`` (only the runs of ``agents``, when given), then print the plan
-    (``dry_run``: returns None) or launch it and print the launch's report. Bad input: one line, exit 2."""
+                 agents: Sequence[str] | None = None, variants: Sequence[str] | None = None) -> LaunchReport | None:
+    """Expand sweep ``name`` with ``sel`` (only the runs of ``agents`` and ``variants``, when given), then print the
+    plan (``dry_run``: returns None) or launch it and print the launch's report. Bad input: one line, exit 2."""
     if options.warm_start and options.launcher == Launcher.slurm:
         fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
     packing = _gpu_packing(options.gpus, options.runs_per_gpu, options.launcher, options.max_parallel,
@@ -211,6 +211,8 @@ def launch_sweep(name: str, sel: Selection, options: LaunchOptions, dry_run: boo
         planned = specs.plan(specs.expand(spec, sel))
         if agents is not None:
             planned = [p for p in planned if p.run.agent in agents]
+        if variants is not None:
+            planned = [p for p in planned if p.run.variant in variants]
         root = specs.results_root_of(planned)
         if dry_run:
             print_plan(planned, spec, root, options.force, specs.excluded(spec, sel))
