@@ -275,6 +275,8 @@ def test_tiny_run_writes_videos_and_event_files(tiny_taco_watched: Path):
 
     watched = tiny_taco_watched
     assert_mirrors_csv(watched)
+    health = read_scalars(watched)  # the actor's health metrics (issue 49) are mirrored like every column
+    assert {"train/actor_saturated", "train/actor_pretanh"} <= set(health)
     ev = pd.read_csv(watched / EVAL)
     videos = sorted((watched / "videos").iterdir())
     assert [v.name for v in videos] == [f"frame_{f:09d}.mp4" for f in ev["frame"]]
@@ -292,6 +294,7 @@ def test_tiny_run_w_and_b_history_equals_its_csvs_and_repro_wandb_sync_names_it(
 
     watched = tiny_taco_watched
     record, history = assert_wandb_mirrors_csv(watched)  # every eval.csv and train.csv point once, at its frame
+    assert any("train/actor_saturated" in row for row in history)  # the actor's health (issue 49)
     ev = pd.read_csv(watched / EVAL)
     evals = [row for row in history if "eval/episode_reward" in row]
     assert [row["frame"] for row in evals] == list(ev["frame"]) == [0, 200, 400]
