@@ -50,7 +50,17 @@ STRENGTH_METRIC = "lix_strength"  # train.csv column: S after the update, as the
 def local_signal_mixing(x: torch.Tensor, strength: torch.Tensor, max_shift: float, fixed_batch: bool = True
                         ) -> torch.Tensor:
     """LIX of the feature maps ``x`` (N, C, H, H) at ``strength`` S in [0, 1] (a 0-d tensor without gradient); draws
-    one ``torch.rand`` of shape (1, 1, 1, 2) (``fixed_batch``) or (N, 1, 1, 2)."""
+    one ``torch.rand`` of shape (1, 1, 1, 2) (``fixed_batch``) or (N, 1, 1, 2). Float32 whatever autocast is on
+    around it (``agent.amp`` / ``agent.fast``: repro/agent/numerics.py): the draw, the shift and the sampling grid in
+    bf16 (8 bits) move every sampled cell, so S = 0 was no longer the identity; the result is float32 (the next
+    convolution's autocast rounds it to bf16, the strength rule reads it in float32). On float32 input without
+    autocast (the plain path) the same ops as before, bit for bit."""
+    with torch.autocast(x.device.type, enabled=False):
+        return _mix(x.float(), strength.float(), max_shift, fixed_batch)
+
+
+def _mix(x: torch.Tensor, strength: torch.Tensor, max_shift: float, fixed_batch: bool) -> torch.Tensor:
+    """:func:`local_signal_mixing` of float32 ``x``, without autocast (the authors' order of operations)."""
     n, _, h, w = x.shape
     if h != w:
         raise ValueError(f"local signal mixing needs square feature maps (got {h} x {w})")

@@ -4,8 +4,10 @@ What it turns on is decided here, from the device and the CPU's instruction sets
 ``resolved.json`` (``fast``), so a run says what it ran:
 
 * ``amp``: bfloat16 autocast of the encoder's convolutions (everything after them stays float32: the backbone's
-  module docstring says why), where the hardware computes bf16 natively: a CUDA device with bf16 (Ampere and
-  later), or a CPU with AVX512-BF16 or AMX-BF16 (elsewhere bf16 is emulated and slower);
+  module docstring says why; ``numerics.py`` declares the one list of what may run in bf16, and
+  tests/test_numerics_contract.py holds every online agent to it), where the hardware computes bf16 natively: a
+  CUDA device with bf16 (Ampere and later), or a CPU with AVX512-BF16 or AMX-BF16 (elsewhere bf16 is emulated and
+  slower);
 * ``u8_shift``: the random shift cropped on the uint8 frames (4x fewer bytes than on float32), exact: the same
   offsets give the same pixels;
 * ``bf16_input``: with ``amp``, the cropped frames go to bf16 before the encoder's ``x / 255 - 0.5`` (autocast
