@@ -1,10 +1,10 @@
 """`repro dataset make`: medium, medium-replay and full-replay datasets from a recorded online run.
 
 - medium: the policy snapshot whose evaluation return is nearest ``medium_fraction`` x the run's best
-  evaluation return (ties: the earliest), rolled out with its exploration noise (a truncated-normal sample
-  around the actor's mean with the stddev of the schedule at the snapshot's step, as the online actor acts
-  in training after its uniform exploration steps) on fresh episode seeds, whole episodes until at least N
-  transitions.
+  evaluation return (ties: the earliest; its encoder and actor built as the run's learner builds them, in eval
+  mode), rolled out with its exploration noise (a truncated-normal sample around the actor's mean with the
+  stddev of the schedule at the snapshot's step, as the online actor acts in training after its uniform
+  exploration steps) on fresh episode seeds, whole episodes until at least N transitions.
 - medium-replay: recorded training episodes that ended at or before that snapshot's step, drawn uniformly
   without replacement (seeded) as whole episodes until at least N transitions.
 - full-replay: the same draw over the whole recording.
@@ -28,18 +28,19 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
 import yaml
+from torch import nn
 
-from repro.agent.networks import Actor, Encoder
 from repro.config.compose import CONF_DIR, ConfigError, typed
 from repro.config.schema import DatasetKind, RunConfig
 from repro.data.dataset import MANIFEST, PENDING, DatasetError, check_dataset, load_manifest, write_dataset
 from repro.data.record import EPISODES, SNAPSHOTS, load_snapshot, record_dir, snapshot_path, snapshot_steps
 from repro.envs import TASKS
+from repro.learners import OnlineLearner, build_learner
 from repro.runs import rundir
 from repro.runs.fsutil import holder_words, try_flock
 from repro.train.build import build_env, run_action_dim
@@ -210,17 +211,41 @@ def _replay_episodes(chosen: list[RecordedEpisode]) -> Iterator[dict[str, np.nda
         yield data
 
 
+def snapshot_policy(cfg: RunConfig, path: Path, state: dict[str, Any], device: str) -> tuple[nn.Module, nn.Module]:
+    """The encoder and actor of a policy snapshot, built as the run's own learner builds them (``agent.learner`` of
+    its config: A-LIX's encoder holds its mixing strength, not the plain encoder's weights only) and put in eval mode,
+    as the online loop acts (A-LIX: no mixing). MakeError (one line) when the snapshot does not fit that learner."""
+    spec = state["policy"]
+    shape = cast("tuple[int, int, int]", tuple(int(d) for d in spec["obs_shape"]))
+    with torch.random.fork_rng(devices=[]):  # building draws initial weights: leave the caller's generator alone
+        learner = build_learner(cfg.agent, shape, int(spec["action_dim"]), device)
+    if not isinstance(learner, OnlineLearner):
+        raise MakeError(f"{path}: learner {cfg.agent.learner!r} of the run does not act online (no acting modules)")
+    modules = dict(learner.acting_modules())
+    missing = sorted({"encoder", "actor"} - set(modules)) + sorted(set(modules) - set(state))
+    if missing:
+        raise MakeError(f"{path}: the snapshot and learner {cfg.agent.learner!r} do not share the acting module(s) "
+                        f"{', '.join(missing)}")
+    for name, module in modules.items():
+        _load_module(path, name, module, state[name])
+    return modules["encoder"], modules["actor"]
+
+
+def _load_module(path: Path, name: str, module: nn.Module, weights: dict[str, torch.Tensor]) -> None:
+    """``weights`` into ``module`` (strict), eval mode; MakeError naming the first mismatch."""
+    try:
+        module.load_state_dict(weights)
+    except RuntimeError as exc:
+        detail = " ".join(str(exc).split())
+        raise MakeError(f"{path}: its {name} does not fit the run's learner: {detail}") from None
+    module.train(False)
+
+
 def _rollouts(source: Source, snap: Snapshot, n: int, seed: int, device: str) -> Iterator[dict[str, np.ndarray]]:
     """Whole episodes of the snapshot's noisy policy until at least ``n`` transitions."""
     state = load_snapshot(snap.path)
     spec = state["policy"]
-    encoder = Encoder(tuple(spec["obs_shape"])).to(device)
-    actor = Actor(encoder.repr_dim, int(spec["action_dim"]), int(spec["feature_dim"]), int(spec["hidden_dim"]))
-    encoder.load_state_dict(state["encoder"])
-    actor.load_state_dict(state["actor"])
-    actor.to(device)
-    encoder.train(False)
-    actor.train(False)
+    encoder, actor = snapshot_policy(source.cfg, snap.path, state, device)
     std = float(state["stddev"])
     rc = source.cfg
     env = build_env(rc, rc.seed + 20_000)
