@@ -43,8 +43,7 @@ IMAGE, BATCH = 36, 4
 TINY = ["profile=tiny", "agent.hidden_dim=32", "agent.feature_dim=16"]
 MODES = {"amp": ["agent.amp=true"], "fast": ["agent.fast=true", "agent.amp=true"]}
 # Known failures outside this test's files, each with its reason: strict, so a fix makes the mark fail until removed.
-BROKEN = {("atc", "fast"): "ATC's momentum target encoder gets agent.fast's bf16 frames (aux.aug) outside autocast: "
-                           "its float32 convolution refuses them (RuntimeError: input BFloat16, bias float)"}
+BROKEN: dict[tuple[str, str], str] = {}
 
 
 @dataclass(frozen=True)
@@ -202,6 +201,16 @@ def test_only_the_declared_ops_run_in_bf16(agent_name: str, mode: str):
     ops = one_watched_update(agent_name, MODES[mode])
     assert ops.convolutions > 0, "no bf16 convolution: autocast was off, the check would be vacuous"
     assert not ops.outside, report(ops)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+@pytest.mark.parametrize("agent_name, extra", [("spr", ["agent.objective_params.spr.momentum=0.9"]), ("atc", [])])
+def test_a_momentum_target_encoder_runs_as_the_online_one(agent_name: str, extra: list[str]):
+    """A momentum target encoder (ATC's; SPR's with momentum > 0) gets agent.fast's bf16 frames: it encodes them under
+    the online encoder's autocast (AuxBatch.encode_by), as the online one does (before: a RuntimeError, a float32
+    convolution refusing bf16 input)."""
+    ops = one_watched_update(agent_name, MODES["fast"] + extra)
+    assert ops.convolutions > 0 and not ops.outside, report(ops)
 
 
 def test_the_registry_is_enumerated():

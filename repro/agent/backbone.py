@@ -209,8 +209,13 @@ class DrQV2Backbone:
     def encode(self, obs: torch.Tensor, autocast: bool = True) -> torch.Tensor:
         """The encoder's output for shifted frames, in float32: its convolutions under :meth:`autocast` (bf16 with
         ``agent.amp`` / ``agent.fast``), nothing after them (see the module docstring)."""
+        return self.encode_with(self._encode, obs, autocast)
+
+    def encode_with(self, encoder: Callable[[torch.Tensor], torch.Tensor], obs: torch.Tensor,
+                    autocast: bool = True) -> torch.Tensor:
+        """:meth:`encode` with another encoder of the same kind (an objective's momentum target)."""
         with self.autocast(autocast):
-            h = self._encode(obs)
+            h = encoder(obs)
         return h.float()
 
     def encode_batch(self, batch: dict[str, torch.Tensor], autocast: bool = True) -> EncodedBatch:
@@ -267,7 +272,7 @@ class DrQV2Backbone:
         if self.aux_opt is None:
             return {}
         aux = AuxBatch(batch, self.encode, self.aug, self.encode_action_sequence, self.cfg.reward_target,
-                       self.encode_action)
+                       self.encode_action, self.encode_with)
         total = torch.zeros((), device=self.device)
         metrics: Metrics = {}
         for name, objective in self.objectives.items():  # the encoder under autocast (encode), the heads in float32

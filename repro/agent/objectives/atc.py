@@ -51,7 +51,7 @@ class ATCObjective(Objective):
     @torch.no_grad()
     def target_latent(self, aux: AuxBatch) -> torch.Tensor:
         """H_m(f_m(aug(o_{t+K}))) from the momentum target, with a fresh random shift."""
-        h = self.target["encoder"](aux.aug(aux.batch["future_obs"]))
+        h = aux.encode_by(self.target["encoder"], aux.aug(aux.batch["future_obs"]))
         return self.target["state_proj"](h)
 
     def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:

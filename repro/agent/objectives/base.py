@@ -38,6 +38,10 @@ class ObjectiveContext:
         return self._shared
 
 
+# encode_with(encoder, frames): another encoder run as the agent's own (its autocast, float32 features)
+EncodeWith = Callable[[Callable[[torch.Tensor], torch.Tensor], torch.Tensor], torch.Tensor]
+
+
 class AuxBatch:
     """One update's data for the auxiliary objectives, with encoder passes computed once and shared.
 
@@ -48,9 +52,11 @@ class AuxBatch:
 
     def __init__(self, batch: dict[str, torch.Tensor], encoder: Callable[[torch.Tensor], torch.Tensor], aug: Callable,
                  encode_actions: Callable[[torch.Tensor], torch.Tensor], reward_target: str,
-                 encode_action_steps: Callable[[torch.Tensor], torch.Tensor] | None = None):
+                 encode_action_steps: Callable[[torch.Tensor], torch.Tensor] | None = None,
+                 encode_with: EncodeWith | None = None):
         self.batch = batch
         self.encoder = encoder
+        self._encode_with = encode_with
         self.aug = aug
         self._encode_actions = encode_actions
         self._encode_steps = encode_action_steps
@@ -76,6 +82,12 @@ class AuxBatch:
             with torch.no_grad():
                 return self.encoder(self.aug(self.batch["future_obs"]))
         return self.memo("future", fn)
+
+    def encode_by(self, encoder: Callable[[torch.Tensor], torch.Tensor], frames: torch.Tensor) -> torch.Tensor:
+        """``encoder`` (another encoder than the agent's, e.g. a momentum target) on augmented ``frames``, as the
+        agent's own encoder runs: under its autocast (``agent.amp``/``agent.fast``: the frames may be bf16), the
+        features in float32 (repro/agent/numerics.py)."""
+        return encoder(frames) if self._encode_with is None else self._encode_with(encoder, frames)
 
     def encode_actions(self, actions: torch.Tensor) -> torch.Tensor:
         """Encode any (B, K, |A|) action sequence with the agent's action (sequence) encoder."""

@@ -68,7 +68,7 @@ class SPRObjective(Objective):
             return self.projection(self.heads.state_proj(h))
         t = self.target
         obs = aux.batch["future_obs"] if k is None else aux.batch["future_obs_seq"][:, k - 1]
-        return t["projection"](t["state_proj"](t["encoder"](aux.aug(obs))))
+        return t["projection"](t["state_proj"](aux.encode_by(t["encoder"], aux.aug(obs))))
 
     @torch.no_grad()
     def target_projection(self, aux: AuxBatch) -> torch.Tensor:
