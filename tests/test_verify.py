@@ -22,6 +22,7 @@ from analysis_fixtures import write_run
 from repro.envs.dmc import DMCEnv, random_policy_returns
 from repro.envs.registry import get_task
 from repro.launch import spec as specs
+from repro.runs import runformat
 
 TASK = "cartpole_balance"
 RANDOM = {TASK: 300.0}  # the random-policy reference, fixed so that the thresholds below are known
@@ -127,6 +128,38 @@ def test_taco_against_the_published_seeds_by_hand(tmp_path):
     tables = V.advantage_frame(list(rows.values()))
     assert list(tables["method"]) == ["TACO", "TACO"]
     assert "not a verdict" in V.advantage_lines(list(rows.values()))[0]
+
+
+def _saturated_train_csv(run: Path, episodes: int = 15) -> None:
+    """The run's train.csv as a run whose actor saturated after its seed frames writes it (1000-frame episodes)."""
+    from analysis_fixtures import METRICS
+    from repro.runs.logger import format_row, header_line
+
+    columns = runformat.train_columns(METRICS)
+    rows = [header_line(columns)]
+    for i in range(1, episodes + 1):
+        rows.append(format_row(columns, {"frame": i * 1000, "step": i * 500, "episode": i, "episode_reward": 160.0,
+                                         "episode_length": 1000, "buffer_size": i * 500, "stddev": 0.9, "fps": 5.0,
+                                         "total_time": float(i), **{m: None if i <= 4 else 1.0 for m in METRICS}}))
+    (run / runformat.TRAIN).write_text("".join(rows))
+
+
+def test_a_saturated_seed_is_named_beside_its_verdict_and_in_the_report(tmp_path):
+    from repro_app.report import _verify_section
+
+    _runs(tmp_path, "taco", [[350, 136, 136], [350, 900, 990]])
+    dead = next(tmp_path.glob("verify/taco/base/cartpole_balance/seed_1"))
+    _saturated_train_csv(dead)
+    _runs(tmp_path, "drqv2", [[350, 400, 990]])
+    rows = V.judge(load_results(tmp_path), random_returns=RANDOM)
+    taco = next(r for r in rows if r.method == "TACO")
+    assert taco.health == "seed 1: actor saturated since frame 4,000: its policy gradient is zero"
+    assert V.health_text(next(r for r in rows if r.method == "DrQ-v2")) == "not saturated"
+    assert taco.health in next(line for line in V.verdict_lines(rows) if "TACO" in line)
+    section = _verify_section(rows)
+    assert "seed 1: actor saturated since frame 4,000" in section and "Early advantage" in section
+    V.write_verdicts(tmp_path / "out", rows)
+    assert "actor saturated since frame 4,000" in (tmp_path / "out" / "verify.md").read_text()
 
 
 def test_only_the_verify_experiment_is_judged(tmp_path):
