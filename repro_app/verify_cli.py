@@ -21,6 +21,9 @@ from repro.runs.console import console, fail
 SWEEP = "verify"
 CPU_AGENTS = ("drqv2",)  # the CPU check: DrQ-v2 alone (TACO to 40K frames takes hours more on a CPU)
 CPU_SEEDS = 1  # one seed at a time uses the 2 cores of the machine it was measured on (docs/verification.md)
+# The CPU check's wall time, measured (docs/verification.md, "What it costs"): 60K frames at 10.3 frames/s and four
+# evaluations of about 84 s, one DrQ-v2 seed alone on an idle 2-core Intel Xeon. The README and docs repeat it.
+CPU_CHECK_TIME = "about 1 h 45 min on an idle 2-core CPU"
 CPU_VARIANTS = ("base",)  # the CPU check: the fast path (the plain path, variant `plain`, is 3-5x its CPU time)
 
 
@@ -102,8 +105,9 @@ def verify_cmd(
         if agents is None or seeds == CPU_SEEDS:
             say(f"{'GPU' if cuda else 'no GPU'}: agents {', '.join(chosen)}, variants {', '.join(kinds)}, seeds "
                 f"1..{seeds or len(spec.seeds)}"
-                + ("" if cuda else f" (the CPU check, docs/verification.md; --agents {','.join(spec.agents)} "
-                   f"--variants {','.join(spec.variants)} --seeds 3 for the whole sweep)"), highlight=False)
+                + ("" if cuda else f" (the CPU check, {CPU_CHECK_TIME}: docs/verification.md; --agents "
+                   f"{','.join(spec.agents)} --variants {','.join(spec.variants)} --seeds 3 for the whole sweep)"),
+                highlight=False)
         options = LaunchOptions(launcher, max_parallel, force, cluster_config,
                                 warm_start and launcher == Launcher.local and gpus is None, gpus, runs_per_gpu)
         report = launch_sweep(SWEEP, Selection(seeds=seeds, frames=frames, sets=root_sets), options, dry_run,
