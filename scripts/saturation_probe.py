@@ -31,7 +31,6 @@ from repro.runs.checkpoint import load_checkpoint
 from repro.train.build import build_agent
 
 
-
 def stacked_replay(run: Path, state: dict, rc, action_dim: int, every: int) -> tuple[torch.Tensor, int]:
     """(N, 3F, H, W) uint8 observations of every ``every``-th stored slot, stacked as the run's buffer stacks them,
     and the number of slots stored."""
