@@ -57,6 +57,22 @@ def first_difference(rows: list[dict], key: str) -> int | None:
     return next((row["update"] for row in rows if any(v != 0.0 for v in row[key].values())), None)
 
 
+def from_run(run: Path, checkpoint: Path | None) -> tuple[list, dict, str, int, int, int]:
+    """(replay episodes stored at the checkpoint, its modules, task, image size, batch size, agent step) of a run."""
+    from repro.config.compose import typed
+    from repro.data.episodes import EpisodeStore
+    from repro.runs import rundir
+    from repro.runs.checkpoint import load_checkpoint
+
+    rc = typed(rundir.saved_config(run))
+    state = load_checkpoint(checkpoint or run / "checkpoint.pt")
+    store = EpisodeStore(run / "replay")
+    kept = sorted(int(rec[0]) for rec in state["buffer"]["episodes"] if int(rec[0]) >= 0)
+    episodes = [store.load(i) for i in kept]
+    image = int(episodes[0]["frames"].shape[-1])
+    return episodes, state["agent"], rc.task.name, image, int(rc.agent.batch_size), int(state["counters"]["step"])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--updates", type=int, default=200)
@@ -72,6 +88,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None, help="write every row as JSON here")
     ap.add_argument("--override", action="append", default=[], help="another config override (repeatable)")
+    ap.add_argument("--run", type=Path, default=None, help="start from this TACO run's checkpoint (--checkpoint, "
+                    "default its checkpoint.pt) on its replay episodes (real frames, its task, batch and image)")
+    ap.add_argument("--checkpoint", type=Path, default=None)
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     overrides = list(args.override) + ([f"agent.hidden_dim={args.hidden}"] if args.hidden else [])
@@ -81,8 +100,11 @@ def main(argv: list[str] | None = None) -> int:
         if row["update"] % 25 == 0:
             print(f"  ... update {row['update']} ({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
 
+    episodes, init = None, None
+    if args.run is not None:
+        episodes, init, args.task, args.image, args.batch, args.step = from_run(args.run, args.checkpoint)
     rows = run_drift(args.task, args.updates, args.image, args.batch, overrides, args.variant, args.fast,
-                     args.draws, args.step, seed=args.seed, on_row=progress)
+                     args.draws, args.step, seed=args.seed, on_row=progress, episodes=episodes, init=init)
     print(f"task {args.task}, frames (9, {args.image}, {args.image}), batch {args.batch}, variant {args.variant}, "
           f"draws {args.draws}, {args.updates} updates in {time.time() - t0:.0f} s")
     print(f"\nthis project (plain) vs upstream ({args.variant}): max |difference| after each update")
@@ -94,6 +116,11 @@ def main(argv: list[str] | None = None) -> int:
         print(table(rows, "fast"))
         first = first_difference(rows, "fast")
         print(f"bit-identical for {'all ' + str(len(rows)) if first is None else first - 1} updates")
+    print("\nmean pre-tanh on the probe after each update: " + ", ".join(sorted(rows[0]["pre_tanh_mean"])))
+    for row in rows:
+        if shown(row["update"], len(rows)) or row["update"] % 25 == 0:
+            print(f"{row['update']:>6} " + " ".join(f"{row['pre_tanh_mean'][k]:8.3f}"
+                                                 for k in sorted(row["pre_tanh_mean"])))
     lo = min(r["pre_tanh_range"][0] for r in rows)
     hi = max(r["pre_tanh_range"][1] for r in rows)
     print(f"\nplain path's pre-tanh on the probe over the run: [{lo:.3g}, {hi:.3g}]")

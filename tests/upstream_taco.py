@@ -624,17 +624,24 @@ def build_project_agent(task: str, image: int, batch: int, overrides: Sequence[s
 def run_drift(task: str = "cartpole_balance", updates: int = 10, image: int = 32, batch: int = 32,
               overrides: Sequence[str] = (), variant: str = "faithful", fast: bool = False,
               draws: str = "fed", step0: int = 2000, probe_size: int = 64, seed: int = 0,
-              upstream_agent=None, on_row=None) -> list[dict]:
+              upstream_agent=None, on_row=None, episodes: Sequence[Mapping[str, Any]] | None = None,
+              init: Mapping[str, Mapping[str, torch.Tensor]] | None = None) -> list[dict]:
     """``updates`` updates of this project's plain agent and of the upstream re-expression (``variant``) from the
     same initial weights on the same batches (one replay of synthetic episodes, repro.bench.batches), with
     ``torch.manual_seed(seed + i)`` before update i on each side (the policy noise) and, with ``draws="fed"``, the
     same shifts by role fed to both (``draws="native"``: each side draws its own from that seed). With ``fast``,
     this project's fast path (agent.fast=true) gets the same batches, seeds and shifts. One row per update: max
     |difference| per parameter group, of the Adam moments, of each metric and of the probe's pre-tanh output;
-    ``upstream_agent``: a factory (agent, obs_shape) -> upstream agent to use instead of ``from_project``."""
+    ``upstream_agent``: a factory (agent, obs_shape) -> upstream agent to use instead of ``from_project``.
+    ``episodes`` (a run's replay episodes) replace the synthetic ones and ``init`` (a run checkpoint's modules) the
+    agent's initial weights: the same updates from a real run's state on its real data (scripts/upstream_drift.py
+    --run)."""
     from repro.bench.batches import batch_stream, synthetic_episodes
 
     agent, rc, obs_shape = build_project_agent(task, image, batch, ["agent.fast=false", *overrides])
+    if init is not None:
+        for name, mod in agent.backbone.modules().items():
+            mod.load_state_dict(init[name])
     up = (upstream_agent or (lambda a, s: from_project(a, s, **VARIANTS[variant])))(agent, obs_shape)
     fast_agent = None
     if fast:
@@ -647,7 +654,8 @@ def run_drift(task: str = "cartpole_balance", updates: int = 10, image: int = 32
             if a is not None:
                 a.backbone.aug = FedShift(a.backbone.aug)
                 feeders.append(a.backbone.aug)
-    episodes = synthetic_episodes(action_dim=agent.action_dim, frame_shape=(3, image, image), seed=seed)
+    if episodes is None:
+        episodes = synthetic_episodes(action_dim=agent.action_dim, frame_shape=(3, image, image), seed=seed)
     stream = batch_stream(agent, rc.agent, rc.env.frame_stack, episodes, "cpu", batch, seed=seed)
     probe = next(batch_stream(agent, rc.agent, rc.env.frame_stack, episodes, "cpu", probe_size, seed=seed + 1))["obs"]
     rows = []
@@ -667,13 +675,16 @@ def run_drift(task: str = "cartpole_balance", updates: int = 10, image: int = 32
         p_ours = pre_tanh(agent.backbone.encoder, agent.backbone.actor, probe)
         row["upstream"]["pre_tanh"] = _maxdiff(p_ours, pre_tanh(up.encoder, up.actor, probe))
         row["pre_tanh_range"] = [float(p_ours.min()), float(p_ours.max())]
+        row["pre_tanh_mean"] = {"plain": float(p_ours.mean()),
+                                "upstream": float(pre_tanh(up.encoder, up.actor, probe).mean())}
         if fast_agent is not None:
             torch.manual_seed(seed + i)
             m_fast = fast_agent.update(b, step)
             row["fast"] = compare_projects(agent.backbone, fast_agent.backbone)
             row["fast"]["metrics"] = max(abs(float(m_ours[k]) - float(m_fast[k])) for k in METRICS)
-            row["fast"]["pre_tanh"] = _maxdiff(p_ours, pre_tanh(fast_agent.backbone.encoder,
-                                                                fast_agent.backbone.actor, probe))
+            p_fast = pre_tanh(fast_agent.backbone.encoder, fast_agent.backbone.actor, probe)
+            row["fast"]["pre_tanh"] = _maxdiff(p_ours, p_fast)
+            row["pre_tanh_mean"]["fast"] = float(p_fast.mean())
         rows.append(row)
         if on_row is not None:
             on_row(row)
