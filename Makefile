@@ -7,13 +7,21 @@ STAMP := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: setup sysdeps repro lint test test-fast test-device-script bench clean
+.PHONY: setup sysdeps browser repro lint test test-fast test-device-script bench clean
 
 # Debian rendering packages (Mesa EGL); skipped when already present or when not root.
 sysdeps:
 	@if ! ldconfig -p | grep -q 'libEGL.so.1' || [ ! -e /usr/lib/x86_64-linux-gnu/dri ] && [ ! -e /usr/lib/aarch64-linux-gnu/dri ]; then \
 	  if [ "$$(id -u)" = 0 ]; then apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libgl1-mesa-dri libglvnd0 >/dev/null; \
 	  else echo "missing libegl1/libgl1-mesa-dri: install them (apt-get install libegl1 libgl1-mesa-dri)"; fi; fi
+
+# Headless Chromium for the report's HTML tests (tests/browser.py: REPORT.html opened alone, a screenshot read back;
+# skipped without it): Debian's chromium-headless-shell, installed when missing and root; never fails the build.
+browser:
+	@command -v chromium-headless-shell >/dev/null || command -v chromium >/dev/null || \
+	  if [ "$$(id -u)" = 0 ]; then (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+	    chromium-headless-shell >/dev/null) || echo "chromium-headless-shell not installed: the browser tests skip"; \
+	  else echo "no headless Chromium (apt-get install chromium-headless-shell): the browser tests skip"; fi
 
 $(STAMP): requirements.txt pyproject.toml
 	$(MAKE) sysdeps
@@ -55,14 +63,14 @@ lint: $(STAMP) $(WANDB_STAMP) $(PLUGIN_STAMP)
 XDIST ?= -n 2 --dist loadgroup
 # benchmarks/gpu_check.sh's own CPU run (the device_script mark, about 2 minutes) is left to `make test-device-script`,
 # so that the suite stays within CI's 12 minutes; the launcher's GPU placement and the e2e bench are tested here.
-test: lint
+test: lint browser
 	$(BIN)/python -m pytest -q -ra $(XDIST) --durations=15 -m "not device_script" $(PYTEST_ARGS)
 
 test-device-script: $(STAMP) $(WANDB_STAMP) $(PLUGIN_STAMP)
 	$(BIN)/python -m pytest -q -ra -m device_script $(PYTEST_ARGS)
 
 # The inner loop: unit tests only (no end-to-end runs, no SLURM), a few minutes.
-test-fast: $(STAMP) $(WANDB_STAMP) $(PLUGIN_STAMP)
+test-fast: $(STAMP) $(WANDB_STAMP) $(PLUGIN_STAMP) browser
 	$(BIN)/python -m pytest -q -ra $(XDIST) -m "not slow and not slurm" $(PYTEST_ARGS)
 
 bench: $(STAMP)

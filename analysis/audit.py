@@ -17,7 +17,18 @@ from collections.abc import Iterable
 import pandas as pd
 
 from analysis.calibration import SOURCE_TEXT
-from analysis.findings import Finding, agree, pm_text, result_text
+from analysis.findings import (
+    PRECISION_NOTE,
+    Finding,
+    agree,
+    half_unit,
+    places,
+    pm_text,
+    printed_within,
+    ratio_range,
+    result_text,
+    rounding_text,
+)
 from analysis.paper import DMC9, PaperData
 from analysis.paper_tex import (
     T1_COLUMNS,
@@ -47,17 +58,23 @@ MODEL_FREE = ["TACO", "DrQ-v2", "A-LIX", "DrQ", "CURL"]
 
 # ---------------------------------------------------------------- checks
 def check_offline_average(p: PaperData) -> Iterable[Finding]:
+    """Table 3's average row against the mean of each method's 12 cells, at the printed precision: each cell within
+    its printed rounding, the mean within as much, the printed average within its own."""
     recomputed = p.offline.groupby("method")["normalized_mean"].mean()
     printed = dict(zip(p.offline_average["method"], p.offline_average["average_normalized"]))
+    h = half_unit(places(p.offline["normalized_mean"]))
+    digits = places(p.offline_average["average_normalized"])
     for method, value in printed.items():
         r = float(recomputed[method])
-        ok = abs(round(r, 1) - value) < 1e-9
-        desc = f"Table 3 average row, {method}: printed vs mean of its 12 cells"
+        ok = printed_within(value, digits, r - h, r + h)
+        desc = f"Table 3 average row, {method}: printed vs mean of its 12 cells (at the printed precision)"
         if not ok:
-            twins = [m for m, v in recomputed.items() if m != method and abs(round(float(v), 1) - value) < 1e-9]
+            twins = [m for m, v in recomputed.items() if m != method and printed_within(value, digits, v - h, v + h)]
             if twins:
                 desc += f" (the printed value is the recomputed average of {', '.join(twins)}: swapped?)"
-        yield Finding("offline_average_row", "T3", desc, f"{value:.1f}", f"{r:.3f} (→ {r:.1f})", ok)
+        yield Finding("offline_average_row", "T3", desc, f"{value:.{digits}f}",
+                      f"{r:.3f} (→ {r:.{digits}f}); " + rounding_text(r - h, r + h, f"each cell within ±{h:g}",
+                                                                    digits, value, r), ok)
 
 
 def check_claim_text_numbers(p: PaperData) -> Iterable[Finding]:
@@ -91,9 +108,15 @@ def check_online_gain(p: PaperData) -> Iterable[Finding]:
     gain, boost = p.claim_number("online_avg_gain", "gain"), p.claim_number("online_avg_gain", "boost_percent")
     piv = p.online.pivot(index="task", columns="method", values="mean")
     r = piv["TACO"].mean() / piv["DrQ-v2"].mean()
+    h = half_unit(places(p.online["mean"]))
+    low, high = ratio_range(piv["TACO"].mean(), piv["DrQ-v2"].mean(), h, h)
+    digits = places([gain])
     yield Finding("online_gain_ratio", "abstract, §1, §5.1 vs T1",
-                  f"TACO vs DrQ-v2: '{gain:g}x' / '{boost:g}% boost' vs ratio of the 9-task means of Table 1",
-                  f"{gain:g}x ({boost:g}%)", f"{r:.3f}x ({100 * (r - 1):.1f}%)", abs(round(r, 1) - gain) < 1e-9)
+                  f"TACO vs DrQ-v2: '{gain:g}x' / '{boost:g}% boost' vs ratio of the 9-task means of Table 1 (at the "
+                  "printed precision)",
+                  f"{gain:g}x ({boost:g}%)", f"{r:.3f}x ({100 * (r - 1):.1f}%); "
+                  + rounding_text(low, high, f"each mean within ±{h:g}", digits, gain, r),
+                  printed_within(gain, digits, low, high))
     per_task = (piv["TACO"] / piv["DrQ-v2"]).mean()
     yield Finding("online_gain_ratio_alt", "T1", "alternative reading: mean of the 9 per-task ratios TACO/DrQ-v2",
                   f"{gain:g}x", f"{per_task:.3f}x", abs(round(per_task, 1) - gain) < 1e-9, kind="info")
@@ -148,13 +171,17 @@ def check_t4_vs_t5(p: PaperData) -> Iterable[Finding]:
     te = p.time_efficiency.set_index(["method", "batch_size"])["fps"]
     ratio = te[("DrQ-v2", 256)] / te[("TACO", 1024)]
     slowdown = p.claim_number("speed", "slowdown")  # the prose's "about 3.6 times slower" (claim_numbers.csv)
+    h, digits = half_unit(places(te)), places([slowdown])
+    low, high = ratio_range(te[("DrQ-v2", 256)], te[("TACO", 1024)], h, h)
     yield Finding(
         "speed_ratio",
         "App. C vs T4",
-        f"'about {slowdown:g} times slower than DrQ-v2': FPS(DrQ-v2 B256) / FPS(TACO B1024)",
+        f"'about {slowdown:g} times slower than DrQ-v2': FPS(DrQ-v2 B256) / FPS(TACO B1024) (at the printed "
+        "precision)",
         f"{slowdown:g}",
-        f"{ratio:.3f} (→ {ratio:.1f})",
-        abs(round(ratio, 1) - slowdown) < 1e-9,
+        f"{ratio:.3f} (→ {ratio:.{digits}f}) from the printed {te[('DrQ-v2', 256)]:g} / {te[('TACO', 1024)]:g}; "
+        + rounding_text(low, high, f"each FPS within ±{h:g}", digits, slowdown, ratio),
+        printed_within(slowdown, digits, low, high),
     )
     yield Finding("speed_vs_drq", "App. C vs T4", "'similar time efficiency as DrQ': TACO B1024 vs DrQ B512 FPS",
                   "similar", f"{te[('TACO', 1024)]:g} vs {te[('DrQ', 512)]:g}", True, kind="info")
@@ -375,7 +402,8 @@ def write_audit(out_dir, findings: list[Finding]):
     n_bad = len(mismatches(findings))
     caption = (f"Audit of the paper's derived numbers from its own tables: {n_bad} mismatches in "
                f"{sum(f.kind == 'check' for f in findings)} checks.")
-    notes = [f"Rows 'outside/inside published CI': the paper's DrQ-v2 baseline against {SOURCE_TEXT}, at 1M frames "
+    notes = [PRECISION_NOTE]
+    notes += [f"Rows 'outside/inside published CI': the paper's DrQ-v2 baseline against {SOURCE_TEXT}, at 1M frames "
              f"(every DMC9 curve has an evaluation there); CIs: stratified bootstrap over the published seeds "
              f"(rliable, {PUBLISHED_REPS:,} repetitions, random state {DEFAULT_SEED}). "
              + published_summary(findings) + " The CI is the published mean's alone (the paper's own seed spread is "

@@ -130,6 +130,9 @@ class ClaimSpec:
     not_simulated: str = ""
     reading_of: str = ""
     note: str = ""
+    # the audit's checks (analysis/audit.py, Finding.check) whose finding bounds the truth the power simulation
+    # assumes: where one does not match, the power table names it (analysis/power.py)
+    audit: tuple[str, ...] = ()
 
     def rule_text(self, paper: PaperData) -> str:
         """``rule`` as shown for ``paper``, with the numbers it quotes from the paper data (:func:`paper_text`)."""
@@ -174,8 +177,30 @@ def require(ctx: Context, table: dict, keys: Sequence[tuple]) -> None:
         raise NotEnoughData(f"need >= {ctx.min_seeds} seeds that reached {ctx.budget_text()} for: {shown}{more}")
 
 
+def apart(values: Sequence[float], digits: int, most: int = 6) -> list[str]:
+    """``values`` printed with ``digits`` decimals, or with more (up to ``most``) where two that differ would print
+    the same: a comparison a verdict makes between them is then visible in the numbers it quotes (no "ahead" between
+    "500.0" and "500.0")."""
+    def clash(d: int) -> bool:
+        shown = [f"{v:.{d}f}" for v in values]
+        return any(shown[i] == shown[j] and values[i] != values[j]
+                   for i in range(len(values)) for j in range(i + 1, len(values)))
+
+    d = digits
+    while d < most and clash(d):
+        d += 1
+    return [f"{v:.{d}f}" for v in values]
+
+
+def vs_text(a: float, b: float, digits: int) -> str:
+    """'a vs b' for a comparison a > b, the two printed apart (:func:`apart`); '(tie)' when they are equal."""
+    x, y = apart([a, b], digits)
+    return f"{x} vs {y}" + (" (tie)" if a == b else "")
+
+
 def pct(a: float, b: float) -> str:
-    return f"{100 * (a / b - 1):+.1f}%"
+    """a over b in percent, with the decimals that tell it from 0 when a and b differ."""
+    return f"{'+' if a >= b else ''}{apart([100 * (a / b - 1), 0.0], 1)[0]}%"
 
 
 def universal(ctx: Context, table: dict, pairs: Sequence[tuple[tuple, tuple, str]]) -> tuple[str, str]:
@@ -186,7 +211,7 @@ def universal(ctx: Context, table: dict, pairs: Sequence[tuple[tuple, tuple, str
         if va is None or vb is None:
             missing.append(name)
             continue
-        lines.append(f"{name}: {va:.1f} vs {vb:.1f}")
+        lines.append(f"{name}: {vs_text(va, vb, 1)}")
         if not va > vb:
             fails.append(name)
     evidence = "; ".join(lines)
@@ -260,7 +285,8 @@ def avg_gain_rule(ctx: Context, x: np.ndarray, y: np.ndarray) -> tuple[str, str]
     means, the CI is evidence (``ctx.reps`` 0: no CI)."""
     r, lo, hi = ratio_of_means(x, y, ctx.reps, ctx.seed)
     verdict = SUPPORTED if r >= gain_bar(ctx.paper) else REFUTED
-    return verdict, (f"TACO/DrQ-v2 = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); paper: {paper_gain(ctx.paper):g}x "
+    shown = apart([r, gain_bar(ctx.paper)], 3)[0]
+    return verdict, (f"TACO/DrQ-v2 = {shown} (95% CI [{lo:.3f}, {hi:.3f}]); paper: {paper_gain(ctx.paper):g}x "
                      f"(Table 1 gives {ctx.paper.online_gain:.3f})")
 
 
@@ -294,7 +320,8 @@ def published_gain_rule(ctx: Context, x: np.ndarray, ys: Sequence[np.ndarray]) -
     frame = float(ctx.budget)
     r, lo, hi = ratio_to_task_means(x, ys, ctx.reps, ctx.seed)
     verdict = SUPPORTED if r >= gain_bar(ctx.paper) else REFUTED
-    return verdict, (f"TACO/DrQ-v2 (published curves at {frames_text(frame)}) = {r:.3f} (95% CI [{lo:.3f}, {hi:.3f}]); "
+    shown = apart([r, gain_bar(ctx.paper)], 3)[0]
+    return verdict, (f"TACO/DrQ-v2 (published curves at {frames_text(frame)}) = {shown} (95% CI [{lo:.3f}, {hi:.3f}]); "
                      f"published DrQ-v2 9-task mean {np.mean([np.mean(y) for y in ys]):.1f}; paper: "
                      f"{paper_gain(ctx.paper):g}x (Table 1 gives {ctx.paper.online_gain:.3f} with its own DrQ-v2)")
 
@@ -332,7 +359,7 @@ def beats_model_based_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) 
             base.append(v)
         taco = present(ctx, table, t, "TACO")
         wins += taco > max(base)
-        lines.append(f"{t} {taco:.0f} vs {max(base):.0f}")
+        lines.append(f"{t} {vs_text(taco, max(base), 0)}")
     src = " (DreamerV3/TD-MPC values from the paper, not rerun)" if used_paper else ""
     verdict = SUPPORTED if wins >= MODEL_BASED_WINS else REFUTED
     return verdict, f"TACO beats both on {wins}/9{src}: " + "; ".join(lines)
@@ -381,10 +408,23 @@ def _reacher_speed(ctx: Context) -> tuple[str, str]:
     t_taco = float(mc["TACO"][mc["TACO"] >= target].index.min())
     hit = mc["DrQ-v2"][mc["DrQ-v2"] >= target]
     t_drq = float(hit.index.min()) if len(hit) else None
-    ok = t_taco <= ctx.budget * REACHER_TACO_WITHIN and (t_drq is None or t_drq >= REACHER_DRQ_FACTOR * t_taco)
-    drq_text = f"{t_drq / 1e6:.2f}M" if t_drq is not None else f"not within {mc['DrQ-v2'].index.max() / 1e6:.2f}M"
-    return (SUPPORTED if ok else REFUTED), (f"target {target:.0f}: TACO at {t_taco / 1e6:.2f}M, DrQ-v2 {drq_text} "
+    # a tie is not sooner (TACO at its target from the first evaluation, DrQ-v2 too: 0 >= 1.5 x 0 is no lead)
+    ok = t_taco <= ctx.budget * REACHER_TACO_WITHIN and (
+        t_drq is None or (t_drq > t_taco and t_drq >= REACHER_DRQ_FACTOR * t_taco))
+    last = float(mc["DrQ-v2"].index.max())
+    taco_s, drq_s, last_s = frames_apart([t_taco, t_drq if t_drq is not None else last, last])
+    drq_text = drq_s if t_drq is not None else f"not within {last_s}"
+    tie = " (a tie: not sooner)" if t_drq == t_taco else ""
+    return (SUPPORTED if ok else REFUTED), (f"target {target:.0f}: TACO at {taco_s}, DrQ-v2 {drq_text}{tie} "
                                             + reacher_printed(ctx.paper))
+
+
+def frames_apart(frames: Sequence[float]) -> list[str]:
+    """Frame counts as the claims quote them: '0.75M' from 10K frames on (two decimals, more where two that differ
+    would print the same), '400 frames' below (an indicative reading of short runs: not '0.00M')."""
+    if all(f >= 10_000 for f in frames):
+        return [f"{m}M" for m in apart([f / 1e6 for f in frames], 2)]
+    return [f"{int(f):,} frames" if f == int(f) else f"{f:,.1f} frames" for f in frames]
 
 
 def _longer(ctx: Context) -> tuple[str, str]:
@@ -400,7 +440,7 @@ def _longer(ctx: Context) -> tuple[str, str]:
             missing.append(t)
             continue
         f = common.max()
-        lines.append(f"{t} at {f / 1e6:.1f}M: {mc['TACO'][f]:.0f} vs {mc['DrQ-v2'][f]:.0f}")
+        lines.append(f"{t} at {f / 1e6:.1f}M: {vs_text(mc['TACO'][f], mc['DrQ-v2'][f], 0)}")
         if not mc["TACO"][f] > mc["DrQ-v2"][f]:
             fails.append(t)
     if fails:
@@ -503,8 +543,9 @@ def _objectives(ctx: Context) -> tuple[str, str]:
     full = present(ctx, table, "full")
     drops = {k: full - present(ctx, table, k) for k in ("no TACO", "no CURL", "no reward")}
     ok = drops["no TACO"] > 0 and drops["no TACO"] > max(drops["no CURL"], drops["no reward"])
+    shown = dict(zip(drops, apart(list(drops.values()), 0)))
     return (SUPPORTED if ok else REFUTED), (f"full {full:.0f}; drops: "
-                                            + ", ".join(f"{k} {v:.0f}" for k, v in drops.items()))
+                                            + ", ".join(f"{k} {v}" for k, v in shown.items()))
 
 
 def _vs_repr(ctx: Context) -> tuple[str, str]:
@@ -578,7 +619,8 @@ def offline_average_rule(ctx: Context, matrices: dict[str, np.ndarray]) -> tuple
         mean, lo, hi = grand_mean_ci(matrices[m], ctx.reps, ctx.seed)
         inside = lo <= p <= hi
         ok &= inside
-        lines.append(f"{m} {mean:.1f} [{lo:.1f}, {hi:.1f}] vs {p}{'' if inside else ' (outside)'}")
+        mean_s, lo_s, hi_s, _ = apart([mean, lo, hi, float(p)], 1)
+        lines.append(f"{m} {mean_s} [{lo_s}, {hi_s}] vs {p}{'' if inside else ' (outside)'}")
     return (SUPPORTED if ok else REFUTED), "; ".join(lines)
 
 
@@ -667,7 +709,8 @@ def _speed(ctx: Context) -> tuple[str, str]:
             ok = (1 - SPEED_TOLERANCE) * slowdown <= ratio <= (1 + SPEED_TOLERANCE) * slowdown and decreasing
             printed_ratio, printed_fps = speed_printed(ctx.paper)
             ev = (f"on {hw}: ratio {ratio:.2f} {printed_ratio}; TACO FPS "
-                  + ", ".join(f"B{b} {v:.1f}" for b, v in taco) + f" {printed_fps}")
+                  + ", ".join(f"B{b} {v}" for (b, _), v in zip(taco, apart([v for _, v in taco], 1)))
+                  + f" {printed_fps}")
             return (SUPPORTED if ok else REFUTED), ev
     raise NotEnoughData("need TACO B1024 and DrQ-v2 B256 FPS measured on the same hardware")
 
@@ -982,7 +1025,8 @@ SPECS: tuple[ClaimSpec, ...] = (
                          notes=("DrQ-v2 is the published curves as published (fixed data, as `repro claims` reads "
                                 "them)",), batch=_published_gain_batch),
               reading_of="online_avg_gain",
-              note=f"read against DrQ-v2 as published by its authors, not against your DrQ-v2 runs: {SOURCE_TEXT}"),
+              note=f"read against DrQ-v2 as published by its authors, not against your DrQ-v2 runs: {SOURCE_TEXT}",
+              audit=("online_gain_vs_published",)),
     ClaimSpec("online_beats_drqv2_all", _beats_drqv2,
               "TACO mean > DrQ-v2 mean on each of the 9 tasks",
               Simulation(_online_sources, _on_table(beats_drqv2_rule), _online_observed, DMC9,
@@ -1190,15 +1234,17 @@ def _reading(ctx: Context, spec: ClaimBudget, short: str | None, fn: Check) -> t
 
 
 def verdict_counts(verdicts: Sequence[Verdict]) -> str:
-    """'2 supported, 1 refuted, 17 not enough data (5 with an indicative reading)' over the claims of claims.csv;
-    the reading of online_avg_gain against the published DrQ-v2 curves is named after them, not counted."""
-    extra = [v for v in verdicts if v.id == PUBLISHED_GAIN_ID]
-    verdicts = [v for v in verdicts if v.id != PUBLISHED_GAIN_ID]
+    """'21 rows (...): 2 supported, 1 refuted, 18 not enough data (5 with an indicative reading, not a verdict)': the
+    counts add up to the rows of the claims table, the reading of online_avg_gain against the published DrQ-v2
+    curves (a row of its own) among them, named."""
     counts = {k: sum(v.verdict == k for v in verdicts) for k in (SUPPORTED, REFUTED, NO_DATA)}
     text = ", ".join(f"{counts[k]} {k}" for k in (SUPPORTED, REFUTED, NO_DATA))
     n_ind = sum(bool(v.indicative) for v in verdicts)
     text += f" ({n_ind} with an indicative reading, not a verdict)" if n_ind else ""
-    return text + "".join(f"; online_avg_gain against the published DrQ-v2 curves: {v.shown}" for v in extra)
+    readings = [v for v in verdicts if v.id == PUBLISHED_GAIN_ID]
+    what = (f"the paper's {len(verdicts) - len(readings)} claims and online_avg_gain read against the published "
+            "DrQ-v2 curves" if readings else f"the paper's {len(verdicts)} claims")
+    return f"{len(verdicts)} rows ({what}): {text}"
 
 
 def claims_frame(verdicts: Sequence[Verdict]) -> pd.DataFrame:

@@ -248,6 +248,7 @@ class PowerRow:
     cells: list[CellSource] = field(default_factory=list)
     tasks: tuple[str, ...] = ()  # the tasks of the claim's runs
     experiments: tuple[str, ...] = ()  # the experiments (sweeps) the claim reads
+    audit: str = ""  # the audit finding that bounds the claim's power (:func:`audit_limit`), "" when none does
 
 
 def power_rows(ctx: Context, sims: int = DEFAULT_SIMS, max_seeds: int = DEFAULT_MAX_SEEDS,
@@ -286,8 +287,27 @@ def power_rows(ctx: Context, sims: int = DEFAULT_SIMS, max_seeds: int = DEFAULT_
         row.seeds_80, row.at_80 = seeds_for(ctx, c, TARGET, sims, ctx.seed, max_seeds, min_seeds=ctx.min_seeds)
         if conditioned and c.observed is not None:
             condition_row(ctx, c, row, sims, max_seeds)
+        if claim.audit and _short_of_target(row):
+            row.audit = audit_limit(ctx.paper, claim.audit)
         rows.append(row)
     return rows
+
+
+def _short_of_target(row: PowerRow) -> bool:
+    """Whether the claim's power stays under :data:`TARGET` at the paper's seeds or given the seeds done."""
+    return any(p is not None and p.supported < TARGET for p in (row.at_paper, row.now)) or (
+        row.simulated and row.seeds_80 is None)
+
+
+def audit_limit(paper: PaperData, checks: Sequence[str]) -> str:
+    """The audit's findings of ``checks`` that do not match (analysis/audit.py), as the power table names them: the
+    cause of a power that no number of seeds lifts, where the paper's own numbers disagree with the data the claim
+    is read against ("" when every one matches)."""
+    from analysis.audit import run_audit
+
+    bad = [f for f in run_audit(paper) if f.check in checks and not f.match]
+    return "; ".join(f"limited by the audit's finding {f.check} ({f.where}): {f.recomputed} where the paper gives "
+                     f"{f.printed} (audit.md)" for f in bad)
 
 
 def condition_row(ctx: Context, claim: SimClaim, row: PowerRow, sims: int, max_seeds: int) -> None:
@@ -325,7 +345,7 @@ def power_frames(rows: Sequence[PowerRow], max_seeds: int = DEFAULT_MAX_SEEDS,
         "cost_of_seeds_for_80": cost(r.id, r.seeds_80) if cost and r.seeds_80 else "",
         "verdict_now": r.verdict, "evidence_now": r.evidence, "seeds_done": r.done_seeds,
         "power_given_done": r.now.supported if r.now else math.nan, "more_seeds_for_80": r.more_80,
-        "not_simulated_because": r.reason, "notes": "; ".join(r.notes), "rule": r.rule,
+        "not_simulated_because": r.reason, "audit": r.audit, "notes": "; ".join(r.notes), "rule": r.rule,
     } for r in rows])
     display = pd.DataFrame({
         "Claim": [r.id for r in rows],
@@ -341,7 +361,8 @@ def power_frames(rows: Sequence[PowerRow], max_seeds: int = DEFAULT_MAX_SEEDS,
         display["P(supported) given done"] = [fmt_num(r.now.supported, 2) if r.now else "" for r in rows]
         display["More seeds for 80%"] = [("" if not r.now else str(r.more_80) if r.more_80 is not None
                                           else f"> {max_seeds - r.done_seeds}") for r in rows]
-    display["Why not simulated / notes"] = [r.reason or "; ".join(r.notes) for r in rows]
+    display["Why not simulated / notes"] = [r.reason or "; ".join(([r.audit] if r.audit else []) + r.notes)
+                                            for r in rows]
     return raw, display
 
 
@@ -401,7 +422,7 @@ def next_runs_paragraph(rows: Sequence[PowerRow], max_seeds: int = DEFAULT_MAX_S
         if r.more_80 is None:
             lines.append(f"- `{r.id}` ({r.verdict or 'no verdict'}): P(supported) {r.now.supported:.2f} given the "
                          f"{r.done_seeds} seed(s) done; even {max_seeds} seeds per cell would not reach 80% if the "
-                         "paper's numbers are the truth.")
+                         "paper's numbers are the truth" + (f": {r.audit}." if r.audit else "."))
         elif r.more_80 > 0:
             lines.append(f"- `{r.id}` ({r.verdict or 'no verdict'}): P(supported) {r.now.supported:.2f} given the "
                          f"{r.done_seeds} seed(s) done; {r.more_80} more seed(s) per cell reach 80%.")

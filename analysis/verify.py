@@ -20,6 +20,12 @@ variant (docs/verification.md says the same in prose):
   task's random-policy return (uniform actions, :func:`repro.envs.dmc.random_policy_returns`), ``P_f`` the
   published DrQ-v2 mean at ``f``. Its curve is drawn beside DrQ-v2's and its frames are shown against the band
   (for information: TACO at a batch of 256 is not DrQ-v2).
+* **Not comparable.** A cell whose environment differs from the published curves' (:data:`PUBLISHED_ENV`: episodes
+  of 1000 frames, action repeat 2, 84x84 frames, 3 stacked, the task's camera, no distracting dimension; e.g.
+  ``--set profile=tiny``'s 100-frame episodes, whose returns are about a tenth of a 1000-frame episode's) is ``not
+  comparable``, never a verdict; the difference is named in the verdict table, the frames table and the figure.
+* **What the table states.** Every verdict row carries its statistic, the band (or DrQ-v2's threshold for other
+  methods) and the false-alarm rate; where there is no number, "n/a" with the reason.
 """
 
 from __future__ import annotations
@@ -37,7 +43,7 @@ import pandas as pd
 from analysis.calibration import SOURCE_TEXT, packaged_published, values_at
 from analysis.claim_budget import frames_text
 from analysis.io import atomic_write_text
-from analysis.load import Results
+from analysis.load import Results, read_config
 from analysis.stats import poi_interval
 from analysis.tables import TableOutput, fmt_num, write_table
 from repro.envs.dmc import random_policy_returns
@@ -55,6 +61,7 @@ MIN_SEEDS = 1  # the band is a per-seed band: one seed is judged (the false-alar
 LEARNS, BELOW, ABOVE = "learns as published", "below the published band", "above the published band"
 LEARNED, NOT_LEARNED = "learned", "not learned"
 NOT_ENOUGH = "not enough data"
+NOT_COMPARABLE = "not comparable"  # the runs' environment differs from the published curves' (never a verdict)
 INSIDE, UNDER, OVER = "inside", "below", "above"
 
 
@@ -67,6 +74,18 @@ class TaskRule:
     learned_frame: int
 
 
+# The environment of the published curves (DrQ-v2's DMC settings): env key -> (value, how it reads). A run whose
+# config differs in one of them is "not comparable" (camera: None or the task's upstream camera, checked apart).
+PUBLISHED_EPISODE_FRAMES = 1000  # the DMC suite's episodes: 1000 frames (500 agent steps at action repeat 2)
+PUBLISHED_ENV: dict[str, tuple[int, str]] = {
+    "max_episode_frames": (PUBLISHED_EPISODE_FRAMES, "{:,}-frame episodes"),
+    "action_repeat": (2, "action repeat {}"),
+    "image_size": (84, "{0}x{0} pixels"),
+    "frame_stack": (3, "{} stacked frames"),
+    "distracting_dims": (0, "{} distracting action dims"),
+}
+PUBLISHED_ENV_TEXT = ("the published settings (1000-frame episodes, action repeat 2, 84x84 pixels, 3 stacked frames, "
+                      "the task's camera, no distracting dimension)")
 RULES: dict[str, TaskRule] = {r.task: r for r in (
     # every published seed is 963-995 at 60K frames; a pipeline that does not learn stays far under the band at
     # 40K and 60K (docs/verification.md)
@@ -127,6 +146,9 @@ class VerdictRow:
     threshold: float = math.nan  # learned: the return to reach
     random_return: float = math.nan
     note: str = ""
+    statistic: str = ""  # what the rule reads, at each frame it reads (or "n/a: why")
+    band: str = ""  # DrQ-v2: the published band at those frames; other methods: the learned threshold
+    environment: str = ""  # how the runs' environment differs from the published curves' ("" when it does not)
     health: str = ""  # the seeds whose actor is saturated (repro/runs/health.py), "" when none
     health_logged: bool = True  # every seed's train.csv logs actor_saturated (runs before issue 49 do not)
     frames: list[FrameRow] = field(default_factory=list, repr=False)
@@ -134,7 +156,7 @@ class VerdictRow:
 
     @property
     def judged(self) -> bool:
-        return self.verdict != NOT_ENOUGH
+        return self.verdict not in (NOT_ENOUGH, NOT_COMPARABLE)
 
 
 def band(values: np.ndarray, k: float = BAND_SD) -> tuple[float, float]:
@@ -212,17 +234,91 @@ def judge(results: Results, min_seeds: int = MIN_SEEDS, published: Results | Non
         frames = published_frames(task, reached)
         frame_rows = _frame_rows(cell_results, published, task, str(method), str(variant), frames)
         base = dict(task=task, method=str(method), variant=str(variant), seeds=len(cell), reached=reached,
-                    frames=frame_rows, **cell_health(results.root, cell))
+                    frames=frame_rows, environment=cell_environment(results.root, cell, task),
+                    **cell_health(results.root, cell))
         if method == BASELINE:
-            rows.append(_baseline_verdict(base, rule, published, frames, frame_rows, min_seeds))
+            row = _baseline_verdict(base, rule, published, frames, frame_rows, min_seeds)
         else:
             given = (random_returns or {}).get(task)
             row = _learned_verdict(base, rule, frame_rows, min_seeds,
                                    functools.partial(random_return, task) if given is None
                                    else functools.partial(float, given))
             row.advantage = _advantage_rows(cell_results, published, task, str(method), str(variant), frames)
-            rows.append(row)
+        row.statistic, row.band = statistic_text(row), band_text(row)
+        rows.append(row)
     return rows
+
+
+def _not_comparable(row: VerdictRow) -> VerdictRow:
+    """``row`` made "not comparable" when its environment differs from the published curves' (a short cell stays
+    "not enough data", the difference added to its note)."""
+    if not row.environment:
+        return row
+    if row.verdict == NOT_ENOUGH:
+        later = "a longer run with this environment is 'not comparable' (column Environment)"
+        row.note = f"{row.note}; {later}" if row.note else later
+        return row
+    row.verdict = NOT_COMPARABLE
+    row.note = (f"its environment differs from the published curves' ({row.environment}); the band is that of "
+                f"{PUBLISHED_ENV_TEXT}")
+    return row
+
+
+def _first_published_frame(task: str) -> int:
+    frames = published_frames(task, math.inf)
+    return frames[0] if frames else 0
+
+
+def statistic_text(row: VerdictRow) -> str:
+    """The verdict table's Statistic: what the rule reads (the mean over the cell's seeds) at each frame it reads, or
+    "n/a" with the reason."""
+    if not row.frames:
+        first = frames_text(_first_published_frame(row.task))
+        return f"n/a: no published evaluation frame reached (the first is {first}; the runs reach " \
+               f"{frames_text(row.reached)})"
+    so_far = " (so far)" if row.verdict == NOT_ENOUGH else ""
+    if row.method == BASELINE:
+        values = "; ".join(f"{fmt_num(f.mean)} at {frames_text(f.frame)}" for f in row.frames)
+        return f"mean of {row.seeds} seed(s): {values}{so_far}"
+    last = row.frames[-1]
+    return (f"mean of {row.seeds} seed(s): {fmt_num(last.mean)} at {frames_text(last.frame)} (seeds "
+            f"{fmt_num(last.low)}-{fmt_num(last.high)}){so_far}")
+
+
+def band_text(row: VerdictRow) -> str:
+    """The verdict table's Band: DrQ-v2's published band at each frame read; another method's learned threshold; or
+    "n/a" with the reason."""
+    if row.method == BASELINE:
+        if not row.frames:
+            return "n/a: no published evaluation frame reached"
+        return "; ".join(f"[{fmt_num(f.band_low)}, {fmt_num(f.band_high)}] at {frames_text(f.frame)}"
+                         for f in row.frames)
+    if math.isnan(row.threshold) and row.verdict == NOT_COMPARABLE:
+        return "n/a: no threshold for an environment other than the published curves'"
+    if math.isnan(row.threshold):
+        rule = RULES.get(row.task)
+        at = frames_text(rule.learned_frame) if rule else "the learned frame"
+        return f"n/a: the threshold is set once every seed reaches {at} (the learned frame)"
+    last = row.frames[-1]
+    return (f">= {fmt_num(row.threshold)} at {frames_text(last.frame)} = random {fmt_num(row.random_return)} + "
+            f"{LEARNED_SHARE:g} x (published DrQ-v2 {fmt_num(last.published_mean)} - random)")
+
+
+def false_alarm_text(row: VerdictRow) -> str:
+    """The verdict table's False alarm: the rate for the cell's seed count, or "n/a" with the reason."""
+    if row.method != BASELINE:
+        return ("n/a: the learned rule reads a threshold, not a band of published seeds (no TACO seeds are "
+                "published to derive a rate from)")
+    if not math.isnan(row.false_alarm):
+        rate = 100 * row.false_alarm
+        text = f"{rate:.0f}%" if rate == 0 or rate >= 1 else f"{rate:.1g}%"
+        return f"{text} for {row.seeds} seed(s)" + (" (at the frames reached so far)" if row.verdict == NOT_ENOUGH
+                                                    else "")
+    if not row.frames:
+        return "n/a: no published evaluation frame reached"
+    published = min(f.published_n for f in row.frames)
+    return (f"n/a: the rate needs {row.seeds} + 2 published seeds (one set judged against a band of at least two "
+            f"others); {published} are published")
 
 
 def _advantage_rows(cell: Results, published: Results, task: str, method: str, variant: str,
@@ -252,6 +348,37 @@ def cell_health(root: str | Path, cell: pd.DataFrame) -> dict[str, object]:
         if found is not None:
             out.append(f"seed {seed}: {found.message()}")
     return {"health": "; ".join(out), "health_logged": logged}
+
+
+def environment_differences(cfg: dict, task: str) -> list[str]:
+    """How one run's config (``env``) differs from the environment of the published curves (:data:`PUBLISHED_ENV`):
+    e.g. ["100-frame episodes (published: 1,000)"]; [] when it does not."""
+    env = cfg.get("env") or {} if isinstance(cfg, dict) else {}
+    out = []
+    for key, (published, words) in PUBLISHED_ENV.items():
+        value = env.get(key)
+        if value is None and key == "max_episode_frames":
+            continue  # null: the suite's own limit, the published episodes
+        if value is not None and value != published:
+            out.append(f"{words.format(value)} (published: {published:,})")
+    camera = env.get("camera")
+    if camera is not None and camera != get_task(task).camera:
+        out.append(f"camera {camera} (published: {get_task(task).camera})")
+    return out
+
+
+def cell_environment(root: str | Path, cell: pd.DataFrame, task: str) -> str:
+    """How the environment of the runs of ``cell`` differs from the published curves': "" when none does; a run
+    without a readable config.yaml is taken as configured by default."""
+    found: list[str] = []
+    for run_id in cell["run_id"]:
+        path = Path(root) / str(run_id) / runformat.CONFIG
+        try:
+            cfg = read_config(path)
+        except (OSError, ValueError):
+            continue
+        found += [d for d in environment_differences(cfg, task) if d not in found]
+    return "; ".join(found)
 
 
 def health_text(row: VerdictRow) -> str:
@@ -293,12 +420,12 @@ def _baseline_verdict(base: dict, rule: TaskRule, published: Results, frames: Se
     judged = [int(f) for f in frames]
     rate = false_alarm_rate(published_matrix(base["task"], judged, published), base["seeds"]) if judged else math.nan
     if why is not None:
-        return VerdictRow(**base, verdict=NOT_ENOUGH, rule=text, false_alarm=rate, note=why)
+        return _not_comparable(VerdictRow(**base, verdict=NOT_ENOUGH, rule=text, false_alarm=rate, note=why))
     places = {r.position for r in frame_rows}
     verdict = BELOW if UNDER in places else ABOVE if OVER in places else LEARNS
     off = [f"{frames_text(r.frame)}: {fmt_num(r.mean)} vs band [{fmt_num(r.band_low)}, {fmt_num(r.band_high)}]"
            for r in frame_rows if r.position != INSIDE]
-    return VerdictRow(**base, verdict=verdict, rule=text, false_alarm=rate, note="; ".join(off))
+    return _not_comparable(VerdictRow(**base, verdict=verdict, rule=text, false_alarm=rate, note="; ".join(off)))
 
 
 def _learned_verdict(base: dict, rule: TaskRule, frame_rows: Sequence[FrameRow], min_seeds: int,
@@ -308,20 +435,21 @@ def _learned_verdict(base: dict, rule: TaskRule, frame_rows: Sequence[FrameRow],
             "mean - random)")
     why = _short(base, rule, rule.learned_frame, min_seeds, "the learned frame")
     if why is not None or not frame_rows:
-        return VerdictRow(**base, verdict=NOT_ENOUGH, rule=text, note=why or "no published frame reached")
+        return _not_comparable(VerdictRow(**base, verdict=NOT_ENOUGH, rule=text,
+                                          note=why or "no published frame reached"))
+    if base["environment"]:  # no verdict: the threshold (and its random-policy reference) is not simulated
+        return _not_comparable(VerdictRow(**base, verdict=NOT_COMPARABLE, rule=text))
     rand = random_of()
     last = frame_rows[-1]
     threshold = rand + LEARNED_SHARE * (last.published_mean - rand)
     verdict = LEARNED if last.mean >= threshold else NOT_LEARNED
-    note = (f"{fmt_num(last.mean)} at {frames_text(last.frame)} (seeds {fmt_num(last.low)}-{fmt_num(last.high)}); "
-            f"threshold {fmt_num(threshold)} = random {fmt_num(rand)} + {LEARNED_SHARE:g} x (published "
-            f"{fmt_num(last.published_mean)} - random)")
+    note = "" if verdict == LEARNED else f"{fmt_num(threshold - last.mean)} under the threshold"
     return VerdictRow(**base, verdict=verdict, rule=text, threshold=threshold, random_return=rand, note=note)
 
 
 # ---------------------------------------------------------------------------------------------------- tables
-VERDICT_COLUMNS = ["task", "method", "variant", "seeds", "reached", "verdict", "false_alarm", "threshold",
-                   "random_return", "rule", "note", "health", "health_logged"]
+VERDICT_COLUMNS = ["task", "method", "variant", "seeds", "reached", "environment", "verdict", "statistic", "band",
+                   "false_alarm", "threshold", "random_return", "rule", "note", "health", "health_logged"]
 FRAME_COLUMNS = list(FrameRow.__dataclass_fields__)
 ADVANTAGE_COLUMNS = list(AdvantageRow.__dataclass_fields__)
 ADVANTAGE_NOTE = ("An observation at a small budget, never a verdict on the paper's claims (those are judged by "
@@ -356,10 +484,6 @@ def advantage_lines(rows: Sequence[VerdictRow]) -> list[str]:
     return out
 
 
-def _rate_text(rate: float) -> str:
-    return "—" if math.isnan(rate) else f"{100 * rate:.0f}%"
-
-
 def _ranges(rule: TaskRule) -> str:
     """The published seeds' range at each published frame up to the verdict frame."""
     frames = published_frames(rule.task, rule.verdict_frame)
@@ -381,22 +505,47 @@ def verdict_notes() -> list[str]:
         f"least the random policy's return plus {LEARNED_SHARE:g} of the way to the published DrQ-v2 mean there. "
         f"Random policy: uniform actions, {RANDOM_EPISODES} episodes, action repeat 2.",
         "'not enough data' (never a verdict) when a seed has not reached the frame the verdict needs. " + rules,
+        f"'not comparable' (never a verdict) when the runs' environment differs from {PUBLISHED_ENV_TEXT} (column "
+        "Environment): their returns are not on the published curves' scale (a 100-frame episode returns about a "
+        "tenth of a 1000-frame one).",
     ]
+
+
+def environment_display(row: VerdictRow) -> str:
+    """The Environment column: the difference from the published curves' settings, or that there is none."""
+    return f"{row.environment}: not comparable" if row.environment else "as published"
+
+
+def verdict_display(rows: Sequence[VerdictRow]) -> pd.DataFrame:
+    """The verdict table as verify.md and the report show it: the statistic, the band and the false-alarm rate in
+    columns of their own (never an empty cell where there is a number; "n/a" with the reason where there is none)."""
+    return pd.DataFrame({
+        "Task": [r.task for r in rows], "Method": [r.method for r in rows], "Variant": [r.variant for r in rows],
+        "Seeds": [r.seeds for r in rows], "Frames reached": [frames_text(r.reached) for r in rows],
+        "Environment": [environment_display(r) for r in rows], "Verdict": [r.verdict for r in rows],
+        "Statistic": [r.statistic for r in rows], "Band (DrQ-v2) / threshold (others)": [r.band for r in rows],
+        "False alarm": [false_alarm_text(r) for r in rows], "Note": [r.note for r in rows],
+        "Actor": [health_text(r) for r in rows]},
+        columns=["Task", "Method", "Variant", "Seeds", "Frames reached", "Environment", "Verdict", "Statistic",
+                 "Band (DrQ-v2) / threshold (others)", "False alarm", "Note", "Actor"])
+
+
+VERDICT_ORDER = (LEARNS, BELOW, ABOVE, LEARNED, NOT_LEARNED, NOT_ENOUGH, NOT_COMPARABLE)
+
+
+def verdict_caption(rows: Sequence[VerdictRow]) -> str:
+    """verify.md's caption: the verdicts counted (they add up to the table's rows)."""
+    counts = {v: sum(r.verdict == v for r in rows) for v in VERDICT_ORDER}
+    return ("repro verify: the verify runs against the DrQ-v2 authors' published curves (" +
+            (", ".join(f"{n} {v}" for v, n in counts.items() if n) or "no verify runs") + ").")
 
 
 def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutput, TableOutput]:
     """``verify.csv/.md/.tex`` (one verdict per cell) and ``verify_frames.csv/.md/.tex`` (each judged frame)."""
-    raw = verdict_frame(rows)
-    display = pd.DataFrame({
-        "Task": raw["task"], "Method": raw["method"], "Variant": raw["variant"], "Seeds": raw["seeds"],
-        "Frames reached": [frames_text(f) for f in raw["reached"]], "Verdict": raw["verdict"],
-        "False alarm": [_rate_text(v) for v in raw["false_alarm"]], "Note": raw["note"],
-        "Actor": [health_text(r) for r in rows]})
-    counts = {v: int((raw["verdict"] == v).sum()) for v in (LEARNS, BELOW, ABOVE, LEARNED, NOT_LEARNED, NOT_ENOUGH)}
-    caption = ("repro verify: the verify runs against the DrQ-v2 authors' published curves (" +
-               (", ".join(f"{n} {v}" for v, n in counts.items() if n) or "no verify runs") + ").")
-    verdicts = write_table(out_dir, "verify", raw, caption, display, verdict_notes())
+    verdicts = write_table(out_dir, "verify", verdict_frame(rows), verdict_caption(rows), verdict_display(rows),
+                           verdict_notes())
     fr = frames_frame(rows)
+    envs = {(r.task, r.method, r.variant): r.environment for r in rows}
     fr_display = pd.DataFrame({
         "Task": fr["task"], "Method": fr["method"], "Variant": fr["variant"],
         "Frames": [frames_text(f) for f in fr["frame"]],
@@ -406,7 +555,8 @@ def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutp
                                     zip(fr["published_mean"], fr["published_min"], fr["published_max"],
                                         fr["published_n"])],
         "Band": [f"[{fmt_num(lo)}, {fmt_num(hi)}]" for lo, hi in zip(fr["band_low"], fr["band_high"])],
-        "Position": fr["position"]})
+        "Position": [p + (f" (not comparable: {envs[(t, m, v)]})" if envs.get((t, m, v)) else "")
+                     for p, t, m, v in zip(fr["position"], fr["task"], fr["method"], fr["variant"])]})
     frames_table = write_table(out_dir, "verify_frames", fr, "repro verify: each judged frame against the published "
                                f"band (the seeds' range ± {BAND_SD:g} sd).", fr_display, verdict_notes()[:2])
     adv = advantage_frame(rows)
@@ -442,8 +592,9 @@ def verdict_lines(rows: Sequence[VerdictRow]) -> list[str]:
     """One line per cell for the terminal."""
     out = []
     for r in rows:
-        extra = f"; false alarm {_rate_text(r.false_alarm)}" if r.method == BASELINE and r.judged else ""
-        out.append(f"{r.task} {r.method} ({r.variant}, {r.seeds} seed(s), {frames_text(r.reached)}): "
-                   f"{r.verdict}{extra}" + (f" — {r.note}" if r.note else "")
+        env = f", {r.environment}" if r.environment else ""
+        out.append(f"{r.task} {r.method} ({r.variant}, {r.seeds} seed(s), {frames_text(r.reached)}{env}): "
+                   f"{r.verdict} — statistic {r.statistic}; {'band' if r.method == BASELINE else 'threshold'} "
+                   f"{r.band}; false alarm {false_alarm_text(r)}" + (f" — {r.note}" if r.note else "")
                    + (f" — {r.health}" if r.health else ""))
     return out

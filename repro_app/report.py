@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import base64
 import datetime as dt
 import html
 import importlib.metadata
 import platform
+import re
 import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -24,14 +26,15 @@ from analysis.verify import (
     ADVANTAGE_NOTE,
     VerdictRow,
     advantage_frame,
-    health_text,
     judge,
-    verdict_frame,
+    verdict_caption,
+    verdict_display,
     verdict_notes,
     write_verdicts,
 )
 from paper_figures.catalog import resolve, sorted_ids
 from paper_figures.render import render_artifacts
+from paper_figures.verify_plot import caption as verify_caption
 from paper_figures.verify_plot import plot_verify
 
 PACKAGES = ("numpy", "pandas", "scipy", "rliable", "arch", "scikit-learn", "matplotlib", "seaborn", "torch",
@@ -175,17 +178,16 @@ def _calibration_section(ctx: Context, rows: list[CalibrationRow], notes: list[s
 
 
 def _verify_section(rows: Sequence[VerdictRow]) -> str:
-    table = verdict_frame(rows)[["task", "method", "variant", "seeds", "verdict", "false_alarm", "note"]].copy()
-    table["actor"] = [health_text(r) for r in rows]
-    body = to_markdown(table)
+    body = f"{verdict_caption(rows)}\n\n" + to_markdown(verdict_display(rows))
     body += "".join(f"\n_{n}_\n" for n in verdict_notes())
     adv = advantage_frame(rows)
     if not adv.empty:
         body += ("\nEarly advantage against the published DrQ-v2 seeds (an observation at a small budget, not a "
                  "verdict):\n\n" + to_markdown(adv) + f"\n_{ADVANTAGE_NOTE}_\n")
     return _section("repro verify: does this installation learn as the DrQ-v2 authors' code did?",
-                    body + "\n![verify](verify.png)  \n[PDF](verify.pdf); tables: [verify.md](verify.md), "
-                    "[verify_frames.md](verify_frames.md), [verify_advantage.md](verify_advantage.md)")
+                    body + f"\n_{verify_caption()}_\n\n![verify](verify.png)  \n[PDF](verify.pdf); tables: "
+                    "[verify.md](verify.md), [verify_frames.md](verify_frames.md), "
+                    "[verify_advantage.md](verify_advantage.md)")
 
 
 def _artifact_section(art) -> str:
@@ -217,11 +219,42 @@ table{border-collapse:collapse;font-size:0.85em;margin:0.5em 0}th,td{border:1px 
 th{background:#f2f2f2}img{max-width:100%}code{background:#f5f5f5}"""
 
 
-def markdown_to_html(md: str, title: str = "TACO reproduction report") -> str:
-    """Render the report's Markdown (GFM tables) to a standalone HTML page."""
+_IMAGE_TYPES = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".svg": "image/svg+xml",
+                ".gif": "image/gif"}
+_IMG_SRC = re.compile(r'(<img\b[^>]*?\bsrc=")([^"]+)(")')
+SELF_CONTAINED_NOTE = ("One self-contained file: every figure is embedded in it (PNG, base64); the links to the "
+                       "CSV, LaTeX and PDF files work where it sits beside them, in the folder `repro report` wrote.")
+
+
+def embed_images(page: str, base: Path) -> str:
+    """``page`` with every ``<img src>`` that names a file under ``base`` replaced by that file as a data URI (the
+    file's bytes, base64): the page shows its figures wherever it is opened. An image ``base`` lacks keeps its
+    link (tests/test_report_html.py fails on it)."""
+
+    def data_uri(match: re.Match[str]) -> str:
+        src = html.unescape(match.group(2))
+        if src.startswith("data:") or "://" in src:
+            return match.group(0)
+        path = base / src
+        mime = _IMAGE_TYPES.get(path.suffix.lower())
+        if mime is None or not path.is_file():
+            return match.group(0)
+        encoded = base64.b64encode(path.read_bytes()).decode("ascii")
+        return f"{match.group(1)}data:{mime};base64,{encoded}{match.group(3)}"
+
+    return _IMG_SRC.sub(data_uri, page)
+
+
+def markdown_to_html(md: str, title: str = "TACO reproduction report", base: Path | None = None) -> str:
+    """Render the report's Markdown (GFM tables) to a standalone HTML page; with ``base`` (the folder the Markdown's
+    images are in) every figure is embedded as a data URI (:func:`embed_images`), so the page is one file."""
     from markdown_it import MarkdownIt
 
     body = MarkdownIt("commonmark", {"html": False}).enable("table").render(md)
+    if base is not None:  # the note under the title
+        note = f"<p><em>{html.escape(SELF_CONTAINED_NOTE)}</em></p>\n"
+        body = embed_images(body, Path(base))
+        body = body.replace("</h1>\n", "</h1>\n" + note, 1) if "</h1>\n" in body else note + body
     return (f"<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
             f"<style>{_CSS}</style></head><body>\n{body}</body></html>\n")
 
@@ -245,5 +278,5 @@ def build_report(ctx: Context, progress: Callable[[str], None] | None = None) ->
     md = build_markdown(ctx, artifacts, verdicts, findings, (rows, notes),
                         (power_table, next_runs_paragraph(prow, REPORT_MAX_SEEDS)), verify_rows)
     md_path = atomic_write_text(ctx.out_dir / "REPORT.md", md)
-    html_path = atomic_write_text(ctx.out_dir / "REPORT.html", markdown_to_html(md))
+    html_path = atomic_write_text(ctx.out_dir / "REPORT.html", markdown_to_html(md, base=ctx.out_dir))
     return md_path, html_path

@@ -64,3 +64,18 @@ def test_second_invocation_finds_everything_done(main_job):
     assert main_job.done_before and main_job.done_after == main_job.done_before
     assert len(main_job.done_before) == 8 + 22
     assert "report: " in main_job.again and (main_job.out / "REPORT.md").is_file()
+
+
+def test_the_report_html_is_one_file_that_shows_every_figure(main_job, tmp_path):
+    """REPORT.html embeds every figure REPORT.md links (PNG data URIs); opened alone in headless Chromium, each
+    loads, shows and is drawn in a screenshot read back (tests/browser.py; skipped where Chromium is not installed)."""
+    import re
+
+    from browser import check_report_html, image_sources
+
+    page = main_job.out / "REPORT.html"
+    linked = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", (main_job.out / "REPORT.md").read_text())
+    sources = image_sources(page.read_text())
+    assert len(linked) >= 10 and len(sources) == len(linked)
+    assert all(s.startswith("data:image/png;base64,") for s in sources)
+    check_report_html(page, tmp_path)

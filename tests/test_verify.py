@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pytest
@@ -185,6 +186,112 @@ def test_write_verdicts_and_figure(tmp_path):
     assert [p.suffix for p in paths] == [".png", ".pdf"] and all(p.stat().st_size > 5000 for p in paths)
 
 
+def _episodes(root: Path, frames: int) -> None:
+    """Every run under ``root`` configured with episodes of ``frames`` frames (profile=tiny's 100)."""
+    from omegaconf import OmegaConf
+
+    for path in root.rglob(runformat.CONFIG):
+        cfg = OmegaConf.load(path)
+        cfg.env.max_episode_frames = frames
+        OmegaConf.save(cfg, path)
+
+
+def test_the_verdict_table_states_its_statistic_band_and_false_alarm(tmp_path):
+    """Every row of verify.md carries the statistic the rule reads, the band (or the threshold) and the false-alarm
+    rate, as numbers where they exist and "n/a: <why>" where they do not; never an empty cell or a dash there."""
+    _runs(tmp_path / "done", "drqv2", [[350, 300, 800, 980]])
+    _runs(tmp_path / "done", "taco", [[350, 300, 700]])
+    _runs(tmp_path / "short", "drqv2", [[350, 300]])
+    _runs(tmp_path / "short", "taco", [[350, 300]])
+    rows = _judge(tmp_path / "done")
+    drq, taco = rows["DrQ-v2"], rows["TACO"]
+    assert drq.statistic == "mean of 1 seed(s): 300.0 at 20,000 frames; 800.0 at 40,000 frames; 980.0 at 60,000 frames"
+    assert drq.band == ("[-0.8, 628.5] at 20,000 frames; [226.5, 1187.7] at 40,000 frames; [952.7, 1004.7] at "
+                        "60,000 frames")
+    assert V.false_alarm_text(drq) == "10% for 1 seed(s)"
+    assert taco.statistic.startswith("mean of 1 seed(s): 700.0 at 40,000 frames")
+    assert taco.band.startswith(">= 567.4 at 40,000 frames = random 300.0 + 0.5 x (published DrQ-v2 834.9")
+    assert V.false_alarm_text(taco).startswith("n/a: the learned rule reads a threshold")
+    short = _judge(tmp_path / "short")
+    assert short["DrQ-v2"].statistic == "mean of 1 seed(s): 300.0 at 20,000 frames (so far)"
+    assert V.false_alarm_text(short["DrQ-v2"]) == "0% for 1 seed(s) (at the frames reached so far)"  # 20K alone
+    assert short["TACO"].band.startswith("n/a: the threshold is set once every seed reaches 40,000 frames")
+    # more seeds than the published ten leave room for: no rate, and the reason
+    many = V.VerdictRow(**{**drq.__dict__, "seeds": 9, "false_alarm": float("nan")})
+    assert V.false_alarm_text(many) == ("n/a: the rate needs 9 + 2 published seeds (one set judged against a band of "
+                                        "at least two others); 10 are published")
+    for root in ("done", "short"):
+        V.write_verdicts(tmp_path / root / "out", list(_judge(tmp_path / root).values()))
+        table = V.verdict_display(list(_judge(tmp_path / root).values()))
+        for col in ("Statistic", "Band (DrQ-v2) / threshold (others)", "False alarm"):
+            assert all(v and v not in ("—", "-", "nan") for v in table[col]), (root, col, list(table[col]))
+        md = (tmp_path / root / "out" / "verify.md").read_text()
+        assert "| Statistic | Band (DrQ-v2) / threshold (others) | False alarm |" in md and "—" not in md
+    assert "| 10% for 1 seed(s) |" in (tmp_path / "done" / "out" / "verify.md").read_text()
+
+
+def test_a_run_with_other_episodes_says_so_and_gets_no_verdict(tmp_path):
+    """profile=tiny's 100-frame episodes (the published curves': 1000) return about a tenth of the published
+    returns: named in the row, the frames table, the terminal line and the figure's title; a run long enough for a
+    verdict is 'not comparable' (exit 0), a short one stays 'not enough data' and says so."""
+    from paper_figures.verify_plot import draw_panel
+
+    _runs(tmp_path / "long", "drqv2", [[99, 40, 38, 38]])
+    _runs(tmp_path / "long", "taco", [[99, 40, 38]])
+    _episodes(tmp_path / "long", 100)
+    rows = _judge(tmp_path / "long")
+    text = "100-frame episodes (published: 1,000)"
+    assert rows["DrQ-v2"].verdict == V.NOT_COMPARABLE and rows["TACO"].verdict == V.NOT_COMPARABLE
+    assert all(r.environment == text and not r.judged for r in rows.values())
+    assert text in rows["DrQ-v2"].note and "1000-frame episodes" in rows["DrQ-v2"].note
+    assert rows["TACO"].band.startswith("n/a") and V.false_alarm_text(rows["DrQ-v2"]) == "10% for 1 seed(s)"
+    assert all(text in line for line in V.verdict_lines(list(rows.values())))
+    V.write_verdicts(tmp_path / "out", list(rows.values()))
+    md = (tmp_path / "out" / "verify.md").read_text()
+    assert f"| {text}: not comparable | not comparable |" in md and "2 not comparable" in md
+    assert f"below (not comparable: {text})" in (tmp_path / "out" / "verify_frames.md").read_text()
+
+    _runs(tmp_path / "tiny", "drqv2", [[99, 60, 38]], eval_every=200)
+    _episodes(tmp_path / "tiny", 100)
+    results = load_results(tmp_path / "tiny")
+    row = V.judge(results, random_returns=RANDOM)[0]
+    assert row.verdict == V.NOT_ENOUGH and row.environment == text and "'not comparable'" in row.note
+    fig, ax = plt.subplots()
+    draw_panel(ax, results, V.verify_cells(results), TASK, [row])
+    assert text in ax.get_title()
+    plt.close(fig)
+    # the published settings, written out as a config does, are no difference
+    cfg = {"env": {"max_episode_frames": 1000, "action_repeat": 2, "image_size": 84, "frame_stack": 3,
+                   "distracting_dims": 0, "camera": 0}}
+    assert V.environment_differences(cfg, TASK) == []
+    cfg["env"].update(action_repeat=4, camera=1)
+    assert V.environment_differences(cfg, TASK) == ["action repeat 4 (published: 2)", "camera 1 (published: 0)"]
+
+
+@pytest.mark.parametrize("curve, eval_every, band", [([99, 60, 38], 200, False), ([350, 300, 800, 980], 20_000, True)])
+def test_the_figure_ends_at_the_data_and_its_legend_lists_what_is_drawn(tmp_path, curve, eval_every, band):
+    """A 400-frame run: the x axis ends at 400 frames (not at the published 20K), and no verdict band is listed (no
+    published frame after 0 is reached, so none is drawn); a 60K run: the band is drawn at 20K, 40K and 60K and
+    listed once."""
+    from paper_figures.verify_plot import draw_panel
+
+    _runs(tmp_path, "drqv2", [curve], eval_every=eval_every)
+    results = load_results(tmp_path)
+    rows = V.judge(results, random_returns=RANDOM)
+    fig, ax = plt.subplots()
+    draw_panel(ax, results, V.verify_cells(results), TASK, rows)
+    last = eval_every * (len(curve) - 1)
+    assert last < ax.get_xlim()[1] <= 1.05 * last
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any("verdict band" in t for t in labels) is band
+    assert len(labels) == len(set(labels)) == 3 + band
+    assert "action repeat 2" in ax.get_xlabel()
+    if band:
+        caps = [c for c in ax.containers if c.get_label().startswith("verdict band")]
+        assert len(caps) == 1 and len(caps[0].lines[2][0].get_segments()) == 3  # one bar per judged frame
+    plt.close(fig)
+
+
 def test_random_policy_returns_equal_the_pixel_env():
     """The simulator-only random rollout sums rewards as the pixel environment does (same actions, same seed)."""
     info = get_task(TASK)
@@ -273,7 +380,7 @@ def test_the_kept_cpu_runs_are_judged_as_recorded(record, verdicts):
     kept = Path(__file__).resolve().parents[1] / "docs" / "verification" / record
     rows = V.judge(load_results(kept / "runs"))
     recorded = pd.read_csv(kept / "verify.csv")
-    for col in ("note", "health"):  # an empty note or health (nothing to say) reads back as NaN
+    for col in ("note", "health", "environment"):  # an empty text (nothing to say) reads back as NaN
         recorded[col] = recorded[col].fillna("")
     pd.testing.assert_frame_equal(V.verdict_frame(rows).reset_index(drop=True), recorded, check_dtype=False)
     assert list(recorded["verdict"]) == verdicts
