@@ -328,6 +328,16 @@ def _verify(*args: str) -> subprocess.CompletedProcess:
                           timeout=600)
 
 
+def test_one_cpu_time_for_the_check_everywhere():
+    """The CPU check's time is one figure: the one `repro verify` prints on a machine without a GPU, repeated by the
+    README and docs/verification.md (three different times were quoted before issue 49)."""
+    from repro_app.verify_cli import CPU_CHECK_TIME
+
+    root = Path(__file__).resolve().parents[1]
+    for doc in ("README.md", "docs/verification.md"):
+        assert CPU_CHECK_TIME in " ".join((root / doc).read_text().split()), doc
+
+
 def test_verify_bad_input_is_one_line(tmp_path):
     out = _verify("--agents", "dreamer", "-r", str(tmp_path), "--dry-run")
     assert out.returncode == 2 and "Traceback" not in out.stderr + out.stdout
