@@ -29,13 +29,15 @@ import pandas as pd
 
 from analysis.cache import lookup
 from analysis.claim_budget import frames_text
-from analysis.load import SOURCE_PUBLISHED, SOURCE_RUNS, Results, load_published
+from analysis.comparable import env_differences
+from analysis.load import PUBLISHED_ACTION_REPEAT, SOURCE_PUBLISHED, SOURCE_RUNS, Results, load_published
 from analysis.stats import DEFAULT_REPS, DEFAULT_SEED, difference_of_means, mean_cis
 from analysis.tables import TableOutput, fmt_ci, fmt_num, write_table
 
 MIN_SEEDS = 3
 BELOW, CONSISTENT, ABOVE, NOT_ENOUGH, NO_CURVE = "below", "consistent", "above", "not enough seeds", \
     "no published curve"
+OTHER_ENV = "not comparable"  # runs whose episodes or camera differ from the published setting (analysis.comparable)
 SOURCE_TEXT = ("the DrQ-v2 authors' published learning curves (facebookresearch/drqv2, curves/, commit c0c650b, MIT; "
                "packaged in repro_data/reference/drqv2_curves)")
 INTERP_TEXT = ("published values between their evaluations (every 20K frames, 100K on humanoid) are linearly "
@@ -197,6 +199,10 @@ def calibrate(results: Results, published: Results | None = None, reps: int = DE
         user_vals = values_at(Results(results.root, cell, cell_eval), frame)["value"].to_numpy(dtype=float)
         pub_vals = published_values(published, task, frame)
         verdict, d, lo, hi, why = reading(user_vals, pub_vals, reps, seed, min_seeds)
+        other = env_differences(cell)  # action repeat and distracting dims are left out above: episodes, camera
+        if other:  # returns of other episodes: shown, with no difference and no reading
+            verdict, d, lo, hi = OTHER_ENV, math.nan, math.nan, math.nan
+            why = f"environment differs from the published one: {other}"
         rows.append(_row(base, frame, user_vals, pub_vals, verdict, d, lo, hi, "; ".join(x for x in (note, why) if x),
                          reps, seed))
     return rows, notes
@@ -225,7 +231,7 @@ def calibration_frames(rows: Sequence[CalibrationRow]) -> tuple[pd.DataFrame, pd
     display = pd.DataFrame({
         "Task": [r.task for r in rows],
         "Runs": [f"{r.experiment}/{r.variant}" for r in rows],
-        "Frames": [frames_text(r.frame) for r in rows],
+        f"Env. frames (action repeat {PUBLISHED_ACTION_REPEAT})": [frames_text(r.frame) for r in rows],
         "Your DrQ-v2 (n)": [f"{_mean_ci(r.user_n, r.user_mean, r.user_ci_low, r.user_ci_high)} (n={r.user_n})"
                             for r in rows],
         "Published DrQ-v2 (n)": [f"{_mean_ci(r.published_n, r.published_mean, r.published_ci_low, r.published_ci_high)}"
@@ -246,7 +252,8 @@ def calibration_notes(reps: int, seed: int, extra: Sequence[str] = ()) -> list[s
         f"Mean [95% CI] over seeds; CI: stratified bootstrap of the mean (rliable, {reps:,} repetitions, random state "
         f"{seed}). Δ = yours − published, with the 95% percentile bootstrap CI of the difference of means (each side "
         f"resampled over its own seeds, rliable, random state {seed}). Reading: 'below' if that CI lies below 0, "
-        f"'above' if above 0, else 'consistent'; no reading with fewer than {MIN_SEEDS} seeds on either side.",
+        f"'above' if above 0, else 'consistent'; no reading with fewer than {MIN_SEEDS} seeds on either side, and "
+        f"'{OTHER_ENV}' (no Δ) for runs whose episodes or camera differ from the published setting.",
         *extra,
     ]
 

@@ -15,6 +15,7 @@ analysis.claims.budget_words); ``source`` (where the budget comes from).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -95,6 +96,48 @@ def claim_runs(scores: pd.DataFrame, spec: ClaimBudget, experiment_map: Experime
     rows = scores[scores["experiment"].isin(expand_experiments(spec.experiments, experiment_map))]
     has_dataset = rows["dataset"].notna()
     return rows[has_dataset] if offline else rows[~has_dataset]
+
+
+def other_experiments(scores: pd.DataFrame, read: Sequence[str], offline: bool) -> dict[str, int]:
+    """Experiments with runs (online, or offline with ``offline``) other than those ``read``: name -> runs, in order
+    of name."""
+    if scores.empty:
+        return {}
+    rows = scores[~scores["experiment"].isin(list(read))]
+    rows = rows[rows["dataset"].notna()] if offline else rows[rows["dataset"].isna()]
+    return {str(k): int(v) for k, v in rows.groupby("experiment").size().sort_index().items()}
+
+
+def map_hint(canonical: str, found: dict[str, int], offline: bool = False) -> str:
+    """The `-x` option that reads the experiments ``found`` (name -> runs) as ``canonical`` (repro_app/analysis_cli.py
+    --experiment-map), in words: "runs exist in experiment(s) tiny (8 online runs): `-x main=tiny` reads them as
+    main"; '' when none were found."""
+    if not found:
+        return ""
+    kind = "offline" if offline else "online"
+    listed = ", ".join(f"{e} ({n} {kind} run{'s' if n != 1 else ''})" for e, n in found.items())
+    return (f"runs exist in experiment(s) {listed}: `-x {canonical}={','.join(found)}` reads them as "
+            f"experiment {canonical}")
+
+
+def claim_hint(scores: pd.DataFrame, spec: ClaimBudget, experiment_map: ExperimentMap | None) -> str:
+    """For a claim whose experiments have no runs: which other experiments have runs of its kind, and the `-x` that
+    reads them as the claim's last (most general) experiment (``main``; ``offline`` for the offline claims)."""
+    offline = spec.kind == "offline_updates"
+    if not spec.experiments:
+        return ""
+    found = other_experiments(scores, expand_experiments(spec.experiments, experiment_map), offline)
+    return map_hint(spec.experiments[-1], found, offline)
+
+
+def unread_hints(scores: pd.DataFrame, experiment_map: ExperimentMap | None) -> list[str]:
+    """Runs that no claim reads (experiments none of claim_budgets.csv's names, as mapped): the `-x` options that read
+    the online ones as ``main`` and the offline ones as ``offline`` (:func:`map_hint`)."""
+    canonical = list(dict.fromkeys(e for b in load_budgets().values() for e in b.experiments))
+    read = expand_experiments(canonical, experiment_map)
+    hints = [map_hint("main", other_experiments(scores, read, False)),
+             map_hint("offline", other_experiments(scores, read, True), True)]
+    return [h for h in hints if h]
 
 
 def reach(runs: pd.DataFrame) -> Reach:

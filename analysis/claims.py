@@ -43,7 +43,7 @@ from analysis.cells import (
     table2_cells,
     table3_cells,
 )
-from analysis.claim_budget import ClaimBudget, claim_runs, frames_text, load_budgets, reach, seed_counts
+from analysis.claim_budget import ClaimBudget, claim_hint, claim_runs, frames_text, load_budgets, reach, seed_counts
 from analysis.context import Context
 from analysis.offline_tables import offline_runs
 from analysis.paper import DMC9, METAWORLD6, OFFLINE_TASKS, PaperData
@@ -1150,7 +1150,8 @@ def _short_of_budget(ctx: Context, spec: ClaimBudget) -> str | None:
     r = reach(runs)
     names = ", ".join(select.expand_experiments(spec.experiments, ctx.experiment_map))
     if r.runs == 0:
-        return f"no runs in experiment(s) {names}; the claim is about {spec.text()}"
+        hint = claim_hint(ctx.scores, spec, ctx.experiment_map)
+        return f"no runs in experiment(s) {names}; the claim is about {spec.text()}" + (f"; {hint}" if hint else "")
     if spec.kind == "offline_updates":
         if r.done == 0:
             return f"none of the {r.runs} offline runs has finished its configured offline.updates"

@@ -10,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.cache import lookup
+from analysis.comparable import FRAMES, Budget
 from analysis.load import Results
 from analysis.paper import PaperData
 from analysis.scores import DEFAULT_BUDGET, final_scores, learning_curves
@@ -92,6 +93,12 @@ class Context:
     @property
     def no_runs(self) -> bool:
         return self.results.empty
+
+    def frames_budget(self, rows: pd.DataFrame | None = None) -> Budget:
+        """``budget`` as environment frames, with the action repeats of ``rows`` (runs or scores) beside it."""
+        repeats = () if rows is None or rows.empty or "action_repeat" not in rows.columns else tuple(
+            sorted({int(r) for r in rows["action_repeat"].dropna()}))
+        return Budget(self.budget, FRAMES, repeats)
 
     def budget_text(self) -> str:
         if self.budget_label is not None:

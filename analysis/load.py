@@ -77,6 +77,8 @@ IDENTITY = (
     "objectives",
     "action_repeat",
     "distracting_dims",
+    "max_episode_frames",
+    "camera",
     "train_frames",
     "dataset",
     "cql_alpha",
@@ -155,6 +157,9 @@ def identity_from_config(cfg: dict[str, Any]) -> dict[str, Any]:
         "suite": ident["suite"],
         "seed": _int_or_none(ident["seed"]),
         "distracting_dims": _int_or_none(ident["distracting_dims"]) or 0,
+        # the environment beside the paper's (analysis/comparable.py labels a run whose episodes or camera differ)
+        "max_episode_frames": _int_or_none(_get(cfg, "env.max_episode_frames")),
+        "camera": _text_or_none(_get(cfg, "env.camera")),
         "train_frames": _int_or_none(ident["train_frames"]),
         "offline_updates": None,
     }
@@ -207,6 +212,10 @@ def _int_or_none(value: Any) -> int | None:
         return int(value)
     except (TypeError, ValueError):
         return None
+
+
+def _text_or_none(value: Any) -> str | None:
+    return None if value is None else str(value)
 
 
 def _float_or_none(value: Any) -> float | None:

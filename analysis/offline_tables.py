@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from analysis import select
+from analysis.comparable import paper_updates, rows_budget
 from analysis.compare import build_cells
 from analysis.paper import PaperData
 from analysis.stats import CellStats, grand_mean_ci, poi_interval, score_matrix
@@ -65,7 +66,7 @@ def t3_cells(df: pd.DataFrame, paper: PaperData, reps: int, seed: int) -> list[C
     if df.empty:
         df = df.assign(normalized=pd.Series(dtype=float), score_reference=pd.Series(dtype=object))
     cells = build_cells(df, ["task", "dataset", "method"], expected, paper=lambda k: _paper_cell(paper, k),
-                        value="normalized", reps=reps, seed=seed, note=_reference_note)
+                        value="normalized", reps=reps, seed=seed, note=_reference_note, paper_budget=paper_updates())
     return cells + average_cells(df, cells, paper, reps, seed)
 
 
@@ -81,6 +82,7 @@ def average_cells(df: pd.DataFrame, cells: Sequence[Cell], paper: PaperData, rep
     for method in paper.offline_average["method"]:
         covered = sum(1 for c in cells if c.keys["method"] == method and c.keys["task"] != "Average" and c.stats.n)
         stats = CellStats(0, math.nan, math.nan, math.nan, math.nan)
+        budget = None
         note = f"the paper's cells average to {recomputed.get(method, math.nan):.1f}"
         if covered == len(pair_ids) and not df.empty:
             matrix, mnote = pair_matrix(df, method, pair_ids)
@@ -89,11 +91,12 @@ def average_cells(df: pd.DataFrame, cells: Sequence[Cell], paper: PaperData, rep
                 per_run = matrix.mean(axis=1)
                 std = float(np.std(per_run, ddof=1)) if len(per_run) > 1 else math.nan
                 stats = CellStats(int(matrix.shape[0]), mean, std, lo, hi)
+                budget = rows_budget(df[(df["method"] == method) & df["reached"].astype(bool)])
                 note += f"; {mnote}; std over runs of the per-run average"
         elif covered:
             note += f"; only {covered}/{len(pair_ids)} pairs have finished runs: no average"
         out.append(Cell({"task": "Average", "dataset": ALL_PAIRS, "method": method}, float(printed[method]), None,
-                        stats, note=note))
+                        stats, note=note, budget=budget, paper_budget=paper_updates()))
     return out
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from analysis.comparable import ENV_KEYS
 from analysis.load import IDENTITY, ResultsRootError, load_results, read_csv_strict
 from repro.runs.runformat import EVAL_COLUMNS, TRAIN, TRAIN_REQUIRED
 
@@ -102,10 +103,11 @@ def tidy_curves(runs: pd.DataFrame, evals: pd.DataFrame, metric: str, by: Sequen
         # agent file's name: CQL+TACO for cql_taco, a plugin's own label for its agent
         named["algo"] = runs["method"].where(runs["method"].notna(), runs["algo"]).astype(str)
     meta["label"] = named.agg(" / ".join, axis=1)
-    out = values.merge(meta[["run_id", "task", "seed", "label"]], on="run_id", how="inner")
+    env = [c for c in (*ENV_KEYS, "suite") if c in runs.columns]  # to label runs of another environment
+    out = values.merge(meta[["run_id", "task", "seed", "label"]].join(runs[env]), on="run_id", how="inner")
     if out.empty:
         raise PlotInputError(f"no values of '{metric}' in the selected runs")
-    return out[["task", "seed", "label", "frame", "value", "run_id"]]
+    return out[["task", "seed", "label", "frame", "value", "run_id", *env]]
 
 
 def repeated_seeds(curves: pd.DataFrame) -> list[str]:

@@ -42,9 +42,12 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
     score the run recorded (``normalized``, eval.csv's ``normalized_score``, with its ``score_reference``);
     ``reached`` when the run is done and evaluated at its ``offline.updates``. Online rows have no
     ``normalized``; offline rows no ``frame``.
+
+    ``budget``: the budget a row is scored at (online: ``budget``, in environment frames; offline: the run's
+    ``offline.updates``), which analysis.comparable compares with the paper's.
     """
     cols = [*IDENTITY, "metric", "score", "frame", "reached", "last_frame", "normalized", "score_reference",
-            "update", "last_update"]
+            "update", "last_update", "budget"]
     if results.runs.empty:
         return pd.DataFrame(columns=cols)
     runs, ev = results.runs, results.eval
@@ -63,7 +66,8 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
         row = dict(zip(IDENTITY, values))
         run_id = row["run_id"]
         if not pd.isna(row["dataset"]):
-            row.update(_offline_score(row, off_last.get(run_id), off_pick.get(run_id)))
+            row.update(_offline_score(row, off_last.get(run_id), off_pick.get(run_id)),
+                       budget=math.nan if pd.isna(row["offline_updates"]) else float(row["offline_updates"]))
             out.append(row)
             continue
         metric = metric_of(row["suite"])
@@ -78,7 +82,8 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
             row["status"] == "done" and not pd.isna(train_frames) and train_frames >= budget
         )
         row.update(metric=metric, score=score, frame=frame, reached=bool(reached), last_frame=last,
-                   normalized=math.nan, score_reference=None, update=math.nan, last_update=math.nan)
+                   normalized=math.nan, score_reference=None, update=math.nan, last_update=math.nan,
+                   budget=float(budget))
         out.append(row)
     return pd.DataFrame(out, columns=cols)
 

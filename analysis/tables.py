@@ -14,6 +14,7 @@ from typing import Any
 
 import pandas as pd
 
+from analysis.comparable import Budget, comparable, not_comparable_text, units_note
 from analysis.io import atomic_write_text
 from analysis.stats import CellStats
 
@@ -158,7 +159,12 @@ def key_name(key: str) -> str:
 
 @dataclass
 class Cell:
-    """One cell of a comparison: its keys (e.g. task, method), the paper's value and the reproduced stats."""
+    """One cell of a comparison: its keys (e.g. task, method), the paper's value and the reproduced stats.
+
+    ``budget``: the budget of the runs its stats come from (those that reached it; analysis.comparable.rows_budget),
+    ``paper_budget`` the budget of the paper's value (None: a value without one, e.g. a timing); the cell is
+    :attr:`comparable` by analysis.comparable's rule, and only then shows a Δ and a "Paper in CI".
+    """
 
     keys: dict[str, Any]
     paper_mean: float | None
@@ -166,16 +172,27 @@ class Cell:
     stats: CellStats
     n_short: int = 0  # runs that stopped before the frame budget (not used in the stats)
     note: str = ""
+    budget: Budget | None = None
+    paper_budget: Budget | None = None
+    short_at: str = ""  # where the runs counted in n_short stopped ('400 frames')
+
+    @property
+    def comparable(self) -> bool:
+        """Whether its reproduced value may stand beside the paper's (analysis.comparable.comparable)."""
+        return comparable(self.budget, self.paper_budget)
 
 
 def comparison_frames(cells: Sequence[Cell], digits: int = 1) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(raw, display) frames of a comparison table; empty cells are kept and marked."""
+    """(raw, display) frames of a comparison table; empty cells are kept and marked. A cell whose reproduced value
+    is not comparable with the paper's (:attr:`Cell.comparable`) shows its value with its budget and "not
+    comparable", and has no Δ and no "Paper in CI" (raw: NaN and None, ``comparable`` False)."""
     raw_rows, disp_rows = [], []
     for c in cells:
         s = c.stats
         paper = math.nan if c.paper_mean is None else float(c.paper_mean)
-        diff = s.mean - paper if not (math.isnan(paper) or math.isnan(s.mean)) else math.nan
-        inside = s.contains(None if math.isnan(paper) else paper)
+        shown = c.comparable
+        diff = s.mean - paper if shown and not (math.isnan(paper) or math.isnan(s.mean)) else math.nan
+        inside = s.contains(None if math.isnan(paper) else paper) if shown else None
         raw_rows.append(
             {
                 **c.keys,
@@ -189,22 +206,65 @@ def comparison_frames(cells: Sequence[Cell], digits: int = 1) -> tuple[pd.DataFr
                 "ci_high": s.ci_high,
                 "diff": diff,
                 "paper_in_ci": inside,
+                "budget": math.nan if c.budget is None else c.budget.value,
+                "budget_unit": None if c.budget is None else c.budget.unit,
+                "paper_budget": None if c.paper_budget is None else c.paper_budget.short(),
+                "comparable": shown if s.n and not math.isnan(paper) else None,
                 "note": c.note,
             }
         )
-        n_text = str(s.n) + (f" (+{c.n_short} short)" if c.n_short else "")
+        against = s.n > 0 and not math.isnan(paper)  # a reproduced value beside a paper value
+        n_text = str(s.n) + (f" (+{c.n_short} short" + (f", at {c.short_at})" if c.short_at else ")")
+                             if c.n_short else "")
+        value = fmt_pm(s.mean, s.std, digits) if s.n else "no runs"
+        if against and not shown:
+            value += f" ({c.budget.short()}, not comparable)" if c.budget is not None else " (not comparable)"
         disp_rows.append(
             {
                 **{key_name(k): v for k, v in c.keys.items()},
                 "Paper": fmt_pm(c.paper_mean, c.paper_std, digits) if c.paper_mean is not None else "n/a",
-                "Reproduced": fmt_pm(s.mean, s.std, digits) if s.n else "no runs",
+                "Reproduced": value,
                 "n": n_text,
                 "95% CI": fmt_ci(s.ci_low, s.ci_high, digits),
-                "Δ": fmt_num(diff, digits),
-                "Paper in CI": fmt_bool(inside) if s.n else EMPTY,
+                "Δ": fmt_num(diff, digits) if shown or not against else NOT_COMPARED,
+                "Paper in CI": (fmt_bool(inside) if shown else NOT_COMPARED) if against else EMPTY,
             }
         )
     display = pd.DataFrame(disp_rows)
     if any(c.note for c in cells):
         display["Note"] = [c.note for c in cells]
-    return pd.DataFrame(raw_rows), display
+    return pd.DataFrame(raw_rows), display.rename(columns=_budget_headers(cells))
+
+
+NOT_COMPARED = "n/a"  # Δ and "Paper in CI" of a value that is not comparable with the paper's
+
+
+def _budget_headers(cells: Sequence[Cell]) -> dict[str, str]:
+    """The Paper and Reproduced headers with their budget, its unit and action repeat, where every cell shares one:
+    'Paper (1M env. frames, action repeat 2)'."""
+    out = {}
+    papers = {c.paper_budget for c in cells if c.paper_mean is not None}
+    if len(papers) == 1:
+        paper = next(iter(papers))
+        if paper is not None and not paper.at_least:
+            out["Paper"] = f"Paper ({paper.header()})"
+    ours = {c.budget.header() for c in cells if c.stats.n and c.budget is not None}
+    if len(ours) == 1:
+        out["Reproduced"] = f"Reproduced ({next(iter(ours))})"
+    return out
+
+
+def budget_notes(cells: Sequence[Cell]) -> list[str]:
+    """The notes of a comparison table on its budgets: what their unit is (the action repeats beside the frames)
+    and, where some reproduced values are not comparable with the paper's, which budgets stand beside which."""
+    papers = [c.paper_budget for c in cells if c.paper_budget is not None]
+    if not papers:
+        return []
+    paper = papers[0]
+    repeats = [r for c in cells if c.stats.n and c.budget is not None for r in c.budget.repeats]
+    notes = [units_note(paper, repeats)]
+    apart = [c for c in cells if c.stats.n and c.paper_mean is not None and not c.comparable]
+    if apart:
+        notes.append(not_comparable_text(sorted({c.budget for c in apart if c.budget is not None},
+                                                key=lambda b: (b.value, b.repeats)), paper))
+    return notes

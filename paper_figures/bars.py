@@ -15,6 +15,7 @@ from paper_figures.common import (
     banner,
     bar_caption,
     comparison_table,
+    env_banner,
     grouped_bars,
     has_data,
     palette,
@@ -41,10 +42,13 @@ def render_bars(
     colors: dict[str, str] | None = None,
     digits: int = 0,
     hide: Sequence[str] = (),
+    varied: Sequence[str] = (),
 ) -> tuple[ArtifactResult, list]:
-    """Build cells over ``x_order`` x ``hue_order`` (+ any extra groups in the data), write the table and figure."""
+    """Build cells over ``x_order`` x ``hue_order`` (+ any extra groups in the data), write the table and figure.
+    ``varied``: environment settings the figure itself varies (F9's action repeat), not labelled as differences
+    from the paper's environment."""
     expected = [{x: xv, hue: hv} for xv in x_order for hv in hue_order]
-    cells = build_cells(df, [x, hue], expected, paper=paper, reps=ctx.reps, seed=ctx.seed)
+    cells = build_cells(df, [x, hue], expected, paper=paper, reps=ctx.reps, seed=ctx.seed, varied=varied)
     xs = list(dict.fromkeys([*x_order, *(c.keys[x] for c in cells)]))
     hues = list(dict.fromkeys([*hue_order, *(c.keys[hue] for c in cells)]))
     table = comparison_table(ctx, artifact_id, cells, caption, notes, digits=digits, hide=hide)
@@ -57,6 +61,7 @@ def render_bars(
         ax.tick_params(axis="x", rotation=30)
     if ctx.no_runs:
         banner(fig, NO_RUNS_TEXT)
+    env_banner(fig, df, varied)
     png = save_figure(fig, ctx, artifact_id)
     result = ArtifactResult(artifact_id, title, caption + " " + bar_caption(ctx), figures=[png], tables=[table],
                             notes=table.notes, has_runs=has_data(cells))

@@ -21,11 +21,12 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
+from analysis.comparable import env_differences, env_label  # noqa: E402
 from analysis.context import Context  # noqa: E402
 from analysis.identity import task_display  # noqa: E402
 from analysis.io import save_figure_files  # noqa: E402
 from analysis.stats import mean_cis  # noqa: E402
-from analysis.tables import Cell, TableOutput, comparison_frames, write_table  # noqa: E402
+from analysis.tables import Cell, TableOutput, budget_notes, comparison_frames, write_table  # noqa: E402
 
 METHOD_COLORS = {
     "TACO": "#d62728",
@@ -41,6 +42,7 @@ METHOD_COLORS = {
     "TACO w/o action repr": "#ff9896",
 }
 PAPER_MARK: dict[str, Any] = dict(marker="D", color="black", markersize=6, linestyle="none", zorder=5)
+APART_HATCH = "////"  # a bar whose value is not comparable with the paper's (analysis.comparable)
 NO_RUNS_TEXT = "no runs found: paper values only"
 
 
@@ -70,6 +72,17 @@ def save_figure(fig: plt.Figure, ctx: Context, name: str) -> Path:
     return png
 
 
+def env_banner(fig: plt.Figure, rows: pd.DataFrame, varied: Sequence[str] = ()) -> str:
+    """Across the top of a figure (where :func:`banner` says that no runs were found: never both), how the
+    environment of the runs drawn (``rows``, one or more per run) differs from the paper's
+    (analysis.comparable.env_label); nothing when it does not. Returns the text."""
+    runs = rows.drop_duplicates("run_id") if not rows.empty and "run_id" in rows.columns else rows
+    text = env_label(runs, varied)
+    if text:
+        banner(fig, textwrap.fill(text, 140))
+    return text
+
+
 def banner(fig: plt.Figure, text: str) -> None:
     """A visible note across the top of a figure (e.g. that no runs were found)."""
     fig.text(0.5, 1.0, text, ha="center", va="bottom", fontsize=10, color="#b22222", style="italic")
@@ -88,7 +101,8 @@ def bar_caption(ctx: Context, extra: str = "") -> str:
         f"Bars: reproduced mean over seeds at {ctx.budget_text()}; error bars: 95% stratified-bootstrap CI of "
         f"the mean (rliable percentile bootstrap, {ctx.reps:,} repetitions, random state {ctx.seed}); "
         "black diamonds: the paper's reported value (where the paper gives one); n: seeds that reached the "
-        "budget; 'no runs' marks an empty cell." + (" " + extra if extra else "")
+        "budget; 'no runs' marks an empty cell; a hatched, pale bar is at another budget than the paper's value "
+        "(its budget above it): not comparable with the diamond." + (" " + extra if extra else "")
     )
 
 
@@ -110,6 +124,7 @@ def grouped_bars(
     colors = colors or palette(list(hue_order))
     n_h = max(len(hue_order), 1)
     width = 0.8 / n_h
+    apart_at: set[str] = set()  # the budgets of bars not comparable with the paper's values
     top = (
         np.nanmax(
             np.r_[
@@ -129,17 +144,23 @@ def grouped_bars(
             if row.empty:
                 continue
             r = row.iloc[0]
+            apart = not bool(r.get("comparable", True))
             if r["n"] > 0 and not math.isnan(r["mean"]):
+                if apart:
+                    apart_at.add(str(r.get("budget") or "another budget"))
                 err = None
                 if not math.isnan(r["ci_low"]):
                     err = [[r["mean"] - r["ci_low"]], [r["ci_high"] - r["mean"]]]
-                ax.bar(pos, r["mean"], width * 0.92, color=colors[hv], yerr=err, capsize=2, ecolor="#222222", zorder=3)
+                style: dict[str, Any] = dict(hatch=APART_HATCH, alpha=0.45, edgecolor="#333333") if apart else {}
+                ax.bar(pos, r["mean"], width * 0.92, color=colors[hv], yerr=err, capsize=2, ecolor="#222222", zorder=3,
+                       **style)
+                label = f"n={int(r['n'])}" + (f", {r['budget']}" if apart and r.get("budget") else "")
                 ax.text(pos, (r["ci_high"] if not math.isnan(r["ci_high"]) else r["mean"]) + 0.015 * top,
-                        f"n={int(r['n'])}", ha="center", va="bottom", fontsize=6.5, rotation=90)
+                        label, ha="center", va="bottom", fontsize=6.5, rotation=90)
             else:
-                ax.text(
-                    pos, 0.01 * top, "no runs", ha="center", va="bottom", fontsize=6.5, rotation=90, color="#777777"
-                )
+                short = int(r.get("n_short", 0) or 0)
+                empty = f"no runs ({short} short, at {r['short_at']})" if short and r.get("short_at") else "no runs"
+                ax.text(pos, 0.01 * top, empty, ha="center", va="bottom", fontsize=6.5, rotation=90, color="#777777")
             if not math.isnan(r["paper"]):
                 ax.plot([pos], [r["paper"]], **PAPER_MARK)
     ax.set_xticks(range(len(x_order)))
@@ -148,6 +169,9 @@ def grouped_bars(
     ax.set_ylim(0, top * 1.15)
     handles: list[Artist] = [Patch(color=colors[h], label=str(h)) for h in hue_order]
     handles.append(Line2D([], [], label="paper (reported)", **PAPER_MARK))
+    if apart_at:
+        handles.append(Patch(facecolor="white", edgecolor="#333333", hatch=APART_HATCH,
+                             label=f"at {', '.join(sorted(apart_at))}: not comparable with the paper"))
     ax.legend(handles=handles, fontsize=7.5, loc="upper left", bbox_to_anchor=(1.0, 1.0))
 
 
@@ -170,10 +194,11 @@ def comparison_table(
     display = display.drop(columns=[c for c in hide if c in display.columns])
     if "Task" in display.columns:
         display["Task"] = display["Task"].map(lambda t: task_display(t) if t != "Average" else t)
-    full_notes = list(notes) + [stats_note or (
+    full_notes = list(notes) + budget_notes(cells) + [stats_note or (
         f"Reproduced: mean ± std over seeds (std with ddof=1) at {ctx.budget_text()}; 95% CI: stratified "
         f"bootstrap of the mean (rliable, {ctx.reps:,} repetitions, random state {ctx.seed}); Δ = reproduced − "
-        "paper; n: seeds that reached the budget (+k short: runs that stopped earlier, not used); — : no data."
+        "paper (only where comparable); n: seeds that reached the budget (+k short: runs that stopped earlier, "
+        "where they stopped; not used); — : no data."
     )]
     if ctx.no_runs:
         full_notes.insert(0, "No runs were found under the results root: only the paper's values are shown.")
@@ -195,11 +220,13 @@ def curve_panel(
         if rows.empty:
             continue
         n_seeds = rows["seed"].nunique()
+        runs = rows.drop_duplicates("run_id") if "run_id" in rows.columns else rows.iloc[0:0]
+        env = env_differences(runs)
         if per_seed:
             for i, (_, s) in enumerate(rows.groupby("seed")):
                 s = s.sort_values("frame")
                 ax.plot(s["frame"], s["value"], color=colors[lab], lw=0.9, alpha=0.75,
-                        label=f"{lab} (per seed, n={n_seeds})" if i == 0 else None)
+                        label=f"{lab} (per seed, n={n_seeds}{'; ' + env if env else ''})" if i == 0 else None)
             continue
         pivot = rows.pivot_table(index="frame", columns="seed", values="value")
         frames = pivot.index.to_numpy(dtype=float)
@@ -207,7 +234,7 @@ def curve_panel(
         cis = mean_cis([pivot.loc[f].to_numpy() for f in pivot.index], reps=reps, seed=seed)
         lo = np.array([c[0] for c in cis])
         hi = np.array([c[1] for c in cis])
-        ax.plot(frames, mean, color=colors[lab], lw=1.6, label=f"{lab} (n={n_seeds})")
+        ax.plot(frames, mean, color=colors[lab], lw=1.6, label=f"{lab} (n={n_seeds}{'; ' + env if env else ''})")
         ax.fill_between(frames, lo, hi, color=colors[lab], alpha=0.2, lw=0)
     ax.xaxis.set_major_formatter(FuncFormatter(frames_label))
 

@@ -9,6 +9,7 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter
 
 from analysis.calibration import band_caption, published_band
+from analysis.comparable import frames_axis_label, paper_env
 from analysis.context import Context
 from analysis.identity import task_display
 from paper_figures.common import (
@@ -64,7 +65,8 @@ def render_curves(
         if hline is not None and not rows.empty:
             ax.axhline(hline[0], color="#555555", ls="--", lw=1, label=hline[1])
         ax.set_title(task_display(task), fontsize=10)
-        ax.set_xlabel("frames")
+        ax.set_xlabel(frames_axis_label(rows["action_repeat"] if not rows.empty and "action_repeat" in rows.columns
+                                        else [paper_env()["action_repeat"]]), fontsize=8)
         ax.set_ylabel(ylabel)
         if not rows.empty:
             ax.legend(fontsize=7, loc="upper left")
@@ -104,6 +106,8 @@ def _caption(ctx: Context, caption: str, per_seed: bool, paper_marks: bool, drew
              f"lines: mean over seeds; bands: 95% stratified-bootstrap CI of the mean at each frame (rliable, "
              f"{ctx.curve_reps:,} repetitions, random state {ctx.seed}); curves are interpolated on a common "
              "frame grid and not extrapolated past a run's last evaluation")
+    bands += ("; x axis: environment frames = agent steps x action repeat (the repeat in the axis label); a legend "
+              "entry names how its runs' environment differs from the paper's, where it does")
     marks_text = " Diamonds at 1M frames: the paper's Table 1 values." if paper_marks else ""
     pub_text = " " + band_caption(ctx.curve_reps, ctx.seed) if drew_published else ""
     return f"{caption} {bands[0].upper() + bands[1:]}.{marks_text}{pub_text}"

@@ -26,7 +26,7 @@ def render(ctx: Context) -> ArtifactResult:
     )
     result, _ = render_bars(
         ctx, "F10", "Latent action dimension on Quadruped Run", df, "dim", "arm", dims, ["TACO"], caption,
-        f"return at {ctx.budget_text()}",
+        f"return at {ctx.frames_budget(df).text()}",
         paper=lambda k: ctx.paper.online_value("quadruped_run", "TACO") if k["dim"] == PAPER_DEFAULT else None,
         x_labels=lambda d: f"{d}" + (" (paper default)" if d == PAPER_DEFAULT else ""), figsize=(7.0, 4.0),
         hide=["Arm"],

@@ -43,7 +43,8 @@ def render(ctx: Context) -> ArtifactResult:
                     "Broken seeds": "—" if r is None else int(r["broken"]),
                 }
             )
-    tcap = (f"Spread over seeds of the return at {ctx.budget_text()} (the paper gives no numbers for this figure). "
+    tcap = (f"Spread over seeds of the return at {ctx.frames_budget(scores).text()} (the paper gives no numbers for "
+            "this figure). "
             f"A seed is 'broken' if its return is below {BROKEN_FRACTION:g} x the median of its cell.")
     table = write_table(ctx.out_dir, "F11", spread, tcap, pd.DataFrame(disp))
     result.tables.append(table)

@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from analysis import select
+from analysis.comparable import env_label, paper_frames
 from analysis.compare import cells_frame
 from analysis.context import Context
 from analysis.paper import DMC9
@@ -29,6 +30,7 @@ from paper_figures.common import (
     banner,
     bar_caption,
     comparison_table,
+    env_banner,
     grouped_bars,
     palette,
     placeholder,
@@ -40,9 +42,14 @@ from paper_figures.registry import ArtifactResult, register
 SCALE = SCORE_SCALE["episode_reward"]
 
 
+def _online(ctx: Context) -> pd.DataFrame:
+    """The runs of Table 1's cells (one row per run, scores at the budget), labelled by method."""
+    return relabel(select.online_main(ctx.scores, ctx.experiment_map), "method")
+
+
 def average_matrices(ctx: Context) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """Per method with runs on all nine tasks: the (runs x 9) matrix of returns at the budget (reached runs)."""
-    df = relabel(select.online_main(ctx.scores, ctx.experiment_map), "method")
+    df = _online(ctx)
     df = df[df["reached"].astype(bool)] if not df.empty else df
     mats, notes = {}, {}
     for method in (df["method"].unique() if not df.empty else []):
@@ -107,8 +114,13 @@ def _cells(ctx: Context, methods: list[str], paper: pd.Series, mats: dict[str, n
                 )
                 row["P(TACO > method)"] = f"{p:.2f} {fmt_ci(lo, hi, 2)}"
         note = mat_notes.get(method, "no runs") if method not in mats else mat_notes[method]
+        runs = _online(ctx)
+        runs = runs[runs["method"] == method] if not runs.empty else runs
+        budget = ctx.frames_budget(runs[runs["reached"].astype(bool)]) if method in mats else None
+        note = "; ".join(n for n in (note, env_label(runs)) if n)
         cells.append(
-            Cell({"method": method}, float(paper[method]) if method in paper.index else None, None, stats, note=note)
+            Cell({"method": method}, float(paper[method]) if method in paper.index else None, None, stats, note=note,
+                 budget=budget, paper_budget=paper_frames())
         )
         extra_rows.append(row)
     return cells, extra_rows
@@ -139,7 +151,7 @@ def _figure(ctx: Context, cells: list[Cell], methods: list[str], normed: dict[st
     ax.get_legend().remove()
     for i, method in enumerate(methods):
         ax.get_xticklabels()[i].set_color(palette(methods)[method])
-    ax.set_ylabel(f"mean return over 9 tasks at {ctx.budget_text()}")
+    ax.set_ylabel(f"mean return over 9 tasks at {ctx.frames_budget(_online(ctx)).text()}")
     ax.set_title("Average over nine DMC tasks")
     ax.tick_params(axis="x", rotation=30)
     if normed:
@@ -157,4 +169,5 @@ def _figure(ctx: Context, cells: list[Cell], methods: list[str], normed: dict[st
         placeholder(ax2, "performance profile: needs runs of a method on all nine DMC tasks")
     if ctx.no_runs:
         banner(fig, NO_RUNS_TEXT)
+    env_banner(fig, _online(ctx))
     return save_figure(fig, ctx, "F1")

@@ -53,6 +53,6 @@ def render(ctx: Context) -> ArtifactResult:
         + ", ".join(f"{t} {how}" for t, (_, how) in implied_no_repr(ctx.paper).items()) + ")."
     )
     result, _ = render_bars(ctx, "F3", "Action representation", df, "task", "label", tasks, LABELS, caption,
-                            f"return at {ctx.budget_text()}", paper=lambda k: paper_value(ctx, k),
+                            f"return at {ctx.frames_budget(df).text()}", paper=lambda k: paper_value(ctx, k),
                             x_labels=task_display)
     return result

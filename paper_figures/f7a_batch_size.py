@@ -28,6 +28,6 @@ def render(ctx: Context) -> ArtifactResult:
         "each method's default batch size (TACO 1024, DrQ-v2 256)."
     )
     result, _ = render_bars(ctx, "F7a", "Batch size on Quadruped Run", df, "batch", "label", batches,
-                            ["TACO", "DrQ-v2"], caption, f"return at {ctx.budget_text()}", paper=paper,
+                            ["TACO", "DrQ-v2"], caption, f"return at {ctx.frames_budget(df).text()}", paper=paper,
                             x_labels=lambda b: f"B={b}")
     return result

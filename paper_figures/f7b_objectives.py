@@ -21,7 +21,7 @@ def render(ctx: Context) -> ArtifactResult:
     )
     result, _ = render_bars(
         ctx, "F7b", "Objective removal on Quadruped Run", df, "label", "arm", VARIANTS, ["TACO"], caption,
-        f"return at {ctx.budget_text()}",
+        f"return at {ctx.frames_budget(df).text()}",
         paper=lambda k: ctx.paper.online_value("quadruped_run", "TACO") if k["label"] == "full" else None,
         figsize=(6.5, 4.0), hide=["Arm"],
     )

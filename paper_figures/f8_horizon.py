@@ -43,5 +43,6 @@ def render(ctx: Context) -> ArtifactResult:
         "(TACO at its default K per task: 1 on quadruped_run and walker_run, 3 elsewhere)."
     )
     result, _ = render_bars(ctx, "F8", "Prediction horizon K", df, "task", "label", [*DMC9, *extra], LABELS, caption,
-                            f"return at {ctx.budget_text()}", paper=paper, x_labels=task_display, figsize=(13, 4.2))
+                            f"return at {ctx.frames_budget(df).text()}", paper=paper, x_labels=task_display,
+                            figsize=(13, 4.2))
     return result

@@ -31,8 +31,8 @@ def render(ctx: Context) -> ArtifactResult:
     )
     result, _ = render_bars(
         ctx, "F9", "Action repeat and K on Hopper Hop", df, "ar", "k", repeats, ks, caption,
-        f"return at {ctx.budget_text()}",
+        f"return at {ctx.frames_budget(df).text()}",
         paper=lambda k: ctx.paper.online_value("hopper_hop", "TACO") if (k["ar"], k["k"]) == (2, "K=3") else None,
-        x_labels=lambda a: f"action repeat {a}", figsize=(7.5, 4.0),
+        x_labels=lambda a: f"action repeat {a}", figsize=(7.5, 4.0), varied=("action_repeat",),
     )
     return result

@@ -15,6 +15,7 @@ import pandas as pd  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
 from analysis.calibration import band_caption  # noqa: E402
+from analysis.comparable import env_differences, frames_axis_label  # noqa: E402
 from analysis.identity import task_display  # noqa: E402
 from analysis.io import atomic_savefig  # noqa: E402
 from paper_figures.common import (  # noqa: E402
@@ -56,7 +57,7 @@ def plot_curves(curves: pd.DataFrame, metric: str, out: Path, x: str = "frame", 
             if not one.empty and one["frame"].nunique() == 1:
                 ax.scatter(one["frame"], one["value"], color=colors[lab], s=12)
         ax.set_title(task_display(task))
-        ax.set_xlabel("frames" if x == "frame" else x)
+        ax.set_xlabel(frames_axis_label(rows.get("action_repeat", ())) if x == "frame" else x)
         ax.set_ylabel(metric)
     # One legend for all panels (the first panel may lack a group): label and its seed count(s) over tasks.
     seeds = curves.groupby(["label", "task"])["seed"].nunique()
@@ -64,7 +65,10 @@ def plot_curves(curves: pd.DataFrame, metric: str, out: Path, x: str = "frame", 
     names = []
     for lab in labels:
         n = sorted(set(seeds.loc[lab].tolist()))
-        names.append(f"{lab} (n={n[0]})" if len(n) == 1 else f"{lab} (n={n[0]}-{n[-1]})")
+        runs = curves[curves["label"] == lab]
+        env = env_differences(runs.drop_duplicates("run_id")) if "run_id" in runs.columns else ""
+        seeds_text = f"n={n[0]}" if len(n) == 1 else f"n={n[0]}-{n[-1]}"
+        names.append(f"{lab} ({seeds_text}{'; ' + env if env else ''})")
     if drew_published:
         handles.append(Line2D([], [], **PUBLISHED_STYLE))
         names.append("DrQ-v2 (published by its authors)")

@@ -92,6 +92,10 @@ def summarize_load(ctx) -> None:
     else:
         done = int((res.runs["status"] == "done").sum())
         typer.echo(f"Loaded {len(res.runs)} runs ({done} done) from {res.root}; budget {ctx.budget_text()}.")
+        from analysis.claim_budget import unread_hints
+
+        for hint in unread_hints(ctx.scores, ctx.experiment_map):
+            typer.echo(f"  Hint: {hint[0].upper()}{hint[1:]} (no claim reads these experiment names).")
     for problem in res.problems:
         typer.echo(f"  {problem}", err=True)
 

@@ -115,6 +115,7 @@ def write_run(
     curve: Sequence[float] | None = None,
     train_rows: int = 3,
     save_frames: bool = False,
+    config: dict[str, Any] | None = None,
 ) -> Path:
     """Write one run directory and return it. Arguments left None keep the composed config's value; the
     config goes through the training schema, and resolved.json through the code training uses
@@ -130,7 +131,8 @@ def write_run(
     ``train_rows``: train.csv rows of an online run (one per episode at the paper's scale, benchmarks/).
     ``save_frames``: a done online run also writes its final evaluation episode's frames (frames.npz, by the writer
     training uses) where its config's train.save_frames says so (on by default), as a trained run does; synthetic
-    frames of the run's image size, one per action-repeated step of a 500-step episode."""
+    frames of the run's image size, one per action-repeated step of a 500-step episode. ``config``: other dotted
+    config values (e.g. ``{"env.max_episode_frames": 100}``)."""
     cfg = run_config(
         algo, task, seed, root, experiment=experiment, variant=variant, **{
             "agent.K": K, "agent.batch_size": batch_size, "agent.latent_action_dim": latent_action_dim,
@@ -138,7 +140,7 @@ def write_run(
             "env.action_repeat": action_repeat, "env.distracting_dims": distracting_dims, "train.frames": frames,
             "offline.dataset": dataset, "agent.cql.alpha": cql_alpha, **({
                 "offline.updates": updates, "offline.eval_every_updates": eval_every_updates}
-                if dataset is not None else {})})
+                if dataset is not None else {}), **(config or {})})
     offline = is_offline(str(cfg.agent.learner))
     run = path or rundir.run_dir(cfg)
     run.mkdir(parents=True, exist_ok=True)

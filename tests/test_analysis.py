@@ -34,8 +34,11 @@ REPS = 200
 pytestmark = pytest.mark.filterwarnings("ignore:random_state is deprecated:FutureWarning")
 
 
+PAPER = 1_000_000  # the paper's budget of Table 1 (environment frames)
+
+
 def _ctx(root: Path, **kw) -> Context:
-    return Context(results=load_results(root), out_dir=root / "_out", budget=FRAMES, reps=REPS, **kw)
+    return Context(results=load_results(root), out_dir=root / "_out", **{"budget": FRAMES, "reps": REPS, **kw})
 
 
 # ---------------------------------------------------------------- loading
@@ -221,13 +224,15 @@ def test_seeded_restores_global_numpy_state():
 
 # ---------------------------------------------------------------- artifacts: exact cells
 def test_t1_cells_exact(tmp_path):
+    # at the paper's budget (1M frames): a run that reached it is compared with the paper (Δ, Paper in CI)
     for s, v in enumerate((530.0, 540.0, 550.0)):
-        write_run(tmp_path, experiment="main", algo="taco", task="quadruped_run", seed=s, final=v)
+        write_run(tmp_path, experiment="main", algo="taco", task="quadruped_run", seed=s, final=v, frames=PAPER,
+                  eval_every=PAPER // 4)
     write_run(tmp_path, experiment="main", algo="drqv2", task="quadruped_run", seed=0, final=400.0, frames=60_000,
               done=False)
     from paper_figures.t1_online import render
 
-    ctx = _ctx(tmp_path)
+    ctx = _ctx(tmp_path, budget=PAPER)
     table = render(ctx).tables[0]
     t = table.data.set_index(["task", "method"])
     taco = t.loc[("quadruped_run", "TACO")]
@@ -240,8 +245,11 @@ def test_t1_cells_exact(tmp_path):
     assert (drq["n"], drq["n_short"]) == (0, 1) and math.isnan(drq["repro_mean"])  # short run counted, not used
     assert t.loc[("hopper_hop", "DreamerV3"), "n"] == 0  # empty cells are kept
     md = (ctx.out_dir / "T1.md").read_text()
+    assert ("| Task | Method | Paper (1M env. frames, action repeat 2) | Reproduced (1M env. frames, action repeat 2) "
+            "| n | 95% CI | Δ | Paper in CI |") in md
     assert "| Quadruped Run | TACO | 541 ± 38 | 540 ± 10 | 3 |" in md
-    assert "| Quadruped Run | DrQ-v2 | 407 ± 21 | no runs | 0 (+1 short) |" in md
+    assert "| Quadruped Run | DrQ-v2 | 407 ± 21 | no runs | 0 (+1 short, at 60K frames) |" in md
+    assert bool(taco["comparable"]) and "not comparable" not in md
     assert (ctx.out_dir / "T1.tex").read_text().count(r"\\") > 60 and (ctx.out_dir / "T1.csv").exists()
 
 
@@ -251,6 +259,107 @@ def test_experiment_map_reads_other_experiment_names(tmp_path):
     assert select.online_main(ctx.scores).empty
     mapped = select.online_main(ctx.scores, {"main": ["tiny"]})
     assert list(mapped["label"]) == ["TACO"]
+
+
+# ---------------------------------------------------------------- a value beside the paper's only where comparable
+def test_the_comparability_rule():
+    from analysis.comparable import UPDATES, Budget, comparable, paper_frames, paper_updates
+
+    paper = paper_frames()
+    assert (paper.value, paper.repeats, paper.text()) == (1_000_000, (2,), "1M env. frames (action repeat 2)")
+    assert comparable(Budget(1_000_000, repeats=(2,)), paper) and comparable(Budget(1_000_000, repeats=(4,)), paper)
+    assert not comparable(Budget(400), paper) and not comparable(Budget(2_000_000), paper)  # another budget
+    assert not comparable(None, paper)  # no run reached it
+    assert not comparable(Budget(1_000_000, UPDATES), paper)  # another unit
+    offline = paper_updates()  # the paper states none: from the default offline.updates (100K) on
+    assert offline.at_least and offline.value == 100_000
+    assert not comparable(Budget(20, UPDATES), offline) and comparable(Budget(550_000, UPDATES), offline)
+    assert comparable(None, None) and comparable(Budget(400), None)  # a paper value without a budget (a timing)
+
+
+def test_a_short_run_is_shown_as_not_comparable_without_delta_or_in_ci(tmp_path):
+    # `make repro`'s situation: 400-frame runs of 100-frame episodes under experiment tiny, read as main at 400
+    for s in (1, 2):
+        for algo, final in (("taco", 1.0), ("drqv2", 2.0)):
+            write_run(tmp_path, experiment="tiny", algo=algo, task="cheetah_run", seed=s, final=final + s,
+                      frames=400, eval_every=200, config={"env.max_episode_frames": 100})
+    from paper_figures.t1_online import render
+
+    ctx = _ctx(tmp_path, budget=400, experiment_map={"main": ["tiny"]})
+    table = render(ctx).tables[0]
+    taco = table.data.set_index(["task", "method"]).loc[("cheetah_run", "TACO")]
+    assert taco["n"] == 2 and taco["repro_mean"] == 2.5  # the value is shown, as what it is
+    assert math.isnan(taco["diff"]) and taco["paper_in_ci"] is None and not taco["comparable"]
+    assert (taco["budget"], taco["budget_unit"], taco["paper_budget"]) == (400, "frames", "1M frames")
+    md = (ctx.out_dir / "T1.md").read_text()
+    row = next(ln for ln in md.splitlines() if ln.startswith("| Cheetah Run | TACO |"))
+    assert row.startswith("| Cheetah Run | TACO | 821 ± 48 | 2 ± 1 (400 frames, not comparable) | 2 |")
+    assert "| n/a | n/a |" in row and "-820" not in row  # no Δ, no "Paper in CI"
+    assert "100-frame episodes (paper: 1,000)" in row  # the run's environment, labelled
+    assert "| Paper (1M env. frames, action repeat 2) | Reproduced (400 env. frames, action repeat 2) |" in md
+    assert "Not comparable: reproduced values at 400 env. frames (action repeat 2), the paper's at 1M env. " in md
+    assert "Frames are environment frames = agent steps x action repeat (the paper: action repeat 2" in md
+
+    # the same runs at the paper's budget: no run reached it, and the short ones say where they stopped
+    ctx = _ctx(tmp_path, budget=1_000_000, experiment_map={"main": ["tiny"]})
+    render(ctx)
+    md = (ctx.out_dir / "T1.md").read_text()
+    assert "| Cheetah Run | TACO | 821 ± 48 | no runs | 0 (+2 short, at 400 frames) | — | — | — |" in md
+
+
+def test_runs_of_another_environment_are_labelled():
+    from analysis.comparable import env_difference, env_differences
+
+    base = {"suite": "dmc", "action_repeat": 2, "max_episode_frames": None, "camera": None, "distracting_dims": 0}
+    assert env_difference(base) == [] and env_difference({**base, "max_episode_frames": 1000}) == []
+    assert env_difference({**base, "max_episode_frames": 100}) == ["100-frame episodes (paper: 1,000)"]
+    assert env_difference({**base, "action_repeat": 4}) == ["action repeat 4 (paper: 2)"]
+    assert env_difference({**base, "action_repeat": 4}, varied=("action_repeat",)) == []  # F9's own variable
+    assert env_difference({**base, "camera": "1"}) == ["camera 1 (paper: the task's own)"]
+    assert env_difference({**base, "distracting_dims": 20}) == ["20 distracting action dims (paper: 0)"]
+    rows = pd.DataFrame([{**base, "max_episode_frames": 100}, base])
+    assert env_differences(rows) == "100-frame episodes (paper: 1,000) (1 of 2 runs)"
+
+
+def test_an_offline_run_below_the_papers_updates_is_not_compared(tmp_path):
+    for algo in ("td3bc", "td3bc_taco"):
+        for s in (1, 2):
+            write_run(tmp_path, experiment="offline", algo=algo, task="cheetah_run", seed=s, final=10.0 + s,
+                      dataset="medium", updates=20, eval_every_updates=10)
+    from paper_figures.t3_offline import render
+
+    ctx = _ctx(tmp_path)
+    table = render(ctx).tables[0]
+    cell = table.data.set_index(["task", "dataset", "method"]).loc[("cheetah_run", "medium", "TD3+BC")]
+    assert cell["n"] == 2 and math.isnan(cell["diff"]) and cell["paper_in_ci"] is None and not cell["comparable"]
+    md = (ctx.out_dir / "T3.md").read_text()
+    assert "(20 updates, not comparable) | 2 |" in md and "| Reproduced (20 gradient updates) |" in md
+    assert "the paper's at an unstated number of updates (a run is compared from 100K updates on)" in md
+
+
+def test_claims_without_runs_name_the_experiments_that_have_them_and_the_x_option(tmp_path):
+    from analysis.claim_budget import unread_hints
+
+    for s in (1, 2):
+        write_run(tmp_path, experiment="tiny", algo="taco", task="cheetah_run", seed=s, final=1.0, frames=400,
+                  eval_every=200)
+        write_run(tmp_path, experiment="tiny_offline", algo="td3bc", task="cheetah_run", seed=s, final=1.0,
+                  dataset="medium", updates=20, eval_every_updates=10)
+    ctx = _ctx(tmp_path)
+    v = _verdicts(ctx)
+    hint = "runs exist in experiment(s) tiny (2 online runs): `-x main=tiny` reads them as experiment main"
+    assert "no runs in experiment(s) main" in v["online_avg_gain"].evidence and hint in v["online_avg_gain"].evidence
+    assert ("`-x offline=tiny_offline` reads them as experiment offline" in v["offline_gain"].evidence
+            and "tiny_offline (2 offline runs)" in v["offline_gain"].evidence)
+    assert unread_hints(ctx.scores, {}) == [
+        hint, "runs exist in experiment(s) tiny_offline (2 offline runs): `-x offline=tiny_offline` reads them as "
+        "experiment offline"]
+    mapped = _ctx(tmp_path, experiment_map={"main": ["tiny"], "offline": ["tiny_offline"]})
+    assert unread_hints(mapped.scores, mapped.experiment_map) == []
+    assert "runs reach 400 frames" in _verdicts(mapped)["online_avg_gain"].evidence  # the hint's option reads them
+    out = CliRunner().invoke(_app(), ["claims", "--results", str(tmp_path), "--out", str(tmp_path / "out"),
+                                      "--reps", "50"])
+    assert out.exit_code == 0 and "Hint: Runs exist in experiment(s) tiny (2 online runs): `-x main=tiny`" in out.output
 
 
 def test_speed_from_runs_and_bench(tmp_path):

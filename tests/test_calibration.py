@@ -132,6 +132,22 @@ def test_calibration_reads_below_consistent_and_above_a_known_curve(tmp_path):
     assert "user has 2 seeds" in by["two"].note and np.isnan(by["two"].diff_ci_low)
 
 
+def test_calibration_of_runs_with_shorter_episodes_is_not_comparable(tmp_path):
+    """A DrQ-v2 of 100-frame episodes (profile=tiny) held against the 1000-frame published curves: its values are
+    shown, named by the difference, with no Δ and no below/above reading."""
+    from analysis.calibration import OTHER_ENV, calibration_frames
+
+    pub = load_published(write_published(tmp_path / "pub", "cheetah_run").parent)
+    for seed, final in enumerate([30.0, 31.0, 32.0]):
+        write_run(tmp_path / "runs", experiment="tiny", algo="drqv2", task="cheetah_run", seed=seed, final=final,
+                  frames=50_000, eval_every=10_000, config={"env.max_episode_frames": 100})
+    (row,), _ = calibrate(load_results(tmp_path / "runs"), pub, reps=REPS)
+    assert row.reading == OTHER_ENV and np.isnan(row.diff) and np.isnan(row.diff_ci_low)
+    assert row.user_mean == pytest.approx(31.0) and "100-frame episodes (paper: 1,000)" in row.note
+    shown = calibration_frames([row])[1].iloc[0]
+    assert shown["Reading"] == OTHER_ENV and shown["Env. frames (action repeat 2)"] == "50,000 frames"
+
+
 def test_calibration_at_the_runs_own_budget_and_capped_at_the_curves_end(tmp_path):
     pub = load_published(write_published(tmp_path / "pub", "cheetah_run", end=60_000).parent)
     root = tmp_path / "runs"

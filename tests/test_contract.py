@@ -64,7 +64,8 @@ def test_real_run_loads_with_every_field_it_used(trained):
         "method": "TACO", "task": "hopper_hop", "suite": rc.task.suite, "seed": 5, "learner": "actor_critic",
         "K": k_used, "batch_size": rc.agent.batch_size, "nstep": rc.agent.nstep, "latent_action_dim": latent,
         "action_encoder": True, "objectives": "+".join(objectives), "action_repeat": 4,
-        "distracting_dims": rc.env.distracting_dims, "train_frames": 200, "dataset": None, "cql_alpha": None,
+        "distracting_dims": rc.env.distracting_dims, "max_episode_frames": 100, "camera": None,  # profile=tiny's
+        "train_frames": 200, "dataset": None, "cql_alpha": None,
         "offline_updates": None, "status": runformat.STATE_DONE,
     }
     assert set(expected) == set(IDENTITY)  # every identity column the loader produces is checked here

@@ -177,3 +177,44 @@ def test_f8_reads_each_tasks_default_k_from_its_composition():
     assert ks == {task: int(compose([f"task={task}"]).agent.K) for task in DMC9}
     assert ks == {task: 1 if task in ("quadruped_run", "walker_run") else 3 for task in DMC9}
     assert default_k("no_such_task") is None
+
+
+def test_bars_and_curves_mark_short_runs_and_runs_of_another_environment(tmp_path, monkeypatch):
+    """400-frame runs of 100-frame episodes beside the paper's 1M values: F8's bars are hatched, labelled with
+    their budget and not comparable (no Δ); the figures name the episode length (banner, curve legends) and the
+    frame axis its unit and action repeat."""
+    import matplotlib.pyplot as plt
+
+    import paper_figures.bars
+    import paper_figures.curves
+    from analysis_fixtures import write_run
+
+    for s in (1, 2):
+        for algo, final in (("taco", 1.0), ("drqv2", 2.0)):
+            write_run(tmp_path / "runs", experiment="tiny", algo=algo, task="cheetah_run", seed=s, final=final + s,
+                      frames=400, eval_every=200, config={"env.max_episode_frames": 100})
+    drawn: dict[str, object] = {}
+
+    def keep(fig, ctx, name):  # what the figure holds, not written (writing is most of the time)
+        drawn[name] = ([t.get_text() for t in fig.texts],
+                       [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()],
+                       [ax.get_xlabel() for ax in fig.axes], [ax.get_ylabel() for ax in fig.axes],
+                       [p.get_hatch() for ax in fig.axes for p in ax.patches])
+        plt.close(fig)
+        return ctx.out_dir / f"{name}.png"
+
+    for module in (paper_figures.bars, paper_figures.curves):
+        monkeypatch.setattr(module, "save_figure", keep)
+    ctx = Context(results=load_results(tmp_path / "runs"), out_dir=tmp_path / "out", budget=400, reps=REPS,
+                  curve_reps=CURVE_REPS, experiment_map={"main": ["tiny"]}, published_band=False)
+    for art in paper_figures.resolve(["F8", "F4"]):
+        art.render(ctx)
+    texts, legend, _, ylabels, hatches = drawn["F8"]
+    assert any("environment differs from the paper's: 100-frame episodes (paper: 1,000)" in t for t in texts)
+    assert "at 400 frames: not comparable with the paper" in legend and hatches.count("////") >= 2
+    assert ylabels == ["return at 400 env. frames (action repeat 2)"]
+    f8 = (ctx.out_dir / "F8.md").read_text()
+    assert "| Cheetah Run | K=3 | 821 ± 48 | 2 ± 1 (400 frames, not comparable) | 2 | [2, 3] | n/a | n/a |" in f8
+    _, legend, xlabels, _, _ = drawn["F4"]
+    assert "TACO (n=2; 100-frame episodes (paper: 1,000))" in legend
+    assert set(xlabels) == {"environment frames (action repeat 2)"}
