@@ -236,7 +236,8 @@ def calibration_frames(rows: Sequence[CalibrationRow]) -> tuple[pd.DataFrame, pd
                             for r in rows],
         "Published DrQ-v2 (n)": [f"{_mean_ci(r.published_n, r.published_mean, r.published_ci_low, r.published_ci_high)}"
                                  f" (n={r.published_n})" for r in rows],
-        "Δ [95% CI]": [f"{fmt_num(r.diff)} {fmt_ci(r.diff_ci_low, r.diff_ci_high)}".strip() for r in rows],
+        "Δ [95% CI]": ["n/a" if r.reading == OTHER_ENV else
+                       f"{fmt_num(r.diff)} {fmt_ci(r.diff_ci_low, r.diff_ci_high)}".strip() for r in rows],
         "Reading": [r.reading for r in rows],
         "Note": [r.note for r in rows],
     })

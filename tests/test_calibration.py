@@ -146,6 +146,7 @@ def test_calibration_of_runs_with_shorter_episodes_is_not_comparable(tmp_path):
     assert row.user_mean == pytest.approx(31.0) and "100-frame episodes (paper: 1,000)" in row.note
     shown = calibration_frames([row])[1].iloc[0]
     assert shown["Reading"] == OTHER_ENV and shown["Env. frames (action repeat 2)"] == "50,000 frames"
+    assert shown["Δ [95% CI]"] == "n/a"
 
 
 def test_calibration_at_the_runs_own_budget_and_capped_at_the_curves_end(tmp_path):

@@ -27,6 +27,10 @@ def test_tiny_end_to_end_reproduction_online(main_job):
     row = t1[(t1.task == "cheetah_run") & (t1.method == "TACO")].iloc[0]
     assert row.n == 2 and row.repro_mean == row.repro_mean  # reproduced from the two seeds (not NaN)
     assert t1[(t1.task == "quadruped_run") & (t1.method == "TACO")].iloc[0].n == 0  # no runs: shown, not faked
+    # 400-frame runs of 100-frame episodes beside the paper's 1M frames: shown as what they are, never compared
+    assert str(row.comparable) == "False" and row["diff"] != row["diff"] and row.paper_in_ci != row.paper_in_ci
+    line = next(ln for ln in (out / "T1.md").read_text().splitlines() if ln.startswith("| Cheetah Run | TACO |"))
+    assert "(400 frames, not comparable)" in line and "| n/a | n/a |" in line and "100-frame episodes" in line
     report = (out / "REPORT.md").read_text()
     assert "30 runs loaded (30 done)" in report and "## Claims" in report and "Audit" in report
 
@@ -45,6 +49,7 @@ def test_tiny_end_to_end_reproduction_offline(main_job):
             seeds = 1 if method in ("IQL", "BC", "DT") else 2
             assert len(cell) == 1 and cell.iloc[0].n == seeds and cell.iloc[0].repro_mean == cell.iloc[0].repro_mean, \
                 (kind, method)
+    assert (t3[t3.n > 0].comparable.astype(str) == "False").all()  # 20 updates: below the paper's (100K on)
     t3b = pd.read_csv(out / "T3b.csv")
     pairs = t3b[(t3b.task == "cheetah_run") & t3b.dataset.isin(["medium", "full-replay"])]
     assert len(pairs) == 4 and pairs.poi.between(0, 1).all() and (pairs.n_method == 2).all(), pairs
