@@ -31,7 +31,7 @@ from repro.config.compose import CONF_DIR
 
 FRAMES, UPDATES = "frames", "updates"
 DMC_EPISODE_FRAMES = 1000  # a DeepMind Control episode: 1000 environment frames (500 agent steps at repeat 2)
-ENV_KEYS = ("action_repeat", "max_episode_frames", "camera", "distracting_dims")
+ENV_KEYS = ("action_repeat", "max_episode_frames", "camera", "distracting_dims", "image_size", "frame_stack")
 
 
 @functools.cache
@@ -172,10 +172,13 @@ def frames_axis_label(repeats: Iterable[Any] = ()) -> str:
 
 
 # ---------------------------------------------------------------- environments that differ from the paper's
-def env_difference(row: Any, varied: Sequence[str] = ()) -> list[str]:
+def env_difference(row: Any, varied: Sequence[str] = (), against: str = "paper") -> list[str]:
     """How one run's environment differs from the paper's, in words (empty: as the paper's), leaving out the
     dimensions in ``varied`` (an artifact's own variable, e.g. F9's action repeat). ``row``: a mapping or a row of
-    the runs / scores tables (columns action_repeat, max_episode_frames, camera, distracting_dims, suite)."""
+    the runs / scores tables (columns action_repeat, max_episode_frames, camera, distracting_dims, image_size,
+    frame_stack, suite, task; a missing one is taken as the paper's). ``against`` names the reference in the words
+    ("paper", or "published" for the DrQ-v2 authors' curves, whose DMC settings are the paper's): the one rule of
+    "another environment" for the tables, the figures and `repro verify`."""
     paper = paper_env()
     out = []
 
@@ -183,23 +186,42 @@ def env_difference(row: Any, varied: Sequence[str] = ()) -> list[str]:
         v = row.get(key) if hasattr(row, "get") else None
         return None if v is None or (not isinstance(v, str) and pd.isna(v)) else v
 
+    def differs(key: str) -> Any:
+        v = value(key)
+        return None if key in varied or v is None or paper[key] is None or int(v) == int(paper[key]) else int(v)
+
     episode = value("max_episode_frames")
     if "max_episode_frames" not in varied and episode is not None and episode != paper["max_episode_frames"]:
-        if value("suite") == "dmc":
+        if value("suite") in (None, "dmc"):
             if int(episode) < DMC_EPISODE_FRAMES:
-                out.append(f"{int(episode):,}-frame episodes (paper: {DMC_EPISODE_FRAMES:,})")
+                out.append(f"{int(episode):,}-frame episodes ({against}: {DMC_EPISODE_FRAMES:,})")
         else:
-            out.append(f"episodes cut at {int(episode):,} frames (paper: the suite's own)")
-    repeat = value("action_repeat")
-    if "action_repeat" not in varied and repeat is not None and int(repeat) != int(paper["action_repeat"]):
-        out.append(f"action repeat {int(repeat)} (paper: {paper['action_repeat']})")
-    camera = value("camera")
+            out.append(f"episodes cut at {int(episode):,} frames ({against}: the suite's own)")
+    if (repeat := differs("action_repeat")) is not None:
+        out.append(f"action repeat {repeat} ({against}: {paper['action_repeat']})")
+    camera, task = value("camera"), value("task")
     if "camera" not in varied and camera is not None and camera != paper["camera"]:
-        out.append(f"camera {camera} (paper: the task's own)")
-    dims = value("distracting_dims")
-    if "distracting_dims" not in varied and dims is not None and int(dims) != int(paper["distracting_dims"]):
-        out.append(f"{int(dims)} distracting action dims (paper: {paper['distracting_dims']})")
+        own = _task_camera(str(task)) if task is not None else None
+        if own is None or str(camera) != str(own):
+            reference = "the task's own" if own is None else own
+            out.append(f"camera {camera} ({against}: {reference})")
+    if (dims := differs("distracting_dims")) is not None:
+        out.append(f"{dims} distracting action dims ({against}: {paper['distracting_dims']})")
+    if (size := differs("image_size")) is not None:
+        out.append(f"{size}x{size} pixels ({against}: {paper['image_size']})")
+    if (stack := differs("frame_stack")) is not None:
+        out.append(f"{stack} stacked frames ({against}: {paper['frame_stack']})")
     return out
+
+
+def _task_camera(task: str) -> Any:
+    """The task's own camera (its upstream one), None for a task this installation does not know."""
+    from repro.envs.registry import UnknownTaskError, get_task
+
+    try:
+        return get_task(task).camera
+    except UnknownTaskError:
+        return None
 
 
 def env_differences(rows: pd.DataFrame, varied: Sequence[str] = ()) -> str:

@@ -20,8 +20,9 @@ variant (docs/verification.md says the same in prose):
   task's random-policy return (uniform actions, :func:`repro.envs.dmc.random_policy_returns`), ``P_f`` the
   published DrQ-v2 mean at ``f``. Its curve is drawn beside DrQ-v2's and its frames are shown against the band
   (for information: TACO at a batch of 256 is not DrQ-v2).
-* **Not comparable.** A cell whose environment differs from the published curves' (:data:`PUBLISHED_ENV`: episodes
-  of 1000 frames, action repeat 2, 84x84 frames, 3 stacked, the task's camera, no distracting dimension; e.g.
+* **Not comparable.** A cell whose environment differs from the published curves' (analysis/comparable.py's
+  ``env_difference``: episodes of 1000 frames, action repeat 2, 84x84 frames, 3 stacked, the task's camera, no
+  distracting dimension; e.g.
   ``--set profile=tiny``'s 100-frame episodes, whose returns are about a tenth of a 1000-frame episode's) is ``not
   comparable``, never a verdict; the difference is named in the verdict table, the frames table and the figure.
 * **What the table states.** Every verdict row carries its statistic, the band (or DrQ-v2's threshold for other
@@ -42,6 +43,7 @@ import pandas as pd
 
 from analysis.calibration import SOURCE_TEXT, packaged_published, values_at
 from analysis.claim_budget import frames_text
+from analysis.comparable import env_difference
 from analysis.io import atomic_write_text
 from analysis.load import Results, read_config
 from analysis.stats import poi_interval
@@ -74,16 +76,8 @@ class TaskRule:
     learned_frame: int
 
 
-# The environment of the published curves (DrQ-v2's DMC settings): env key -> (value, how it reads). A run whose
-# config differs in one of them is "not comparable" (camera: None or the task's upstream camera, checked apart).
-PUBLISHED_EPISODE_FRAMES = 1000  # the DMC suite's episodes: 1000 frames (500 agent steps at action repeat 2)
-PUBLISHED_ENV: dict[str, tuple[int, str]] = {
-    "max_episode_frames": (PUBLISHED_EPISODE_FRAMES, "{:,}-frame episodes"),
-    "action_repeat": (2, "action repeat {}"),
-    "image_size": (84, "{0}x{0} pixels"),
-    "frame_stack": (3, "{} stacked frames"),
-    "distracting_dims": (0, "{} distracting action dims"),
-}
+# The environment of the published curves: DrQ-v2's DMC settings, the paper's; a run whose config differs is "not
+# comparable" (analysis/comparable.py's env_difference: the one rule for tables, figures and this check).
 PUBLISHED_ENV_TEXT = ("the published settings (1000-frame episodes, action repeat 2, 84x84 pixels, 3 stacked frames, "
                       "the task's camera, no distracting dimension)")
 RULES: dict[str, TaskRule] = {r.task: r for r in (
@@ -351,20 +345,11 @@ def cell_health(root: str | Path, cell: pd.DataFrame) -> dict[str, object]:
 
 
 def environment_differences(cfg: dict, task: str) -> list[str]:
-    """How one run's config (``env``) differs from the environment of the published curves (:data:`PUBLISHED_ENV`):
-    e.g. ["100-frame episodes (published: 1,000)"]; [] when it does not."""
+    """How one run's config (``env``) differs from the environment of the published curves (the paper's DMC settings:
+    analysis/comparable.py's one rule, worded against "published"): e.g. ["100-frame episodes (published: 1,000)"];
+    [] when it does not."""
     env = cfg.get("env") or {} if isinstance(cfg, dict) else {}
-    out = []
-    for key, (published, words) in PUBLISHED_ENV.items():
-        value = env.get(key)
-        if value is None and key == "max_episode_frames":
-            continue  # null: the suite's own limit, the published episodes
-        if value is not None and value != published:
-            out.append(f"{words.format(value)} (published: {published:,})")
-    camera = env.get("camera")
-    if camera is not None and camera != get_task(task).camera:
-        out.append(f"camera {camera} (published: {get_task(task).camera})")
-    return out
+    return env_difference({**env, "task": task, "suite": "dmc"}, against="published")
 
 
 def cell_environment(root: str | Path, cell: pd.DataFrame, task: str) -> str:
