@@ -107,7 +107,8 @@ def test_full_coverage_tables_and_claims(full_report):
     for section in ("## Claims", "## Audit", "## Provenance", "abc1234"):
         assert section in text
     page = html.read_text()
-    assert "<table>" in page and 'src="F1.png"' in page
+    assert "<table>" in page and 'src="F1.png"' not in page  # REPORT.html embeds its figures (one file)
+    assert '<img src="data:image/png;base64,' in page and 'alt="F1"' in page
 
 
 def test_paper_only_view_with_no_runs(tmp_path):
