@@ -7,8 +7,8 @@ run's learner from its ``config.yaml``, loads the checkpoint's modules and, on t
 - the share of states whose policy mean is exactly +-1 in float32 (the policy gradient through the tanh is exactly
   zero there) and the range of the pre-tanh output,
 - the critic's slope dQ/da at the policy mean (min of the two heads, through the action encoder, as the actor's loss
-  sees it): the share of states where it points back inside [-1, 1] from a saturated mean, i.e. where the critic
-  says "move away from the bound" but the actor cannot.
+  sees it): the share of states where it points back towards 0 from the mean's side ("inward"), over all states and
+  over the saturated ones (where the critic says "move away from the bound" but the actor cannot).
 
     OMP_NUM_THREADS=1 .venv/bin/python scripts/saturation_probe.py RUN_DIR [CHECKPOINT ...] [--every 10] [--json OUT]
 """
@@ -63,11 +63,13 @@ def probe(run: Path, checkpoint: Path, every: int) -> dict:
     torch.min(q1, q2).sum().backward()
     slope = action.grad
     at_bound = mean.abs() >= 1.0
-    inward = at_bound & (torch.sign(slope) == -torch.sign(mean))  # the critic says: move away from the bound
+    back = torch.sign(slope) == -torch.sign(mean)  # the critic's slope points back towards 0 from the mean's side
+    inward = at_bound & back
     return {"checkpoint": str(checkpoint), "frame": frame, "states": int(len(obs)), "stored": stored,
             "saturated": float(at_bound.float().mean()), "pretanh_min": float(pre.min()),
             "pretanh_max": float(pre.max()), "pretanh_mean": float(pre.mean()),
-            "mean_action": float(mean.mean()), "inward_share_of_saturated":
+            "mean_action": float(mean.mean()), "inward_share": float(back.float().mean()),
+            "inward_share_of_saturated":
                 float(inward.float().sum() / at_bound.float().sum()) if bool(at_bound.any()) else float("nan")}
 
 
@@ -80,13 +82,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     checkpoints = args.checkpoints or [args.run / "checkpoint.pt"]
     rows = []
-    print("frame   states  saturated  pre-tanh [min, max] (mean)  mean action  critic says 'inward' where saturated")
+    print("frame   states  saturated  pre-tanh [min, max] (mean)  mean action  critic 'inward': all states, "
+          "saturated ones")
     for ckpt in checkpoints:
         row = probe(args.run, ckpt, args.every)
         rows.append(row)
         print(f"{row['frame']:>6} {row['states']:>7} {row['saturated']:10.3f}  [{row['pretanh_min']:6.2f}, "
               f"{row['pretanh_max']:6.2f}] ({row['pretanh_mean']:6.2f})  {row['mean_action']:11.3f}  "
-              f"{row['inward_share_of_saturated']:.3f}", flush=True)
+              f"{row['inward_share']:.3f}, {row['inward_share_of_saturated']:.3f}", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0
