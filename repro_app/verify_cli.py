@@ -33,23 +33,16 @@ def _has_cuda() -> bool:
     return bool(torch.cuda.is_available())
 
 
-def _agents(agents: Optional[str], sweep_agents: tuple[str, ...], cuda: bool) -> tuple[str, ...]:
-    if agents is None:
-        return sweep_agents if cuda else tuple(a for a in CPU_AGENTS if a in sweep_agents)
-    chosen = tuple(a.strip() for a in agents.split(",") if a.strip())
-    unknown = [a for a in chosen if a not in sweep_agents]
+def _chosen(option: str, given: Optional[str], sweep_values: tuple[str, ...], cpu_default: tuple[str, ...],
+            cuda: bool) -> tuple[str, ...]:
+    """The sweep's values an option picks (``--agents`` / ``--variants``, comma-separated): all of them on a GPU
+    machine, ``cpu_default`` on a CPU when the option is not given; an unknown or empty one is one line, exit 2."""
+    if given is None:
+        return sweep_values if cuda else tuple(v for v in cpu_default if v in sweep_values)
+    chosen = tuple(v.strip() for v in given.split(",") if v.strip())
+    unknown = [v for v in chosen if v not in sweep_values]
     if unknown or not chosen:
-        fail(f"--agents: {', '.join(unknown) or 'none given'}; the verify sweep has {', '.join(sweep_agents)}")
-    return chosen
-
-
-def _variants(variants: Optional[str], sweep_variants: tuple[str, ...], cuda: bool) -> tuple[str, ...]:
-    if variants is None:
-        return sweep_variants if cuda else tuple(v for v in CPU_VARIANTS if v in sweep_variants)
-    chosen = tuple(v.strip() for v in variants.split(",") if v.strip())
-    unknown = [v for v in chosen if v not in sweep_variants]
-    if unknown or not chosen:
-        fail(f"--variants: {', '.join(unknown) or 'none given'}; the verify sweep has {', '.join(sweep_variants)}")
+        fail(f"{option}: {', '.join(unknown) or 'none given'}; the verify sweep has {', '.join(sweep_values)}")
     return chosen
 
 
@@ -98,8 +91,8 @@ def verify_cmd(
     say = console().print
     if not judge_only:
         cuda = _has_cuda() or gpus is not None
-        chosen = _agents(agents, spec.agents, cuda)
-        kinds = _variants(variants, tuple(spec.variants), cuda)
+        chosen = _chosen("--agents", agents, spec.agents, CPU_AGENTS, cuda)
+        kinds = _chosen("--variants", variants, tuple(spec.variants), CPU_VARIANTS, cuda)
         if seeds is None and not cuda:
             seeds = CPU_SEEDS
         if agents is None or seeds == CPU_SEEDS:

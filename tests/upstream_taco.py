@@ -101,22 +101,16 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from repro.agent.networks import orthogonal_init
 from repro.config.schema import AgentConfig
 
 PAD = 4
 ROLES_UPSTREAM = ("obs", "next_obs", "anchor", "positive", "future")  # upstream's draw order within one update
 
 
-def upstream_init(module: nn.Module) -> None:
-    """``utils.weight_init``: orthogonal Linear (gain 1) and Conv2d (ReLU gain) weights, biases zero."""
-    if isinstance(module, nn.Linear):
-        nn.init.orthogonal_(module.weight.data)
-        if module.bias is not None:
-            module.bias.data.fill_(0.0)
-    elif isinstance(module, (nn.Conv2d, nn.ConvTranspose2d)):
-        nn.init.orthogonal_(module.weight.data, nn.init.calculate_gain("relu"))
-        if module.bias is not None:
-            module.bias.data.fill_(0.0)
+# ``utils.weight_init``: orthogonal Linear (gain 1) and Conv2d (ReLU gain) weights, biases zero: the same rule as this
+# project's (the comparison copies the weights anyway: the init only decides the shapes' first values)
+upstream_init = orthogonal_init
 
 
 class GridShift(nn.Module):
