@@ -180,7 +180,7 @@ UNIT_SECONDS = {
     "tests/test_offline_sweep.py::test_tiny_offline_sweep_runs_every_learner_on_every_dataset_kind_then_t3": 50,
     "tests/test_speedups.py::test_compile_matches_plain_path": 48,
     "offline_analysis": 40,
-    "tests/test_alix_dataset.py::test_a_medium_dataset_is_made_from_a_recorded_tiny_alix_run_with_the_cli": 45,
+    "tests/test_alix_dataset.py::test_a_medium_dataset_is_made_from_a_recorded_tiny_alix_run_with_the_cli": 25,
     "tests/test_cli.py::test_metaworld_tiny_run_logs_success": 36,
     "seam": 30,
     "tests/test_one_writer.py::test_a_write_error_is_one_line_naming_the_file_and_a_rerun_resumes": 26,

@@ -93,7 +93,8 @@ def _repro(*args: str) -> subprocess.CompletedProcess:
 def test_a_medium_dataset_is_made_from_a_recorded_tiny_alix_run_with_the_cli(tmp_path: Path):
     root = tmp_path / "runs"
     trained = _repro("train", "agent=alix", "profile=tiny", "task=cheetah_run", "runtime.record=true",
-                     "runtime.threads=1", "train.save_frames=false", f"runtime.results_root={root}", "--no-progress")
+                     "runtime.threads=1", "train.save_frames=false", "train.frames=200", "train.eval_every_frames=100",
+                     f"runtime.results_root={root}", "--no-progress")  # 2 snapshots: the medium one is the first
     assert trained.returncode == 0, trained.stderr
     run = root / "default" / "alix" / "base" / "cheetah_run" / "seed_1"
     made = _repro("dataset", "make", "--source", str(run), "--kind", "medium", "--transitions", "60")
