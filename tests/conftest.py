@@ -180,6 +180,9 @@ UNIT_SECONDS = {
     "tests/test_offline_sweep.py::test_tiny_offline_sweep_runs_every_learner_on_every_dataset_kind_then_t3": 50,
     "tests/test_speedups.py::test_compile_matches_plain_path": 48,
     "offline_analysis": 40,
+    "tests/test_alix_train.py::test_a_tiny_alix_run_through_a_sweep_and_a_killed_and_resumed_train_give_the_same_logs":
+        55,
+    "tests/test_verify.py::test_verify_tiny_end_to_end": 40,
     "tests/test_alix_dataset.py::test_a_medium_dataset_is_made_from_a_recorded_tiny_alix_run_with_the_cli": 25,
     "tests/test_cli.py::test_metaworld_tiny_run_logs_success": 36,
     "seam": 30,
