@@ -457,6 +457,18 @@ def advantage_frame(rows: Sequence[VerdictRow]) -> pd.DataFrame:
     return pd.DataFrame([a.__dict__ for r in rows for a in r.advantage], columns=ADVANTAGE_COLUMNS)
 
 
+def advantage_display(rows: Sequence[VerdictRow]) -> pd.DataFrame:
+    """The advantage table as read (verify_advantage.md, the report): frames with their unit, the interval beside
+    the value."""
+    adv = advantage_frame(rows)
+    return pd.DataFrame({
+        "Task": adv["task"], "Method": adv["method"], "Variant": adv["variant"],
+        "Environment frames (action repeat 2)": [frames_text(f) for f in adv["frame"]],
+        "Seeds (method / published)": [f"{n} / {p}" for n, p in zip(adv["n"], adv["published_n"])],
+        "P(X > Y) [95% CI]": [f"{v:.2f} [{lo:.2f}, {hi:.2f}]" for v, lo, hi in
+                              zip(adv["poi"], adv["poi_low"], adv["poi_high"])]})
+
+
 def advantage_lines(rows: Sequence[VerdictRow]) -> list[str]:
     """One line per method other than DrQ-v2: its P(X > Y) against the published seeds at each judged frame."""
     out = []
@@ -544,13 +556,7 @@ def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutp
                      for p, t, m, v in zip(fr["position"], fr["task"], fr["method"], fr["variant"])]})
     frames_table = write_table(out_dir, "verify_frames", fr, "repro verify: each judged frame against the published "
                                f"band (the seeds' range ± {BAND_SD:g} sd).", fr_display, verdict_notes()[:2])
-    adv = advantage_frame(rows)
-    adv_display = pd.DataFrame({
-        "Task": adv["task"], "Method": adv["method"], "Variant": adv["variant"],
-        "Frames": [frames_text(f) for f in adv["frame"]],
-        "Seeds (method / published)": [f"{n} / {p}" for n, p in zip(adv["n"], adv["published_n"])],
-        "P(X > Y) [95% CI]": [f"{v:.2f} [{lo:.2f}, {hi:.2f}]" for v, lo, hi in
-                              zip(adv["poi"], adv["poi_low"], adv["poi_high"])]})
+    adv, adv_display = advantage_frame(rows), advantage_display(rows)
     write_table(out_dir, "verify_advantage", adv, "repro verify: each method other than DrQ-v2 against the DrQ-v2 "
                 "authors' published seeds at every judged frame, probability of improvement.", adv_display,
                 [ADVANTAGE_NOTE, f"Published: {SOURCE_TEXT}."])

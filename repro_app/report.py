@@ -25,7 +25,7 @@ from analysis.tables import TableOutput, to_markdown
 from analysis.verify import (
     ADVANTAGE_NOTE,
     VerdictRow,
-    advantage_frame,
+    advantage_display,
     judge,
     verdict_caption,
     verdict_display,
@@ -180,7 +180,7 @@ def _calibration_section(ctx: Context, rows: list[CalibrationRow], notes: list[s
 def _verify_section(rows: Sequence[VerdictRow]) -> str:
     body = f"{verdict_caption(rows)}\n\n" + to_markdown(verdict_display(rows))
     body += "".join(f"\n_{n}_\n" for n in verdict_notes())
-    adv = advantage_frame(rows)
+    adv = advantage_display(rows)
     if not adv.empty:
         body += ("\nEarly advantage against the published DrQ-v2 seeds (an observation at a small budget, not a "
                  "verdict):\n\n" + to_markdown(adv) + f"\n_{ADVANTAGE_NOTE}_\n")

@@ -159,6 +159,7 @@ def test_a_saturated_seed_is_named_beside_its_verdict_and_in_the_report(tmp_path
     assert taco.health in next(line for line in V.verdict_lines(rows) if "TACO" in line)
     section = _verify_section(rows)
     assert "seed 1: actor saturated since frame 4,000" in section and "Early advantage" in section
+    assert "Environment frames (action repeat 2)" in section and "| 20,000 frames |" in section  # with its unit
     V.write_verdicts(tmp_path / "out", rows)
     assert "actor saturated since frame 4,000" in (tmp_path / "out" / "verify.md").read_text()
 
