@@ -21,7 +21,7 @@ from __future__ import annotations
 import csv
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,42 +58,46 @@ class Row:
     share: float
 
 
-def saturation(rows: Sequence[Row], min_share: float = SATURATED_SHARE,
-               min_frames: int = SATURATED_FRAMES) -> Saturation | None:
-    """The saturated stretch ending at the last row with updates, when it spans at least ``min_frames``; None
-    otherwise (also for a run that has logged no update yet)."""
-    updated = [r for r in rows if not math.isnan(r.share)]
-    if not updated or updated[-1].share < min_share:
-        return None
-    start = len(updated) - 1
-    while start > 0 and updated[start - 1].share >= min_share:
-        start -= 1
-    first, last = updated[start], updated[-1]
-    found = Saturation(since=first.frame - first.length, until=last.frame, share=last.share)
-    return found if found.frames >= min_frames else None
-
-
 class Watch:
-    """The rule over rows as a run writes them: :meth:`add` returns the saturation the first time a stretch
-    reaches the length (once per stretch; a recovery and a new stretch report again)."""
+    """The rule over rows in the order a run writes them, one row at a time: :meth:`add` returns the saturation the
+    first time a stretch reaches the length (once per stretch; a recovery and a new stretch report again);
+    :attr:`current` is the stretch ending at the last row with updates, once long enough. A row without updates
+    (NaN share) neither extends nor breaks a stretch."""
 
     def __init__(self, min_share: float = SATURATED_SHARE, min_frames: int = SATURATED_FRAMES):
         self.min_share, self.min_frames = min_share, min_frames
-        self.rows: list[Row] = []
+        self.current: Saturation | None = None
+        self._since: int | None = None  # the first frame of the stretch of saturated rows ending at the last one
         self._said: int | None = None  # the ``since`` of the stretch already reported
 
     def add(self, row: Row) -> Saturation | None:
-        self.rows.append(row)
-        found = saturation(self.rows, self.min_share, self.min_frames)
-        if found is None or found.since == self._said:
+        if math.isnan(row.share):
             return None
-        self._said = found.since
-        return found
+        if row.share < self.min_share:
+            self._since, self.current = None, None
+            return None
+        if self._since is None:
+            self._since = row.frame - row.length
+        found = Saturation(since=self._since, until=row.frame, share=row.share)
+        self.current = found if found.frames >= self.min_frames else None
+        if self.current is None or self.current.since == self._said:
+            return None
+        self._said = self.current.since
+        return self.current
 
     def extend(self, rows: Iterable[Row]) -> None:
         """Rows already written (a resumed run): remembered, a stretch among them not reported again."""
         for row in rows:
             self.add(row)
+
+
+def saturation(rows: Iterable[Row], min_share: float = SATURATED_SHARE,
+               min_frames: int = SATURATED_FRAMES) -> Saturation | None:
+    """The saturated stretch ending at the last row with updates, when it spans at least ``min_frames``; None
+    otherwise (also for a run that has logged no update yet)."""
+    watch = Watch(min_share, min_frames)
+    watch.extend(rows)
+    return watch.current
 
 
 def _number(text: str | None) -> float:
