@@ -27,11 +27,6 @@ import pandas as pd
 from scipy import special as sc
 from scipy import stats as sps
 
-try:  # the constants of scipy's truncated-normal inverse CDF (see _truncnorm_rvs)
-    from scipy.stats._continuous_distns import _log_gauss_mass, _norm_logcdf
-except ImportError:  # pragma: no cover - another scipy: its truncnorm.rvs is used as it is
-    _log_gauss_mass = _norm_logcdf = None
-
 from analysis.calibration import published_values
 from analysis.claim_budget import frames_text
 from analysis.context import Context
@@ -75,7 +70,7 @@ class CellSource:
         if not self.std > 0:
             return np.full((sims, n), self.mean)
         a, b = (self.low - self.mean) / self.std, (self.high - self.mean) / self.std
-        if _log_gauss_mass is None or _norm_logcdf is None or not a < b:
+        if not a < b:
             return sps.truncnorm.rvs(a, b, loc=self.mean, scale=self.std, size=(sims, n), random_state=rng)
         return _truncnorm_rvs(rng, a, b, (sims, n)) * self.std + self.mean
 
@@ -97,11 +92,12 @@ def _truncnorm_rvs(rng: np.random.Generator, a: float, b: float, size: tuple[int
     broadcasts ``a`` and ``b`` to ``size`` and computes the truncation's constants (the log CDF at the bound, the
     log of the mass between the bounds) for every value; here they are computed once. Its log-sum-exp of two terms
     (``scipy.special.logsumexp``: the larger term plus log1p of the exponential of their difference; where that
-    is not finite, the log of the sum of the exponentials) is written out for the pair."""
+    is not finite, the log of the sum of the exponentials) is written out for the pair. Only scipy.special's public
+    functions are used (:func:`_log_mass`)."""
     q = rng.uniform(size=size).ravel()
     lower = a < 0  # scipy's branch: the inverse CDF from the left tail, or from the right one (by symmetry)
-    bound = _norm_logcdf(np.array([a if lower else -b]))
-    mass = _log_gauss_mass(np.array([a]), np.array([b]))
+    bound = sc.log_ndtr(np.array([a if lower else -b]))
+    mass = np.array([_log_mass(a, b)])
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         term = (np.log(q) if lower else np.log1p(-q)) + mass
         high, low = np.maximum(bound, term), np.minimum(bound, term)
@@ -111,6 +107,19 @@ def _truncnorm_rvs(rng: np.random.Generator, a: float, b: float, size: tuple[int
             log_phi[odd] = np.log(np.exp(np.broadcast_to(bound, term.shape)[odd]) + np.exp(term[odd]))
     x = sc.ndtri_exp(log_phi)
     return (x if lower else -x).reshape(size)
+
+
+def _log_mass(a: float, b: float) -> float:
+    """The log of the standard normal's mass between ``a < b``, computed as scipy's truncated normal computes it
+    (the same operations, so the same bits: tests/test_plan.py), from scipy.special's public functions: between two
+    bounds in the left tail, the log of the difference of the two CDFs (a log-sum-exp with the second term negated,
+    as a complex logarithm); in the right tail, the left tail's by symmetry; around zero, log1p of minus both
+    tails."""
+    if b <= 0:
+        return float(np.real(sc.logsumexp([sc.log_ndtr(b), sc.log_ndtr(a) + np.pi * 1j])))
+    if a > 0:
+        return _log_mass(-b, -a)
+    return float(sc.log1p(-sc.ndtr(a) - sc.ndtr(-b)))
 
 
 # ---------------------------------------------------------------- cells from runs

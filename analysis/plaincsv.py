@@ -12,7 +12,6 @@ import warnings
 from collections.abc import Collection
 
 import numpy as np
-from pandas._libs.parsers import STR_NA_VALUES
 
 COMMA, NEWLINE = ord(","), ord("\n")
 MAX_INT_CHARS = 15  # integers of at most 15 characters, sign included, are summed in int64; longer: pandas
@@ -23,7 +22,12 @@ _FLOAT_MARKS[np.frombuffer(b".eE", dtype=np.uint8)] = True
 # a word of a text column (offline eval.csv's score_reference): pandas keeps it as it is, unless it reads it as a
 # missing value, a boolean or an infinity
 _WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_./-]*")
-_NOT_WORDS = {*STR_NA_VALUES, "true", "false", "inf", "infinity"}
+# The fields pandas' read_csv reads as a missing value by default (its documented ``na_values`` default), written out
+# here rather than imported from pandas' internals: tests/test_plaincsv.py checks that read_csv reads exactly these,
+# of them and their case variants, as NaN, so a pandas that changes the list fails that test.
+NA_VALUES = frozenset({"", "#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND", "1.#QNAN",
+                       "<NA>", "N/A", "NA", "NULL", "NaN", "None", "n/a", "nan", "null"})
+_NOT_WORDS = {*NA_VALUES, "true", "false", "inf", "infinity"}
 
 
 def plain_columns(text: str, keep: Collection[str] | None = None, words: Collection[str] = ()

@@ -12,7 +12,7 @@ import pytest
 
 import analysis.load
 from analysis.load import EVAL_REQUIRED, TRAIN_REQUIRED, load_results, read_csv_strict
-from analysis.plaincsv import plain_columns
+from analysis.plaincsv import NA_VALUES, plain_columns
 from analysis_fixtures import write_run
 
 # texts the runs write, and texts they do not (each left to pandas)
@@ -97,6 +97,21 @@ def test_words_read_as_pandas_reads_them(name):
 def test_other_text_columns_are_left_to_pandas(name):
     assert plain_columns(NOT_WORDS[name], words={"ref"}) is None
     assert plain_columns(WORDS["words"]) is None  # words where numbers belong
+
+
+def test_the_missing_value_spellings_are_those_pandas_reads_as_nan():
+    """analysis.plaincsv.NA_VALUES (written out, not read from pandas' internals) is what read_csv reads as missing:
+    on a sample of those spellings, their case variants and near misses, read_csv gives NaN exactly for the members
+    (a pandas that adds, drops or re-cases a spelling fails here); and no member is kept as a word."""
+    sample = set(NA_VALUES) | {"na", "Na", "NAN", "Nan", "NONE", "none", "Null", "N/a", "nul", "NA1", "#N/A N/a"}
+    for value in list(NA_VALUES):
+        sample |= {value.upper(), value.lower(), value.title(), value.swapcase()}
+    sample.discard("")  # an empty field is NaN on both paths (WORDS' "words and empty fields")
+    text = "update,ref\n0,paper\n" + "".join(f"{i + 1},{v}\n" for i, v in enumerate(sorted(sample)))
+    read = pd.read_csv(io.StringIO(text))["ref"].iloc[1:]
+    assert {v for v, r in zip(sorted(sample), read) if pd.isna(r)} == NA_VALUES - {""}
+    for value in NA_VALUES - {""}:
+        assert plain_columns(f"update,ref\n0,paper\n1,{value}\n", words={"ref"}) is None, value
 
 
 @pytest.mark.parametrize("name", sorted(NOT_PLAIN))
