@@ -31,6 +31,7 @@ from analysis.plaincsv import plain_columns
 from repro.bench.results import BenchFile, BenchFormatError, path_of
 from repro.bench.results import read as read_bench
 from repro.config.compose import ABSENT, get_key
+from repro.config.errors import UserError
 from repro.config.schema import normalize_dataset
 from repro.runs.migrate import migrate_config
 from repro.runs.runformat import (
@@ -137,7 +138,7 @@ class Results:
         return self.runs.empty
 
 
-class ResultsRootError(FileNotFoundError):
+class ResultsRootError(UserError, FileNotFoundError):
     """The results root does not exist or is not a directory."""
 
 

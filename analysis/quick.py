@@ -15,6 +15,7 @@ import pandas as pd
 
 from analysis.comparable import ENV_KEYS
 from analysis.load import IDENTITY, ResultsRootError, load_results, read_csv_strict
+from repro.config.errors import UserError
 from repro.runs.runformat import EVAL_COLUMNS, TRAIN, TRAIN_REQUIRED
 
 # Names accepted by --by besides the identity columns of analysis/load.py.
@@ -22,7 +23,7 @@ BY_ALIASES = {"agent": "algo", "frames": "train_frames"}
 NOT_METRICS = ("frame", "step", "update")  # x axes, not values
 
 
-class PlotInputError(ValueError):
+class PlotInputError(UserError, ValueError):
     """No runs, an unknown metric or an unknown grouping column."""
 
 

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from analysis.cache import lookup
+from repro.config.errors import UserError
 from repro.runs.runformat import read_done
 from repro.train import action_tsne
 from repro.train.action_tsne import N_CENTROIDS, TsneResult, make_actions, perplexity_for
@@ -26,7 +27,7 @@ CLUSTER_THRESHOLD = 0.5  # silhouette at or above this counts as "forms clusters
 _PREFIXES = ("agent.action_encoder.step.", "action_encoder.step.", "step.")
 
 
-class ActionEncoderNotFound(KeyError):
+class ActionEncoderNotFound(UserError, KeyError):
     """The checkpoint has no action-encoder state dict of the expected layout."""
 
     def __str__(self) -> str:

@@ -14,6 +14,7 @@ from typing import Any
 
 from analysis.context import Context
 from analysis.tables import TableOutput
+from repro.config.errors import UserError
 
 
 @dataclass
@@ -48,7 +49,7 @@ class Artifact:
 REGISTRY: dict[str, Artifact] = {}
 
 
-class UnknownArtifactError(KeyError):
+class UnknownArtifactError(UserError, KeyError):
     """An artifact id that is not registered."""
 
     def __str__(self) -> str:

@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from repro.config.errors import UserError
+
 FORMAT = 2  # 1: files without ``kind``/``format`` (the online agent under ``algo``)
 ONLINE, OFFLINE, DATA, ROOFLINE = "online", "offline", "data", "roofline"
 KINDS = (ONLINE, OFFLINE, DATA, ROOFLINE)
@@ -40,7 +42,7 @@ BENCH_FRAMES_PER_UPDATE = 4.0  # an entry of a file that recorded none: update_e
 E2E, UPDATE_BOUND = "e2e", "update-bound"  # where a rate comes from
 
 
-class BenchFormatError(ValueError):
+class BenchFormatError(UserError, ValueError):
     """A bench file that cannot be read (one line, with its path)."""
 
 

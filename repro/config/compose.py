@@ -17,6 +17,7 @@ import yaml
 from omegaconf import BooleanNode, DictConfig, FloatNode, IntegerNode, OmegaConf, StringNode, open_dict
 from omegaconf.errors import OmegaConfBaseException, ValidationError
 
+from repro.config.errors import UserError
 from repro.config.plugins import Bound, PluginError, bound_text, in_bound, load_factory
 from repro.config.schema import (
     AGENT_FIELDS,
@@ -41,7 +42,7 @@ CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
 
 
-class ConfigError(ValueError):
+class ConfigError(UserError, ValueError):
     """A config problem, explained in one line."""
 
 

@@ -18,6 +18,8 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import TypeVar
 
+from repro.config.errors import UserError
+
 LEARNER_GROUP = "taco_repro.learners"
 OBJECTIVE_GROUP = "taco_repro.objectives"
 NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -28,7 +30,7 @@ Bound = tuple[float, bool] | tuple[float | None, bool, float, bool]
 Ranges = Mapping[str, Bound]
 
 
-class PluginError(ValueError):
+class PluginError(UserError, ValueError):
     """A registration that cannot be used, in one line."""
 
 

@@ -30,6 +30,7 @@ import numpy as np
 
 from repro import __version__
 from repro.config.compose import is_folder_value
+from repro.config.errors import UserError
 from repro.runs.fsutil import atomic_write, atomic_write_text
 
 FORMAT = 1
@@ -43,7 +44,7 @@ Episode = dict[str, np.ndarray]
 EpisodeSource = Union[Mapping[str, np.ndarray], Callable[[], Mapping[str, np.ndarray]]]
 
 
-class DatasetError(ValueError):
+class DatasetError(UserError, ValueError):
     """A dataset or an input file that cannot be used; the message is one line."""
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import difflib
 from dataclasses import dataclass
 
+from repro.config.errors import UserError
 from repro.config.schema import Suite
 
 
@@ -39,7 +40,7 @@ class TaskInfo:
     notes: str = ""
 
 
-class UnknownTaskError(KeyError):
+class UnknownTaskError(UserError, KeyError):
     """Raised by :func:`get_task` for a name not in :data:`TASKS`."""
 
     def __init__(self, name: str, close_matches: list[str]) -> None:

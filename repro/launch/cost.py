@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from repro.bench import results as bench_results
 from repro.bench.results import BenchFile, BenchFormatError, offline_seconds, path_of, rate
+from repro.config.errors import UserError
 from repro.launch.spec.sharing import split_budget
 
 if TYPE_CHECKING:
@@ -30,7 +31,7 @@ GB = 1024**3
 ADAM_BYTES_PER_PARAM = 16  # fp32 weights, gradients and Adam's two moments
 
 
-class PlanError(Exception):
+class PlanError(UserError):
     """Bad input to ``repro plan`` (one line, exit 2)."""
 
 

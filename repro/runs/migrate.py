@@ -34,6 +34,7 @@ from typing import Any
 import yaml
 
 from repro.config.compose import ABSENT, get_key, pop_key, prune_unread, set_key
+from repro.config.errors import UserError
 from repro.config.schema import LearnerName
 
 CONFIG_FORMAT = 4  # the version config.yaml is written in
@@ -57,7 +58,7 @@ V1_OLD_BEHAVIOUR: dict[str, tuple[tuple[LearnerName, ...], object]] = {
 }
 
 
-class FormatError(ValueError):
+class FormatError(UserError, ValueError):
     """A file of a format version this code does not know (one line)."""
 
 

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from repro.config.errors import UserError
 from repro.runs.fsutil import atomic_write_text
 from repro.runs.runformat import WANDB as WANDB_DIR
 from repro.runs.tblog import cell_number, csv_rows
@@ -48,7 +49,7 @@ OFFLINE_GLOB = "offline-run-*"  # wandb's name for an offline run folder inside 
 PACKAGE_HINT = "pip install '.[wandb]'"
 
 
-class WandbError(ValueError):
+class WandbError(UserError, ValueError):
     """runtime.wandb=true cannot be honoured: no wandb package, or the W&B run cannot start (one line)."""
 
 

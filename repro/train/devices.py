@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import torch
 
+from repro.config.errors import UserError
 from repro.config.schema import Device
 
 
-class DeviceError(ValueError):
+class DeviceError(UserError, ValueError):
     """A device name that is unknown or not present on this machine (one line)."""
 
 

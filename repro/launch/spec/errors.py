@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from repro.config.errors import UserError
 
-class SweepError(ValueError):
+
+class SweepError(UserError, ValueError):
     """A user-facing problem with a sweep, explained in one line (the CLI exits 2)."""
