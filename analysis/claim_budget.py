@@ -47,6 +47,20 @@ class ClaimBudget:
             return frames_text(self.budget)
         return "each run's offline.updates" if self.kind == "offline_updates" else "no training budget"
 
+    def column(self, runs: pd.DataFrame) -> str:
+        """The budget in the claims table's Budget column, with its unit and, for frames, the action repeat beside
+        them: the repeats of the claim's ``runs`` (rows of final_scores), the paper's when there are none
+        ('1M env. frames (action repeat 2)', '1M env. frames (action repeat 1, 2, 4)'); "each run's
+        offline.updates (gradient updates)"; 'no training budget'."""
+        from analysis.comparable import FRAMES, Budget, paper_env
+
+        if self.kind == "frames" and self.budget is not None:
+            repeats = runs["action_repeat"].dropna() if "action_repeat" in runs.columns and not runs.empty else ()
+            if len(repeats) == 0:
+                repeats = (paper_env()["action_repeat"],)
+            return Budget(self.budget, FRAMES, tuple(sorted({int(r) for r in repeats}))).text()
+        return "each run's offline.updates (gradient updates)" if self.kind == "offline_updates" else self.text()
+
 
 def frames_text(frames: float) -> str:
     """1_000_000 -> '1M frames'; 400 -> '400 frames'."""

@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from analysis import bootstrap as bs
-from analysis import select
+from analysis import comparable, select
 from analysis.calibration import SOURCE_TEXT, published_values
 from analysis.cells import (
     Cells,
@@ -510,7 +510,7 @@ def _tsne(ctx: Context) -> tuple[str, str]:
     if res.silhouette_latent_2d is None:
         raise NotEnoughData(info["reason"] or "no latent embedding")
     last = ctx.scores.loc[ctx.scores["run_id"] == info["run_id"], "last_frame"]
-    if not ctx.below_budget and (last.empty or not float(last.fillna(0).max()) >= ctx.budget):
+    if not ctx.below_budget and (last.empty or not comparable.reached(float(last.fillna(0).max()), ctx.budget)):
         got = frames_text(float(last.fillna(0).max())) if not last.empty else "no evaluation"
         raise NotEnoughData(f"the t-SNE run {info['run_id']} reaches {got}; the claim is about {ctx.budget_text()}")
     ok = res.silhouette_latent_2d >= CLUSTER_THRESHOLD and res.silhouette_raw_2d < CLUSTER_THRESHOLD
@@ -755,7 +755,7 @@ def manipulator_rule(ctx: Context, s: dict[str, dict]) -> tuple[str, str]:
     if taco_frac >= SOLVED_FRACTION:
         return SUPPORTED, ev
     last = min(v["last_frame"] for v in s.values())
-    if last >= ctx.budget:
+    if comparable.reached(last, ctx.budget):
         return REFUTED, ev
     raise NotEnoughData(ev + f"; runs reach only {frames_text(last)} of {ctx.budget_text()}")
 
@@ -1156,7 +1156,7 @@ def _short_of_budget(ctx: Context, spec: ClaimBudget) -> str | None:
         if r.done == 0:
             return f"none of the {r.runs} offline runs has finished its configured offline.updates"
         return None
-    if spec.budget is not None and r.highest < spec.budget:
+    if spec.budget is not None and not comparable.reached(r.highest, spec.budget):
         return f"{r.describe()}; the claim is about {spec.text()}"
     return None
 
@@ -1214,7 +1214,8 @@ def evaluate_claims(ctx: Context) -> list[Verdict]:
                                spec.rule_text(ctx.paper)))
             continue
         verdict, evidence, label = _reading(ctx, budget, _short_of_budget(ctx, budget), spec.check)
-        out.append(Verdict(spec.id, claim, verdict, evidence, spec.rule_text(ctx.paper), budget.text(),
+        runs = claim_runs(ctx.scores, budget, ctx.experiment_map, offline=budget.kind == "offline_updates")
+        out.append(Verdict(spec.id, claim, verdict, evidence, spec.rule_text(ctx.paper), budget.column(runs),
                            max(budget.min_seeds, ctx.min_seeds), label))
     return out
 
@@ -1260,7 +1261,9 @@ def write_claims(ctx: Context, verdicts: Sequence[Verdict]):
     """Write ``claims.csv/.md/.tex`` to ``ctx.out_dir``."""
     raw = pd.DataFrame([v.__dict__ for v in verdicts])
     caption = f"Verdict on each claim of the paper from the reproduced runs ({verdict_counts(verdicts)})."
-    notes = ["Each claim is judged at its own budget (Budget) with at least the seeds per cell in Seeds "
+    notes = ["Each claim is judged at its own budget (Budget: environment frames = agent steps x action repeat, the "
+             "repeat of the claim's runs beside them, the paper's where there are none; offline, gradient "
+             "updates) with at least the seeds per cell in Seeds "
              "(analysis/claim_budgets.csv), only from runs that reached that budget; verdicts compare means "
              "with the tolerances in the Rule column; CIs are 95% stratified-bootstrap (rliable)."]
     if any(v.indicative for v in verdicts):

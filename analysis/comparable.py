@@ -3,8 +3,9 @@
 The paper gives its values at a budget: Table 1 and the figures drawn from it at 1M environment frames, Table 3 at
 a number of gradient updates it does not state. A reproduced value is *comparable* with the paper's, and only then
 gets a difference (Δ), a "Paper in CI" or a bar beside the paper's diamond without a mark, when it is computed at
-the paper's budget, in the same unit, from runs that reached it (:func:`comparable`; the runs that reached a budget:
-analysis.scores.final_scores' ``reached``). A value at another budget (``--frames 400``, a run of 20 updates) is
+the paper's budget, in the same unit, from runs that reached it (:func:`comparable`; a run reached a budget only by
+evidence, an evaluation at or past it: :func:`reached`, which analysis.scores.final_scores' ``reached``, the claims,
+the curves (F4) and `repro verify` all read). A value at another budget (``--frames 400``, a run of 20 updates) is
 shown as what it is: its value, its budget and "not comparable".
 
 Units: a frame budget counts **environment frames** (agent steps x action repeat; the paper and the DrQ-v2 authors'
@@ -99,6 +100,13 @@ def paper_updates() -> Budget:
     """The paper's offline budget: it states no number of updates; a run is compared when it finished at least the
     project's default ``offline.updates`` (100K, docs/deviations.md)."""
     return Budget(float(_defaults()["offline"]["updates"]), UPDATES, at_least=True)
+
+
+def reached(last: Any, budget: float) -> bool:
+    """THE evidence that a run reached ``budget``: its last evaluation (online: the last evaluated environment frame;
+    offline: the last evaluated gradient update) is at or past it. A run configured for more, or marked done, without
+    an evaluation there did not reach it. ``last``: NaN or None when the run has no evaluation."""
+    return last is not None and not pd.isna(last) and float(last) >= float(budget)
 
 
 def comparable(at: Budget | None, paper: Budget | None) -> bool:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from analysis.comparable import reached
 from analysis.load import IDENTITY, Results
 
 DEFAULT_BUDGET = 1_000_000
@@ -33,8 +34,8 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
     """One row per run: identity columns + ``score`` at the budget.
 
     Online runs: ``score`` is the evaluation at the largest frame <= ``budget``; ``frame`` is that frame.
-    ``reached`` is true if the run has an evaluation at or past the budget, or is done with
-    ``train.frames >= budget``; runs that did not reach it keep their score (at an earlier frame) but
+    ``reached`` is true if the run has an evaluation at or past the budget (analysis.comparable.reached: by evidence,
+    not by its configured ``train.frames``); runs that did not reach it keep their score (at an earlier frame) but
     are flagged, and the tables count them separately.
 
     Offline runs (a dataset) are scored at their own budget, whatever ``budget`` says: the evaluation at the
@@ -77,11 +78,7 @@ def final_scores(results: Results, budget: int = DEFAULT_BUDGET) -> pd.DataFrame
         if pick is not None:
             frame = float(pick["frame"])
             score = _number(pick[metric]) * (100.0 if metric == "success" else 1.0)
-        train_frames = row["train_frames"] if row["train_frames"] is not None else -1
-        reached = (not math.isnan(last) and last >= budget) or (
-            row["status"] == "done" and not pd.isna(train_frames) and train_frames >= budget
-        )
-        row.update(metric=metric, score=score, frame=frame, reached=bool(reached), last_frame=last,
+        row.update(metric=metric, score=score, frame=frame, reached=reached(last, budget), last_frame=last,
                    normalized=math.nan, score_reference=None, update=math.nan, last_update=math.nan,
                    budget=float(budget))
         out.append(row)
@@ -138,7 +135,7 @@ def _offline_score(run: dict[str, Any], last: float | None, pick: dict[str, Any]
     out.update(score=float(pick["episode_reward"]), update=float(pick["update"]),
                normalized=_number(pick["normalized_score"]),
                score_reference=None if pd.isna(reference) else str(reference),
-               reached=bool(run["status"] == "done" and not pd.isna(budget) and last >= budget))
+               reached=bool(run["status"] == "done" and not pd.isna(budget) and reached(last, budget)))
     return out
 
 

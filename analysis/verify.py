@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis import comparable
 from analysis.calibration import SOURCE_TEXT, packaged_published, values_at
 from analysis.claim_budget import frames_text
 from analysis.comparable import env_difference
@@ -145,6 +146,7 @@ class VerdictRow:
     environment: str = ""  # how the runs' environment differs from the published curves' ("" when it does not)
     health: str = ""  # the seeds whose actor is saturated (repro/runs/health.py), "" when none
     health_logged: bool = True  # every seed's train.csv logs actor_saturated (runs before issue 49 do not)
+    repeats: tuple[int, ...] = ()  # the action repeats of the cell's runs (shown beside the frames reached)
     frames: list[FrameRow] = field(default_factory=list, repr=False)
     advantage: list[AdvantageRow] = field(default_factory=list, repr=False)  # methods other than DrQ-v2
 
@@ -228,6 +230,7 @@ def judge(results: Results, min_seeds: int = MIN_SEEDS, published: Results | Non
         frames = published_frames(task, reached)
         frame_rows = _frame_rows(cell_results, published, task, str(method), str(variant), frames)
         base = dict(task=task, method=str(method), variant=str(variant), seeds=len(cell), reached=reached,
+                    repeats=tuple(sorted({int(r) for r in cell["action_repeat"].dropna()})),
                     frames=frame_rows, environment=cell_environment(results.root, cell, task),
                     **cell_health(results.root, cell))
         if method == BASELINE:
@@ -391,7 +394,7 @@ def _short(base: dict, rule: TaskRule, need: int, min_seeds: int, what: str) -> 
     """Why the cell is not enough data, or None."""
     if base["seeds"] < min_seeds:
         return f"{base['seeds']} seed(s); the check needs at least {min_seeds}"
-    if base["reached"] < need:
+    if not comparable.reached(base["reached"], need):
         return (f"every seed must reach {frames_text(need)} ({what}); they reach "
                 f"{frames_text(base['reached'])}")
     return None
@@ -489,6 +492,10 @@ def _ranges(rule: TaskRule) -> str:
                      for j, f in enumerate(frames))
 
 
+FRAMES_NOTE = ("Frames are environment frames = agent steps x action repeat (the published curves' repeat: 2; a run of "
+               "another repeat is not comparable, as its Position says).")
+
+
 def verdict_notes() -> list[str]:
     rules = " ".join(f"{r.task}: DrQ-v2 judged once every seed reaches {frames_text(r.verdict_frame)}, TACO "
                      f"from {frames_text(r.learned_frame)} (published seeds: {_ranges(r)})." for r in RULES.values())
@@ -501,7 +508,9 @@ def verdict_notes() -> list[str]:
         f"Other methods (TACO): 'learned' when the mean over seeds at the last published frame they all reach is at "
         f"least the random policy's return plus {LEARNED_SHARE:g} of the way to the published DrQ-v2 mean there. "
         f"Random policy: uniform actions, {RANDOM_EPISODES} episodes, action repeat 2.",
-        "'not enough data' (never a verdict) when a seed has not reached the frame the verdict needs. " + rules,
+        "'not enough data' (never a verdict) when a seed has not reached the frame the verdict needs (its last "
+        "evaluation is before it). Frames are environment frames = agent steps x action repeat (the runs' repeat "
+        "beside the frames reached; the published curves': 2). " + rules,
         f"'not comparable' (never a verdict) when the runs' environment differs from {PUBLISHED_ENV_TEXT} (column "
         "Environment): their returns are not on the published curves' scale (a 100-frame episode returns about a "
         "tenth of a 1000-frame one).",
@@ -518,12 +527,13 @@ def verdict_display(rows: Sequence[VerdictRow]) -> pd.DataFrame:
     columns of their own (never an empty cell where there is a number; "n/a" with the reason where there is none)."""
     return pd.DataFrame({
         "Task": [r.task for r in rows], "Method": [r.method for r in rows], "Variant": [r.variant for r in rows],
-        "Seeds": [r.seeds for r in rows], "Frames reached": [frames_text(r.reached) for r in rows],
+        "Seeds": [r.seeds for r in rows],
+        "Env. frames reached": [frames_text(r.reached) + comparable.repeat_text(r.repeats) for r in rows],
         "Environment": [environment_display(r) for r in rows], "Verdict": [r.verdict for r in rows],
         "Statistic": [r.statistic for r in rows], "Band (DrQ-v2) / threshold (others)": [r.band for r in rows],
         "False alarm": [false_alarm_text(r) for r in rows], "Note": [r.note for r in rows],
         "Actor": [health_text(r) for r in rows]},
-        columns=["Task", "Method", "Variant", "Seeds", "Frames reached", "Environment", "Verdict", "Statistic",
+        columns=["Task", "Method", "Variant", "Seeds", "Env. frames reached", "Environment", "Verdict", "Statistic",
                  "Band (DrQ-v2) / threshold (others)", "False alarm", "Note", "Actor"])
 
 
@@ -545,7 +555,7 @@ def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutp
     envs = {(r.task, r.method, r.variant): r.environment for r in rows}
     fr_display = pd.DataFrame({
         "Task": fr["task"], "Method": fr["method"], "Variant": fr["variant"],
-        "Frames": [frames_text(f) for f in fr["frame"]],
+        "Env. frames": [frames_text(f) for f in fr["frame"]],
         "Runs: mean (seeds' range)": [f"{fmt_num(m)} ({fmt_num(lo)}-{fmt_num(hi)}, n={n})"
                                       for m, lo, hi, n in zip(fr["mean"], fr["low"], fr["high"], fr["n"])],
         "Published: mean (range)": [f"{fmt_num(m)} ({fmt_num(lo)}-{fmt_num(hi)}, n={n})" for m, lo, hi, n in
@@ -555,7 +565,8 @@ def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutp
         "Position": [p + (f" (not comparable: {envs[(t, m, v)]})" if envs.get((t, m, v)) else "")
                      for p, t, m, v in zip(fr["position"], fr["task"], fr["method"], fr["variant"])]})
     frames_table = write_table(out_dir, "verify_frames", fr, "repro verify: each judged frame against the published "
-                               f"band (the seeds' range ± {BAND_SD:g} sd).", fr_display, verdict_notes()[:2])
+                               f"band (the seeds' range ± {BAND_SD:g} sd).", fr_display,
+                               [*verdict_notes()[:2], FRAMES_NOTE])
     adv, adv_display = advantage_frame(rows), advantage_display(rows)
     write_table(out_dir, "verify_advantage", adv, "repro verify: each method other than DrQ-v2 against the DrQ-v2 "
                 "authors' published seeds at every judged frame, probability of improvement.", adv_display,

@@ -9,7 +9,7 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter
 
 from analysis.calibration import band_caption, published_band
-from analysis.comparable import frames_axis_label, paper_env
+from analysis.comparable import frames_axis_label, paper_env, paper_frames, reached, short_number
 from analysis.context import Context
 from analysis.identity import task_display
 from paper_figures.common import (
@@ -42,7 +42,8 @@ def render_curves(
     hline: tuple[float, str] | None = None,
     published: bool = False,
 ) -> ArtifactResult:
-    """One panel per task; mean + 95% CI band per label (or per-seed lines); paper diamonds at 1M; with
+    """One panel per task; mean + 95% CI band per label (or per-seed lines); paper diamonds at 1M where the panel's
+    runs reached it or it has none (:func:`_paper_marks`); with
     ``published`` (and ``ctx.published_band``) the DrQ-v2 authors' published mean and CI band on each task that
     has one, up to the panel's last run frame (1M frames on a panel without runs)."""
     paper_marks = paper_marks or {}
@@ -52,6 +53,7 @@ def render_curves(
     ncols = min(ncols, len(tasks))
     fig, axes = panel_grid(len(tasks), ncols=ncols, size=(4.0, 3.0) if len(tasks) > 1 else (6.5, 4.2))
     any_data = drew_published = False
+    short_panels = []  # panels whose runs stop short of the paper's budget: no diamond there
     for ax, task in zip(axes, tasks):
         rows = curves[curves["task"] == task] if not curves.empty else curves
         if published and ctx.published_band:
@@ -60,7 +62,8 @@ def render_curves(
         if not rows.empty:
             any_data = True
             curve_panel(ax, rows, labels, colors, ctx.curve_reps, ctx.seed, per_seed=per_seed)
-        _paper_marks(ax, task, rows, {lab: v for (t, lab), v in paper_marks.items() if t == task}, colors)
+        if _paper_marks(ax, task, rows, {lab: v for (t, lab), v in paper_marks.items() if t == task}, colors):
+            short_panels.append(task)
         ax.xaxis.set_major_formatter(FuncFormatter(frames_label))
         if hline is not None and not rows.empty:
             ax.axhline(hline[0], color="#555555", ls="--", lw=1, label=hline[1])
@@ -78,18 +81,30 @@ def render_curves(
         fig.suptitle(title, y=1.04 if ctx.no_runs or not any_data else 1.0)
     fig.tight_layout()
     png = save_figure(fig, ctx, artifact_id)
-    return ArtifactResult(artifact_id, title, _caption(ctx, caption, per_seed, bool(paper_marks), drew_published),
+    return ArtifactResult(artifact_id, title, _caption(ctx, caption, per_seed, bool(paper_marks), drew_published,
+                                                       short_panels),
                           figures=[png], has_runs=any_data)
 
 
-def _paper_marks(ax, task: str, rows: pd.DataFrame, marks: dict[str, float], colors: dict[str, str]) -> None:
-    """The paper's values at 1M (diamonds) on a panel whose runs reach 0.5M frames or that has none; a panel with
-    neither runs nor marks gets a placeholder, one with marks only a legend of them."""
-    show_marks = marks and (rows.empty or rows["frame"].max() >= 0.5e6)
-    if show_marks:
+def _paper_marks(ax, task: str, rows: pd.DataFrame, marks: dict[str, float], colors: dict[str, str]) -> bool:
+    """The paper's values at its budget (diamonds at 1M frames) on a panel with no runs, or whose runs reached that
+    budget (analysis.comparable.reached: a run's last evaluation at or past it), the one rule of what may stand
+    beside the paper's values. A panel whose runs all stop short gets no diamond but a note in the panel, "runs at
+    400 frames: the paper's 1M values are not comparable" (returns True then). A panel with neither runs nor marks
+    gets a placeholder, one with marks only a legend of them."""
+    paper = paper_frames()
+    last = (rows.groupby("run_id")["frame"].max() if "run_id" in rows.columns else rows["frame"]) \
+        if not rows.empty else pd.Series(dtype=float)
+    short = bool(marks) and not rows.empty and not any(reached(f, paper.value) for f in last)
+    if marks and not short:
         for lab, v in marks.items():
-            ax.plot([1e6], [v], **{**PAPER_MARK, "color": colors.get(lab, "black"), "markeredgecolor": "black"})
-    if rows.empty and not show_marks:
+            ax.plot([paper.value], [v], **{**PAPER_MARK, "color": colors.get(lab, "black"), "markeredgecolor": "black"})
+    if short:
+        lo, hi = float(last.min()), float(last.max())
+        at = short_number(hi) if lo == hi else f"{short_number(lo)}-{short_number(hi)}"
+        ax.text(0.98, 0.03, f"runs at {at} frames: the paper's\n{paper.short()} values not comparable",
+                transform=ax.transAxes, ha="right", va="bottom", fontsize=7, color="#b22222", style="italic")
+    if rows.empty and not marks:
         placeholder(ax, f"no runs for {task_display(task)}")
     elif rows.empty:
         ax.text(0.5, 0.95, "no runs", transform=ax.transAxes, ha="center", va="top", color="#777777")
@@ -98,9 +113,11 @@ def _paper_marks(ax, task: str, rows: pd.DataFrame, marks: dict[str, float], col
                           label=f"{lab} (paper, 1M)") for lab in marks]
         handles += [h for h in ax.get_legend_handles_labels()[0] if isinstance(h, Line2D)]
         ax.legend(handles=handles, fontsize=7, loc="center left")
+    return short
 
 
-def _caption(ctx: Context, caption: str, per_seed: bool, paper_marks: bool, drew_published: bool) -> str:
+def _caption(ctx: Context, caption: str, per_seed: bool, paper_marks: bool, drew_published: bool,
+             short_panels: Sequence[str] = ()) -> str:
     """The figure's caption: the artifact's own text, then what the lines, bands, diamonds and published band are."""
     bands = ("thin lines: individual seeds" if per_seed else
              f"lines: mean over seeds; bands: 95% stratified-bootstrap CI of the mean at each frame (rliable, "
@@ -109,5 +126,9 @@ def _caption(ctx: Context, caption: str, per_seed: bool, paper_marks: bool, drew
     bands += ("; x axis: environment frames = agent steps x action repeat (the repeat in the axis label); a legend "
               "entry names how its runs' environment differs from the paper's, where it does")
     marks_text = " Diamonds at 1M frames: the paper's Table 1 values." if paper_marks else ""
+    if paper_marks and short_panels:
+        marks_text += (" They are drawn only on a panel whose runs reached 1M environment frames (or that has none): "
+                       f"the runs of {', '.join(task_display(t) for t in short_panels)} stop short, their values "
+                       "are not comparable with the paper's and the panel says so.")
     pub_text = " " + band_caption(ctx.curve_reps, ctx.seed) if drew_published else ""
     return f"{caption} {bands[0].upper() + bands[1:]}.{marks_text}{pub_text}"

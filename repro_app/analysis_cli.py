@@ -16,6 +16,7 @@ import typer
 
 from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
 from repro.runs.console import fail
+from repro.runs.fsutil import writable_folder
 
 if TYPE_CHECKING:
     from analysis.context import Context
@@ -121,9 +122,11 @@ class ContextOptions:
     @contextlib.contextmanager
     def opened_cache(self, prune: bool = False) -> Iterator[None]:
         """The command's cache (analysis/cache.py) of ``--out``, or an in-memory one with ``--no-cache``; a line
-        on what it reused. ``prune``: the command uses all a report needs, so what it did not use is dropped."""
+        on what it reused. ``prune``: the command uses all a report needs, so what it did not use is dropped. A
+        ``--out`` it cannot write is one line, exit 2, before anything is written."""
         from analysis.cache import opened
 
+        writable_folder(self.out, "--out")
         with opened(self.out if self.cache else None, prune) as cache:
             yield
         if self.cache:
@@ -221,14 +224,10 @@ def _list_artifacts() -> None:
 def _artifacts(ids: Optional[list[str]], all_: bool) -> list:
     """The artifacts ``figures`` is asked for (every one with --all), or one line and exit 2."""
     from paper_figures.catalog import resolve, sorted_ids
-    from paper_figures.registry import UnknownArtifactError
 
     if not all_ and not ids:
         fail("name artifact ids (e.g. 'repro figures F8 T1'), or pass --all or --list")
-    try:
-        return resolve(sorted_ids() if all_ else (ids or []))  # ids is set unless --all
-    except UnknownArtifactError as exc:
-        fail(str(exc))
+    return resolve(sorted_ids() if all_ else (ids or []))  # ids is set unless --all
 
 
 @_context_options("results", "out", "frames", "reps", "seed", "min_seeds", "experiment_map", "tsne_n", "indicative",
@@ -253,6 +252,7 @@ def audit_cmd(
     """Recompute the paper's derived numbers from its own tables and list every mismatch."""
     from analysis.audit import mismatches, published_rows, published_summary, run_audit, write_audit
 
+    writable_folder(out, "--out")
     findings = run_audit()
     bad = mismatches(findings)
     for f in findings if show_all else bad:
@@ -284,6 +284,7 @@ def calibrate_cmd(
 
     if reps <= 0 or (at is not None and at < 0):
         fail("--reps must be positive and --frames >= 0")
+    writable_folder(out, "--out")
     loaded = _load_results(results)
     for problem in loaded.problems:
         typer.echo(f"  {problem}", err=True)

@@ -12,13 +12,13 @@ from omegaconf import OmegaConf
 from repro.bench import cli as bench
 from repro.data.cli import dataset_app
 from repro.launch import cli as launch_cli
-from repro.runs.console import console, fail
+from repro.runs.console import Commands, console, fail
 from repro.train import make_dataset_cli as make_cli
 from repro_app import analysis_cli, plan_cli, reproduce, verify_cli, watch_cli
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+app = typer.Typer(cls=Commands, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Reproduce, extend and report TACO (Zheng et al., NeurIPS 2023).")
 
 
@@ -26,31 +26,25 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
 def train(ctx: typer.Context,
           dry_run: bool = typer.Option(False, "--dry-run", help="Print the resolved config and parameter counts."),
           progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="Rich progress bar.")):
-    """Train one run: `repro train agent=taco task=hopper_hop agent.K=3 seed=2` (Hydra overrides)."""
-    from repro.config.compose import ConfigError, compose
+    """Train one run: `repro train agent=taco task=hopper_hop agent.K=3 seed=2` (Hydra overrides). Ctrl-C stops it
+    in one line, exit 130; the same command resumes it."""
+    from repro.config.compose import compose
 
-    try:
-        cfg = compose(ctx.args)
-    except ConfigError as exc:
-        fail(str(exc))
+    cfg = compose(ctx.args)
     if dry_run:
         _dry_run(cfg)
         return
-    from repro.config.plugins import PluginError
-    from repro.data.offline_replay import DatasetError
     from repro.runs.fsutil import write_error_message
-    from repro.runs.rundir import RunDirMismatch, RunLocked
-    from repro.runs.wblog import WandbError
-    from repro.train.api import train_config
-    from repro.train.devices import DeviceError
-    from repro.train.start import CheckpointError
 
     try:
+        from repro.train.api import train_config  # torch: seconds to import, Ctrl-C included
+
         path = train_config(cfg, echo=typer.echo, progress=progress)
-    except (RunDirMismatch, DatasetError, DeviceError, CheckpointError, RunLocked, WandbError, PluginError) as exc:
-        fail(str(exc))  # PluginError: a plugin whose code does not import
     except OSError as exc:  # a full disk or a file size limit: every file is written atomically or truncated on resume
         fail(write_error_message(exc), code=1)
+    except KeyboardInterrupt as exc:  # RunInterrupted names the frame; before the loop, nothing to name
+        typer.echo(str(exc) or "interrupted; run the same command to resume", err=True)
+        raise typer.Exit(130) from None
     typer.echo(f"run directory: {path}")
 
 

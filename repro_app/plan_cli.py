@@ -11,6 +11,7 @@ import typer
 
 from analysis.defaults import DEFAULT_REPS, DEFAULT_SEED
 from repro.runs.console import console, fail
+from repro.runs.fsutil import writable_folder
 
 DEFAULT_RESULTS = Path("runs")
 
@@ -66,9 +67,6 @@ def plan_cmd(
 ) -> None:
     """Plan a reproduction before paying for it: each sweep's runs, frames, memory, device-hours and wall-clock
     on your hardware (from your `repro bench` JSON); with --claims each claim's power and the seeds it needs."""
-    from repro.launch.cost import PlanError
-    from repro.launch.spec import SweepError
-
     if not sweeps and not all_ and not claims:
         fail("name sweeps (e.g. 'repro plan main'), or pass --all or --claims")
     if devices < 1 or sims < 10 or max_seeds < 2 or reps < 1 or min_seeds < 1 or (
@@ -81,22 +79,20 @@ def plan_cmd(
         fail("--seeds and --frames must be >= 1")
     if (tasks or seeds_n or frames or sets) and not (sweeps or all_):
         fail("--tasks, --seeds, --frames and --set narrow the sweeps named: name sweeps or pass --all")
-    try:
-        if sweeps or all_:
-            from repro.launch import spec as specs
+    writable_folder(out, "--out")
+    if sweeps or all_:
+        from repro.launch import spec as specs
 
-            selection = specs.selection(tasks, seeds_n, frames, sets, results.expanduser().absolute())
-            _plan_sweeps(sweeps or [], all_, results, out, bench_file, device, devices, cluster_config,
-                         device_memory_gb, selection)
-        if claims:
-            from analysis.cache import opened
+        selection = specs.selection(tasks, seeds_n, frames, sets, results.expanduser().absolute())
+        _plan_sweeps(sweeps or [], all_, results, out, bench_file, device, devices, cluster_config,
+                     device_memory_gb, selection)
+    if claims:
+        from analysis.cache import opened
 
-            with opened(out if cache else None) as kept:
-                _plan_claims(results, out, bench_file, device, sims, max_seeds, seed, reps, min_seeds)
-            if cache:
-                typer.echo(f"Cache ({out / '.cache'}): {kept.summary() or 'nothing computed'}")
-    except (PlanError, SweepError) as exc:
-        fail(str(exc))
+        with opened(out if cache else None) as kept:
+            _plan_claims(results, out, bench_file, device, sims, max_seeds, seed, reps, min_seeds)
+        if cache:
+            typer.echo(f"Cache ({out / '.cache'}): {kept.summary() or 'nothing computed'}")
 
 
 def _cluster(cluster_config: Optional[Path]):

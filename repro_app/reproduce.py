@@ -21,6 +21,7 @@ from typing import Optional
 import typer
 
 from repro.runs.console import fail
+from repro.runs.fsutil import writable_folder
 
 OFFLINE_SWEEP = "tiny_offline"
 # The recorded online run the datasets come from: {experiment}/{agent}/{variant}/{task}/seed_{seed}.
@@ -79,6 +80,8 @@ def register(app: typer.Typer) -> None:
         """Train the tiny sweeps locally (online, then offline), then build every table, figure, claim and the
         report from them."""
         t0 = time.time()
+        writable_folder(results_root, "--results")
+        writable_folder(out, "--out")
         parallel = max_parallel or max(1, os.cpu_count() or 1)
         warm = ["--warm-start"] if warm_start else []
         cmd = [sys.executable, "-m", "repro", "sweep", sweep, "--results", str(results_root), "--max-parallel",

@@ -15,8 +15,9 @@ from repro.launch.cli import (
     default_results_root,
     launch_sweep,
 )
-from repro.launch.spec import Selection, SweepError
+from repro.launch.spec import Selection
 from repro.runs.console import console, fail
+from repro.runs.fsutil import writable_folder
 
 SWEEP = "verify"
 CPU_AGENTS = ("drqv2",)  # the CPU check: DrQ-v2 alone (TACO to 40K frames takes hours more on a CPU)
@@ -83,11 +84,10 @@ def verify_cmd(
     cartpole_balance to 60K frames; resumable, extendable), then prints one verdict per task and agent."""
     from repro.launch import spec as specs
 
-    try:
-        spec = specs.load(SWEEP)
-        root_sets = specs.selection(None, None, None, profile_wins(sets), results_root).sets
-    except SweepError as exc:
-        fail(str(exc))
+    spec = specs.load(SWEEP)
+    root_sets = specs.selection(None, None, None, profile_wins(sets), results_root).sets
+    if not dry_run:
+        writable_folder(out, "--out")
     say = console().print
     if not judge_only:
         cuda = _has_cuda() or gpus is not None
@@ -125,7 +125,7 @@ def profile_wins(sets: Optional[list[str]]) -> list[str]:
     the --set value."""
     from omegaconf import OmegaConf
 
-    from repro.config.compose import ConfigError, check_option, conf_dirs
+    from repro.config.compose import check_option, conf_dirs
     from repro.launch import spec as specs
 
     out = list(sets or ())
@@ -134,10 +134,7 @@ def profile_wins(sets: Optional[list[str]]) -> list[str]:
         if specs.override_key(s) != "profile":
             continue
         name = s.split("=", 1)[1]
-        try:
-            check_option("profile", name)
-        except ConfigError as exc:
-            fail(str(exc))
+        check_option("profile", name)
         path = next(p for d in conf_dirs() if (p := d / "profile" / f"{name}.yaml").is_file())
         flat = OmegaConf.to_container(OmegaConf.load(path))
         assert isinstance(flat, dict)
@@ -163,16 +160,13 @@ def _root_from(sets: tuple[str, ...]) -> Path:
     for s in sets:
         if specs.override_key(s) == "runtime.results_root":
             return Path(s.split("=", 1)[1].strip("'\""))
-    try:
-        return default_results_root()
-    except SweepError as exc:
-        fail(str(exc))
+    return default_results_root()
 
 
 def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = False) -> int:
     """Judge the verify runs under ``root``, write the tables and the figure to ``out``, print one line per cell;
     the exit code: 1 when a verdict says the pipeline does not learn as published, else 0."""
-    from analysis.load import ResultsRootError, load_results
+    from analysis.load import load_results
     from analysis.verify import (
         ABOVE,
         BELOW,
@@ -185,10 +179,7 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = Fals
     )
     from paper_figures.verify_plot import plot_verify
 
-    try:
-        results = load_results(root)
-    except ResultsRootError as exc:
-        fail(str(exc))
+    results = load_results(root)
     rows = judge(results, min_seeds=min_seeds)
     con = console()
     if not rows:

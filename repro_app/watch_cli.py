@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Optional
 import typer
 
 from repro.runs.console import fail
+from repro.runs.fsutil import writable_folder
 from repro.runs.runformat import DONE
 from repro.runs.tblog import TB_DIR
 from repro.runs.wblog import RUN_ID, WANDB_DIR, offline_folders
@@ -120,15 +121,13 @@ def plot_cmd(
                                         "each task that has one (episode_reward against frames only)."),
 ) -> None:
     """Learning curves of any runs: one panel per task, mean over seeds with a 95% bootstrap CI band."""
-    from analysis.quick import PlotInputError, by_columns, load_runs, repeated_seeds, tidy_curves
+    from analysis.quick import by_columns, load_runs, repeated_seeds, tidy_curves
     from paper_figures.quick_plot import plot_curves
 
-    try:
-        cols = by_columns(by)
-        runs, evals, problems = load_runs(paths)
-        curves = tidy_curves(runs, evals, metric, cols)
-    except PlotInputError as exc:
-        fail(str(exc))
+    writable_folder(out.expanduser().absolute().parent, f"--out {out}: its folder")
+    cols = by_columns(by)
+    runs, evals, problems = load_runs(paths)
+    curves = tidy_curves(runs, evals, metric, cols)
     for problem in problems:
         typer.echo(f"  {problem}", err=True)
     for cell in repeated_seeds(curves):

@@ -26,6 +26,7 @@ from torch.utils._python_dispatch import TorchDispatchMode
 import repro
 from repro.data.record import load_snapshot
 from repro.launch.cli import register as register_launch
+from repro.runs.console import Commands
 from repro.runs.logger import WALLCLOCK_COLUMNS
 from repro.runs.runformat import EVAL, TRAIN
 from repro.runs.tblog import read_scalars
@@ -188,7 +189,7 @@ def make_batch(B: int = 6, K: int = 3, A: int = 4, seed: int = 0) -> dict[str, t
 
 def launch_app() -> typer.Typer:
     """A Typer app with the launch commands only (``sweep``, ``sweeps``, ``status``), as ``repro`` registers them."""
-    app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
+    app = typer.Typer(cls=Commands, add_completion=False, pretty_exceptions_enable=False)
     register_launch(app)
 
     @app.callback()
@@ -202,7 +203,7 @@ def bench_app() -> typer.Typer:
     """A Typer app with ``repro bench`` only, as ``repro`` registers it."""
     from repro.bench.cli import register
 
-    app = typer.Typer()
+    app = typer.Typer(cls=Commands)
     register(app)
 
     @app.callback()

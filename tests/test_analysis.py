@@ -277,6 +277,39 @@ def test_the_comparability_rule():
     assert comparable(None, None) and comparable(Budget(400), None)  # a paper value without a budget (a timing)
 
 
+def test_a_run_reaches_a_budget_only_by_an_evaluation_there(tmp_path):
+    """One rule of 'reached' (analysis.comparable.reached): a run done with train.frames at the budget whose last
+    evaluation is before it did not reach it, for the scores (and so every table and claim), the claims' budget and
+    `repro verify`, which reads the same rule; verify's table states the frames reached with their repeat."""
+    from analysis import verify
+    from analysis.comparable import reached
+
+    assert reached(1_000_000, 1_000_000) and not reached(999_999, 1_000_000)
+    assert not reached(math.nan, 0) and not reached(None, 0)
+
+    def cut(run: Path, last: int) -> None:  # the evaluations after ``last`` lost; the run stays done
+        lines = (run / "eval.csv").read_text().splitlines()
+        frame = lines[0].split(",").index("frame")
+        (run / "eval.csv").write_text("\n".join([lines[0], *(ln for ln in lines[1:]
+                                                            if int(ln.split(",")[frame]) <= last)]) + "\n")
+
+    for s in range(3):
+        cut(write_run(tmp_path, experiment="main", algo="taco", task="quadruped_run", seed=s, final=400.0 + s,
+                      frames=PAPER, eval_every=PAPER // 2), PAPER // 2)
+        cut(write_run(tmp_path, experiment="verify", algo="drqv2", task="cartpole_balance", seed=s + 1, final=0.0,
+                      frames=60_000, eval_every=20_000, curve=[350, 300, 800, 980], batch_size=256), 40_000)
+    ctx = _ctx(tmp_path, budget=PAPER)
+    main = ctx.scores[ctx.scores["experiment"] == "main"]
+    assert (main["status"] == "done").all() and (main["train_frames"] == PAPER).all()
+    assert not main["reached"].any() and (main["last_frame"] == PAPER // 2).all()
+    claim = {v.id: v for v in evaluate_claims(ctx)}["online_beats_drqv2_all"]
+    assert claim.verdict == NO_DATA and "runs reach 500,000 frames" in claim.evidence
+    assert claim.budget == "1M env. frames (action repeat 2)"  # the unit and the repeat beside the frames
+    row = verify.judge(load_results(tmp_path), random_returns={"cartpole_balance": 300.0})[0]
+    assert row.verdict == verify.NOT_ENOUGH and row.reached == 40_000 and "they reach 40,000 frames" in row.note
+    assert verify.verdict_display([row])["Env. frames reached"].tolist() == ["40,000 frames (action repeat 2)"]
+
+
 def test_a_short_run_is_shown_as_not_comparable_without_delta_or_in_ci(tmp_path):
     # `make repro`'s situation: 400-frame runs of 100-frame episodes under experiment tiny, read as main at 400
     for s in (1, 2):

@@ -1,7 +1,10 @@
 """The `repro` CLI as a user types it: tasks, dry runs, bad input, a Meta-world run with success."""
 
+import ast
+import functools
 import subprocess
 import sys
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -12,6 +15,15 @@ from repro.envs import TASKS
 from repro_app.cli import app
 
 runner = CliRunner()
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@functools.cache
+def _package_trees() -> list[tuple[Path, ast.Module]]:
+    """Every module of the packages, parsed once: (path relative to the checkout, tree)."""
+    return [(path.relative_to(ROOT), ast.parse(path.read_text(encoding="utf-8")))
+            for pkg in ("repro", "repro_app", "analysis", "paper_figures", "repro_data")
+            for path in sorted((ROOT / pkg).rglob("*.py"))]
 
 
 def repro(*args: str, timeout: int = 300) -> subprocess.CompletedProcess:
@@ -130,20 +142,14 @@ def test_sweep_short_results_flag_launches_under_root(tmp_path):
 def test_every_command_fails_and_prints_through_the_one_console_helper():
     """repro/runs/console.py is the only place that defines a command's error exit (``fail``) or builds a rich
     Console: a copy defined elsewhere (a module's own ``_fail``, its own Console width) fails here by file:line."""
-    import ast
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[1]
     found = []
-    for pkg in ("repro", "repro_app", "analysis", "paper_figures"):
-        for path in sorted((root / pkg).rglob("*.py")):
-            if path == root / "repro" / "runs" / "console.py":
-                continue
-            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for path, tree in _package_trees():
+        if path.parts[0] != "repro_data" and path != Path("repro/runs/console.py"):
+            for node in ast.walk(tree):
                 called = getattr(node.func, "id", getattr(node.func, "attr", "")) if isinstance(node, ast.Call) else ""
                 named = node.name.lstrip("_") if isinstance(node, ast.FunctionDef) else ""
                 if called == "Console" or named in ("fail", "die", "console"):
-                    found.append(f"{path.relative_to(root)}:{node.lineno}")
+                    found.append(f"{path}:{node.lineno}")
     assert not found, found
     from repro.runs.console import fail
 
@@ -214,3 +220,90 @@ def test_objective_parameters_are_read_typed():
     assert agent.objective_params["spr"]["projection_dim"] == 8  # the config is left as given (its run's identity)
     ctx = ObjectiveContext(repr_dim=4, feature_dim=4, hidden_dim=4, action_dim=1, K=1, seq_dim=1)
     assert typed_params(ctx, SPRParams) == SPRParams()  # a context built by hand: the registered defaults
+
+
+# Issue 51.5: one UserError base, caught once by the app (repro/runs/console.py Commands).
+# The base itself, and the exceptions of control flow (never shown to a user as an error).
+INTERNAL_EXCEPTIONS = {"UserError", "NotEnoughData", "Interrupted", "_AlreadyComplete", "RunInterrupted"}
+
+
+def test_every_user_facing_error_derives_from_user_error_and_no_command_lists_them():
+    """Every exception class of the packages that derives from a built-in exception also derives from UserError
+    (except the control-flow ones above), so a new error type is one line, exit 2, with no command to update; and
+    no command catches a UserError only to print it (an ``except`` whose body is ``fail(str(exc))``)."""
+    builtin = {"Exception", "ValueError", "KeyError", "RuntimeError", "OSError", "FileNotFoundError", "TypeError",
+               "LookupError"}
+    missing, lists = [], []
+    for path, tree in _package_trees():
+        for node in ast.walk(tree):
+            where = f"{path}:{getattr(node, 'lineno', '')}"
+            if isinstance(node, ast.ClassDef):
+                bases = {getattr(b, "id", getattr(b, "attr", "")) for b in node.bases}
+                if bases & builtin and "UserError" not in bases and node.name not in INTERNAL_EXCEPTIONS:
+                    missing.append(f"{where} {node.name}")
+            if isinstance(node, ast.ExceptHandler) and node.name and len(node.body) == 1 \
+                    and path != Path("repro/runs/console.py"):  # the one catch
+                if ast.unparse(node.body[0]) == f"fail(str({node.name}))":
+                    lists.append(f"{where} {ast.unparse(node.type) if node.type else ''}")
+    assert not missing, missing
+    assert not lists, lists
+
+
+def test_a_user_error_of_any_command_is_one_line_exit_2():
+    """The app's group catches UserError: a command of an app built as `repro` builds it raises a new subclass and
+    gets one line, exit 2, no traceback; the `repro` app itself is built on that group."""
+    import typer
+    from typer.main import get_command
+
+    from repro.config.errors import UserError
+    from repro.runs.console import Commands
+
+    class NewError(UserError, ValueError):
+        pass
+
+    sub = typer.Typer(cls=Commands)
+
+    @sub.command()
+    def one() -> None:
+        raise NewError("a new kind of bad input")
+
+    @sub.command()
+    def two() -> None:
+        pass
+
+    result = runner.invoke(sub, ["one"])
+    assert result.exit_code == 2 and result.output == "error: a new kind of bad input\n", result.output
+    assert isinstance(get_command(app), Commands)
+
+
+# Issue 50.4: guard rails. Every output path a command writes, as a regular file or under one (unwritable even for
+# root): one line, exit 2, nothing written.
+def _outputs(file, sweep):
+    sub = file / "sub"
+    return [
+        (["report", "--out", str(sub), "--results", str(file.parent / "none")], f"--out {sub} cannot be made"),
+        (["figures", "F1", "--out", str(file)], f"--out {file} is a file"),
+        (["audit", "--out", str(sub)], f"--out {sub} cannot be made"),
+        (["plan", "main", "--out", str(file)], f"--out {file} is a file"),
+        (["verify", "--judge-only", "--out", str(sub), "-r", str(file.parent)], f"--out {sub} cannot be made"),
+        (["plot", str(file.parent), "--out", str(sub / "p.png")], f"its folder {sub} cannot be made"),
+        (["sweep", str(sweep), "-r", str(file)], f"results root {file} is a file"),
+        (["sweep", str(sweep), "-r", str(sub)], f"results root {sub} cannot be made"),
+        (["train", "profile=tiny", f"runtime.results_root={sub}"], f"runtime.results_root {sub} cannot be made"),
+        (["dataset", "export", str(file.parent), "--format", "drqv2", "--out", str(sub)], f"--out {sub} cannot be"),
+        (["reproduce", "--results", str(sub)], f"--results {sub} cannot be made"),
+    ]
+
+
+def test_an_output_path_that_is_a_file_or_under_one_is_one_line_exit_2_before_anything_is_written(tmp_path):
+    sweep = write_sweep(tmp_path, "guard", ["reacher_hard"], {"base": []}, 1)
+    file = tmp_path / "a_file"
+    file.write_text("kept\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    for args, needle in _outputs(file, sweep):
+        result = runner.invoke(app, args, terminal_width=400)
+        lines = result.output.strip().splitlines()
+        assert result.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error: "), (args, result.output)
+        assert needle in lines[0] and isinstance(result.exception, SystemExit), (args, result.output)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before and file.read_text() == "kept\n"
+

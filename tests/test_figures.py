@@ -183,7 +183,9 @@ def test_f8_reads_each_tasks_default_k_from_its_composition():
 def test_bars_and_curves_mark_short_runs_and_runs_of_another_environment(tmp_path, monkeypatch):
     """400-frame runs of 100-frame episodes beside the paper's 1M values: F8's bars are hatched, labelled with
     their budget and not comparable (no Δ); the figures name the episode length (banner, curve legends) and the
-    frame axis its unit and action repeat."""
+    frame axis its unit and action repeat. F4 draws no paper diamond beside the 400-frame curves (the runs did not
+    reach the paper's 1M frames: analysis.comparable's rule), says so in the panel and its caption, and its axis ends
+    at the data."""
     import matplotlib.pyplot as plt
 
     import paper_figures.bars
@@ -200,7 +202,10 @@ def test_bars_and_curves_mark_short_runs_and_runs_of_another_environment(tmp_pat
         drawn[name] = ([t.get_text() for t in fig.texts],
                        [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()],
                        [ax.get_xlabel() for ax in fig.axes], [ax.get_ylabel() for ax in fig.axes],
-                       [p.get_hatch() for ax in fig.axes for p in ax.patches])
+                       [p.get_hatch() for ax in fig.axes for p in ax.patches],
+                       {ax.get_title(): ([t.get_text() for t in ax.texts], ax.get_xlim()[1],
+                                         [ln.get_xdata()[0] for ln in ax.lines if ln.get_marker() == "D"])
+                        for ax in fig.axes})
         plt.close(fig)
         return ctx.out_dir / f"{name}.png"
 
@@ -208,14 +213,18 @@ def test_bars_and_curves_mark_short_runs_and_runs_of_another_environment(tmp_pat
         monkeypatch.setattr(module, "save_figure", keep)
     ctx = Context(results=load_results(tmp_path / "runs"), out_dir=tmp_path / "out", budget=400, reps=REPS,
                   curve_reps=CURVE_REPS, experiment_map={"main": ["tiny"]}, published_band=False)
-    for art in paper_figures.resolve(["F8", "F4"]):
-        art.render(ctx)
-    texts, legend, _, ylabels, hatches = drawn["F8"]
+    results = {art.id: art.render(ctx) for art in paper_figures.resolve(["F8", "F4"])}
+    texts, legend, _, ylabels, hatches, _ = drawn["F8"]
     assert any("environment differs from the paper's: 100-frame episodes (paper: 1,000)" in t for t in texts)
     assert "at 400 frames: not comparable with the paper" in legend and hatches.count("////") >= 2
     assert ylabels == ["return at 400 env. frames (action repeat 2)"]
     f8 = (ctx.out_dir / "F8.md").read_text()
     assert "| Cheetah Run | K=3 | 821 ± 48 | 2 ± 1 (400 frames, not comparable) | 2 | [2, 3] | n/a | n/a |" in f8
-    _, legend, xlabels, _, _ = drawn["F4"]
+    _, legend, xlabels, _, _, panels = drawn["F4"]
     assert "TACO (n=2; 100-frame episodes (paper: 1,000))" in legend
     assert set(xlabels) == {"environment frames (action repeat 2)"}
+    notes, right, diamonds = panels["Cheetah Run"]
+    assert notes == ["runs at 400 frames: the paper's\n1M frames values not comparable"] and diamonds == []
+    assert right < 1000  # the axis ends at the data, not at the paper's 1M
+    assert all(d == [1e6] * 3 for title, (_, _, d) in panels.items() if title != "Cheetah Run")  # no runs: paper's
+    assert "the runs of Cheetah Run stop short, their values are not comparable" in results["F4"].caption

@@ -9,12 +9,15 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 from typer.testing import CliRunner
 
 from helpers import launch_app, write_sweep
 from repro.launch import local
 from repro.launch import spec as specs
 from repro.launch.local import GpuPacking, child_env, parse_gpus
+
+NO_GPU = "99" if torch.cuda.is_available() else "0"  # a GPU this machine lacks (no machine has 100)
 
 
 def test_child_env_puts_cuda_and_egl_on_the_runs_gpu(monkeypatch):
@@ -85,9 +88,12 @@ def test_run_local_places_runs_on_gpus_at_most_n_at_once(tmp_path, monkeypatch):
     (["--runs-per-gpu", "2"], "--runs-per-gpu needs --gpus"),
     (["--gpus", "0", "--max-parallel", "2"], "drop --max-parallel"),
     (["--gpus", "0", "--warm-start"], "--warm-start"),
+    # GPUs CUDA does not see as the runs would (issue 50.4: a run would have trained on the CPU)
+    (["--gpus", NO_GPU], f"--gpus {NO_GPU}: torch sees no CUDA device {NO_GPU} on this machine; drop --gpus"),
 ])
 def test_bad_gpu_options_are_one_line_exit_2(tmp_path, args, needle):
     res = CliRunner().invoke(launch_app(), ["sweep", "tiny", "--results", str(tmp_path), *args])
     assert res.exit_code == 2, res.output
     assert needle in res.output and len(res.output.strip().splitlines()) == 1, res.output
     assert "Traceback" not in res.output
+    assert not any(tmp_path.iterdir())  # nothing started, nothing written under the results root

@@ -1,4 +1,4 @@
-"""End-to-end runs with real rendering and real updates: run directory, determinism, SIGKILL and resume.
+"""End-to-end runs with real rendering and real updates: run directory, determinism, SIGKILL, Ctrl-C and resume.
 
 The tiny run is trained once per test session (conftest: ``tiny_taco`` plain, ``tiny_taco_watched`` recorded
 with TensorBoard and videos); the kill-and-resume run here checks the CSVs, the recording, the event files and
@@ -6,6 +6,8 @@ the videos of a resumed run at once."""
 
 import json
 import platform
+import re
+import signal
 import socket
 import subprocess
 import sys
@@ -71,6 +73,7 @@ def test_run_directory_contract(tiny_taco: Path):
     assert frames.shape == (51, 84, 84, 3) and frames.dtype == np.uint8 and frames.std() > 0
     done = json.loads((reference / "DONE").read_text())
     assert done["frame"] == 400
+    assert not (reference / rundir.WRITER_LOCK).exists()  # released and removed when the run ended
 
 
 def test_same_seed_gives_identical_logs_and_recording_or_watching_changes_no_number(tiny_taco: Path,
@@ -89,7 +92,7 @@ def _count(folder: Path, pattern: str) -> int:
 
 
 def test_sigkill_and_resume_matches_uninterrupted_run(tiny_taco: Path, tiny_taco_watched: Path, tmp_path: Path):
-    """Killed twice, then resumed: the logs, the recording, the event files and the W&B history are those of the
+    """Killed twice, stopped by Ctrl-C once, then resumed: the logs, the recording, the event files and the W&B history are those of the
     uninterrupted runs (the W&B run keeps its id), and `train.video_every=last` leaves the final evaluation's
     video only."""
     run = tmp_path / REL
@@ -116,13 +119,27 @@ def test_sigkill_and_resume_matches_uninterrupted_run(tiny_taco: Path, tiny_taco
     assert not (run / DONE).exists() and rows(run / TRAIN) == 2
     assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200]  # the point the resume rewrites
     run_id = (run / WANDB_DIR / RUN_ID).read_text()
+    # Ctrl-C (SIGINT) in the resumed run once it has written episode 3's row: one line naming the frame, exit 130,
+    # the files closed and no writer lock left; the next start resumes from the checkpoint (issue 50.4). SIGINT is
+    # set to its default in the child: a child of a non-interactive shell may inherit it ignored.
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    t0 = time.time()
+    while rows(run / TRAIN) < 3 and proc.poll() is None and time.time() - t0 < 300:
+        time.sleep(0.05)
+    assert proc.poll() is None, "the run ended before it could be interrupted"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=300)
+    said = re.fullmatch(r"interrupted at frame (\d+); run the same command to resume", err.strip())
+    assert proc.returncode == 130 and said and 300 <= int(said[1]) < 400, (proc.returncode, err[-2000:])
+    assert not (run / DONE).exists() and not (run / rundir.WRITER_LOCK).exists()
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
-    assert "resumed" in out.stdout
-    for name in (EVAL, TRAIN):
+    assert "resumed" in out.stdout and not (run / rundir.WRITER_LOCK).exists()
+    for name in (EVAL, TRAIN):  # no row twice, none missing
         pd.testing.assert_frame_equal(deterministic(run / name), deterministic(tiny_taco / name))
     meta = json.loads((run / "meta.json").read_text())
-    assert len(meta["resumes"]) == 1 + early_checkpoint  # a start without a checkpoint is no resume
+    assert len(meta["resumes"]) == 2 + early_checkpoint  # a start without a checkpoint is no resume
     assert_same_recording(run, tiny_taco_watched)
     assert_mirrors_csv(run)
     assert [s for s, _ in read_scalars(run)["eval/episode_reward"]] == [0, 200, 400]

@@ -11,13 +11,13 @@ from typing import Optional
 
 import typer
 
-from repro.config.compose import ConfigError, compose_base, is_folder_value
+from repro.config.compose import compose_base, is_folder_value
 from repro.data.convert import default_import_name, export_dataset, import_dataset
-from repro.data.dataset import MANIFEST, DatasetError, check_dataset, dataset_path, load_manifest
+from repro.data.dataset import MANIFEST, check_dataset, dataset_path, load_manifest
 from repro.data.formats import FORMATS
 from repro.data.summary import plot_returns, summarize
 from repro.runs.console import fail
-from repro.runs.fsutil import FULL, write_error_message
+from repro.runs.fsutil import FULL, writable_folder, write_error_message
 
 dataset_app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                           help="Offline datasets: inspect, check, import and export.")
@@ -34,10 +34,7 @@ def _os_message(exc: OSError) -> str:
 def _results_root(value: Optional[Path]) -> Path:
     if value is not None:
         return value
-    try:
-        return Path(str(compose_base().runtime.results_root))
-    except ConfigError as exc:
-        fail(str(exc))
+    return Path(str(compose_base().runtime.results_root))
 
 
 @dataset_app.command("info")
@@ -49,8 +46,6 @@ def info_cmd(directory: Path = typer.Argument(..., help="Dataset folder."),
     try:
         m = load_manifest(directory)
         s = summarize(m, directory)
-    except DatasetError as exc:
-        fail(str(exc))
     except OSError as exc:
         fail(_os_message(exc))
     png = out or directory / "returns.png"
@@ -115,9 +110,9 @@ def import_cmd(path: Path = typer.Argument(..., help="An input file or a folder 
     try:
         target = dataset_path(name, root, task)
         existed = (target / MANIFEST).exists()
+        if not existed:
+            writable_folder(target, "--out")
         m = import_dataset(path, fmt, task, target, resize=resize)
-    except DatasetError as exc:
-        fail(str(exc))
     except OSError as exc:  # a full disk: the partial import is kept and a re-run resumes it
         fail(write_error_message(exc), 1 if exc.errno in FULL else 2)
     if existed:
@@ -134,10 +129,9 @@ def export_cmd(directory: Path = typer.Argument(..., help="Dataset folder."),
     """Export a dataset as V-D4RL hdf5 (84px), V-D4RL npz (64px) or DrQ-v2 replay episodes."""
     if fmt not in FORMATS:
         fail(f"unknown format '{fmt}' (known: {', '.join(FORMATS)})")
+    writable_folder(out, "--out")
     try:
         files = export_dataset(directory, fmt, out)
-    except DatasetError as exc:
-        fail(str(exc))
     except OSError as exc:
         fail(_os_message(exc))
     typer.echo(f"exported {directory} as {fmt}: {len(files)} file(s) in {out}")

@@ -18,6 +18,7 @@ from repro.launch import spec as specs
 from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 from repro.launch.spec.sharing import SweepFrames, shared_frames
 from repro.runs.console import console, fail
+from repro.runs.fsutil import writable_folder
 
 if TYPE_CHECKING:
     from repro.launch.local import GpuPacking, LaunchReport
@@ -93,11 +94,8 @@ def sweeps_cmd() -> None:
     for col in ("name", "artifacts", "runs", "tasks", "agents", "variants", "seeds", "frames", "to train",
                 "status"):
         table.add_column(col, overflow="fold")
-    try:
-        all_specs = specs.load_all()
-        shared = shared_frames(all_specs)
-    except SweepError as exc:
-        fail(str(exc))
+    all_specs = specs.load_all()
+    shared = shared_frames(all_specs)
     for s in all_specs:
         table.add_row(*_sweep_row(s, shared.get(s.name)))
     con.print(table)
@@ -172,10 +170,7 @@ def sweep_cmd(
 ) -> None:
     """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
     options = LaunchOptions(launcher, max_parallel, force, cluster_config, warm_start, gpus, runs_per_gpu)
-    try:
-        sel = specs.selection(tasks, seeds, frames, sets, results_root)
-    except SweepError as exc:
-        fail(str(exc))
+    sel = specs.selection(tasks, seeds, frames, sets, results_root)
     report = launch_sweep(name, sel, options, dry_run)
     if report is None:
         return
@@ -201,29 +196,28 @@ class LaunchOptions:
 def launch_sweep(name: str, sel: Selection, options: LaunchOptions, dry_run: bool = False,
                  agents: Sequence[str] | None = None, variants: Sequence[str] | None = None) -> LaunchReport | None:
     """Expand sweep ``name`` with ``sel`` (only the runs of ``agents`` and ``variants``, when given), then print the
-    plan (``dry_run``: returns None) or launch it and print the launch's report. Bad input: one line, exit 2."""
+    plan (``dry_run``: returns None) or launch it and print the launch's report. Bad input (a SweepError, a results
+    root it cannot write): one line, exit 2, before anything is written."""
     if options.warm_start and options.launcher == Launcher.slurm:
         fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
     packing = _gpu_packing(options.gpus, options.runs_per_gpu, options.launcher, options.max_parallel,
                            options.warm_start)
-    try:
-        spec = specs.load(name)
-        planned = specs.plan(specs.expand(spec, sel))
-        if agents is not None:
-            planned = [p for p in planned if p.run.agent in agents]
-        if variants is not None:
-            planned = [p for p in planned if p.run.variant in variants]
-        root = specs.results_root_of(planned)
-        if dry_run:
-            print_plan(planned, spec, root, options.force, specs.excluded(spec, sel))
-            return None
-        if any(p.state == "mismatch" for p in planned) and not options.force:
-            raise SweepError(_mismatch_error(planned, root))
-        _check_wandb(planned)
-        report = _launch(spec, planned, root, options.launcher, options.max_parallel, options.force,
-                         options.cluster_config, options.warm_start, packing)
-    except SweepError as exc:
-        fail(str(exc))
+    spec = specs.load(name)
+    planned = specs.plan(specs.expand(spec, sel))
+    if agents is not None:
+        planned = [p for p in planned if p.run.agent in agents]
+    if variants is not None:
+        planned = [p for p in planned if p.run.variant in variants]
+    root = specs.results_root_of(planned)
+    if dry_run:
+        print_plan(planned, spec, root, options.force, specs.excluded(spec, sel))
+        return None
+    writable_folder(root, "results root")
+    if any(p.state == "mismatch" for p in planned) and not options.force:
+        raise SweepError(_mismatch_error(planned, root))
+    _check_wandb(planned)
+    report = _launch(spec, planned, root, options.launcher, options.max_parallel, options.force,
+                     options.cluster_config, options.warm_start, packing)
     _print_report(report, options.launcher, spec.name)
     return report
 
@@ -231,7 +225,7 @@ def launch_sweep(name: str, sel: Selection, options: LaunchOptions, dry_run: boo
 def _gpu_packing(gpus: Optional[str], runs_per_gpu: Optional[int], launcher: Launcher, max_parallel: Optional[int],
                  warm_start: bool) -> GpuPacking | None:
     """``--gpus`` / ``--runs-per-gpu`` as a GpuPacking (None without --gpus); bad input: one line, exit 2."""
-    from repro.launch.local import parse_gpus
+    from repro.launch.local import check_gpus, parse_gpus
 
     if gpus is None:
         if runs_per_gpu is not None:
@@ -244,10 +238,9 @@ def _gpu_packing(gpus: Optional[str], runs_per_gpu: Optional[int], launcher: Lau
         fail("--gpus sets the runs at once (GPUs x --runs-per-gpu): drop --max-parallel")
     if warm_start:
         fail("--gpus with --warm-start: the warm server sets up one EGL display for every run; drop one")
-    try:
-        return parse_gpus(gpus, 1 if runs_per_gpu is None else runs_per_gpu)
-    except ValueError as exc:
-        fail(str(exc))
+    packing = parse_gpus(gpus, 1 if runs_per_gpu is None else runs_per_gpu)
+    check_gpus(packing)
+    return packing
 
 
 def _check_wandb(planned: list[PlannedRun]) -> None:
@@ -317,8 +310,6 @@ def status_cmd(
             if watch is None or all(s.status in FINISHED for s in statuses):
                 return
             time.sleep(watch)
-    except SweepError as exc:
-        fail(str(exc))
     except KeyboardInterrupt:
         raise typer.Exit(130) from None
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -109,16 +110,41 @@ class GpuPacking:
 
 
 def parse_gpus(text: str, per_gpu: int) -> GpuPacking:
-    """``--gpus 0,1`` and ``--runs-per-gpu N`` as a :class:`GpuPacking`; ValueError (one line) for bad input."""
+    """``--gpus 0,1`` and ``--runs-per-gpu N`` as a :class:`GpuPacking`; SweepError (one line) for bad input."""
+    from repro.launch.spec import SweepError
+
     ids = [part.strip() for part in text.split(",")]
     if not ids or any(not part.isdigit() for part in ids):
-        raise ValueError(f"--gpus takes comma-separated GPU ids (integers >= 0, e.g. 0,1), got '{text}'")
+        raise SweepError(f"--gpus takes comma-separated GPU ids (integers >= 0, e.g. 0,1), got '{text}'")
     gpus = tuple(int(part) for part in ids)
     if len(set(gpus)) != len(gpus):
-        raise ValueError(f"--gpus lists a GPU twice ('{text}'); use --runs-per-gpu to share one")
+        raise SweepError(f"--gpus lists a GPU twice ('{text}'); use --runs-per-gpu to share one")
     if per_gpu < 1:
-        raise ValueError(f"--runs-per-gpu must be >= 1, got {per_gpu}")
+        raise SweepError(f"--runs-per-gpu must be >= 1, got {per_gpu}")
     return GpuPacking(gpus, per_gpu)
+
+
+# Run in a child with the runs' GPU environment: how many of the listed GPUs CUDA sees (0 without CUDA).
+_CUDA_PROBE = "import torch; print(torch.cuda.device_count() if torch.cuda.is_available() else 0)"
+
+
+def check_gpus(packing: GpuPacking) -> None:
+    """SweepError (one line) unless CUDA sees every GPU of ``--gpus`` on this machine, as the runs will see them
+    (asked of a child process with their ``CUDA_DEVICE_ORDER`` and ``CUDA_VISIBLE_DEVICES``, so the launcher itself
+    starts no CUDA context): a run placed on a GPU that is not there would train on the CPU."""
+    from repro.launch.spec import SweepError
+
+    listed = ",".join(map(str, packing.gpus))
+    env = {**os.environ, "CUDA_DEVICE_ORDER": "PCI_BUS_ID", "CUDA_VISIBLE_DEVICES": listed}
+    probe = subprocess.run([sys.executable, "-c", _CUDA_PROBE], env=env, capture_output=True, text=True, timeout=300)
+    lines = probe.stdout.split()
+    seen = int(lines[-1]) if probe.returncode == 0 and lines and lines[-1].isdigit() else 0
+    if seen == 0:
+        raise SweepError(f"--gpus {listed}: torch sees no CUDA device {listed} on this machine; drop --gpus to run "
+                         "on the CPU")
+    if seen < len(packing.gpus):
+        raise SweepError(f"--gpus {listed}: CUDA sees {seen} of these {len(packing.gpus)} GPUs (ids as nvidia-smi "
+                         "numbers them); list only GPUs this machine has")
 
 
 @dataclass

@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import shutil
 import sys
-from typing import TYPE_CHECKING, NoReturn, Optional
+from typing import TYPE_CHECKING, Any, NoReturn, Optional
 
 import typer
+from typer.core import TyperGroup
+
+from repro.config.errors import UserError
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -23,6 +26,18 @@ def fail(message: str, code: int = 2) -> NoReturn:
     (2 for bad input; ``error:`` is red on a terminal, plain text otherwise)."""
     typer.echo(f"{typer.style('error:', fg='red')} {message}", err=True)
     raise typer.Exit(code)
+
+
+class Commands(TyperGroup):
+    """The group of the `repro` app (``typer.Typer(cls=Commands)``): the one place a :class:`UserError` raised by
+    any of its commands, sub-commands included, is caught and printed by :func:`fail` (one line, exit 2). A command
+    catches an error itself only to add to its message or to choose another exit code."""
+
+    def invoke(self, ctx: typer.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except UserError as exc:
+            fail(str(exc))
 
 
 def console(stderr: bool = False, min_width: Optional[int] = None) -> Console:

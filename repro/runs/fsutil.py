@@ -1,5 +1,6 @@
 """The one atomic writer (:func:`atomic_output`: a temporary file in the same folder, fsync, then rename over
-the target) and the one flock-with-holder lock (:func:`try_flock`).
+the target), the one flock-with-holder lock (:func:`try_flock`) and the one check of an output folder
+(:func:`writable_folder`).
 
 Files get the ordinary mode a plain ``open()`` would give them (0666 less the process umask), not
 mkstemp's private 0600, so a dataset or run made by one user can be read by another. A write that fails
@@ -19,6 +20,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
+
+from repro.config.errors import UserError
 
 
 def current_umask() -> int:
@@ -109,6 +112,31 @@ def remove_torn_temporaries(folder: str | os.PathLike) -> list[Path]:
     return removed
 
 
+class OutputPathError(UserError, ValueError):
+    """An output folder a command cannot write (one line, exit 2), said before anything is written."""
+
+
+def writable_folder(path: str | os.PathLike, what: str) -> Path:
+    """The one rule for every output folder a command writes (``--out``, ``-r``, ``runtime.results_root``): ``path``
+    (absolute, ``~`` expanded) when it is a folder this process can write, or one it can create (its nearest
+    existing parent is a writable folder); otherwise :class:`OutputPathError` naming ``what`` (the option), checked
+    before anything is written. Creates nothing."""
+    path = Path(path).expanduser().absolute()
+    parent = path
+    while not os.path.lexists(parent) and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        kind = "a file, not a folder" if parent.is_file() else "not a folder"
+        where = "" if parent == path else f" cannot be made: {parent}"
+        raise OutputPathError(f"{what} {path}{where} is {kind}")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        read_only = os.statvfs(parent).f_flag & os.ST_RDONLY
+        why = "is on a read-only filesystem" if read_only else "is not writable by this user"
+        where = "" if parent == path else f" cannot be made: {parent}"
+        raise OutputPathError(f"{what} {path}{where} {why}")
+    return path
+
+
 FULL = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)  # a full disk, a file size limit, a quota
 
 
@@ -127,13 +155,20 @@ def write_error_message(exc: OSError) -> str:
 class HolderLock:
     """An exclusive ``flock`` on a small file that names its holder (JSON: pid, host, ...), taken by
     :func:`try_flock`. The kernel releases it when the holder exits in any way (SIGKILL included), so a dead
-    holder never blocks the next one; the file stays and names the last holder."""
+    holder never blocks the next one (its file stays and names it). :meth:`release` removes the file, while still
+    holding the lock, then unlocks: a process that opened the old file meanwhile finds it gone once it gets the
+    lock and tries again on a new one (:func:`try_flock`), so a lock that ended leaves no file behind."""
 
     path: Path
     fd: int
 
     def release(self) -> None:
         if self.fd >= 0:
+            try:
+                if _same_file(self.fd, self.path):
+                    self.path.unlink()
+            except OSError:
+                pass  # a read-only folder: the file stays, as after a kill
             fcntl.flock(self.fd, fcntl.LOCK_UN)
             os.close(self.fd)
             self.fd = -1
@@ -145,20 +180,36 @@ class HolderLock:
         self.release()
 
 
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether ``path`` still names the file open as ``fd`` (not removed, not replaced by a new file)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return False
+    mine = os.fstat(fd)
+    return (st.st_dev, st.st_ino) == (mine.st_dev, mine.st_ino)
+
+
 def try_flock(file: str | os.PathLike, holder: dict[str, object]) -> HolderLock | None:
     """Take the exclusive ``flock`` on ``file`` now (created if missing) and write ``holder`` into it as JSON;
-    None when another process holds it (never waits). A filesystem without locks raises an ``OSError`` naming
+    None when another process holds it (never waits). A lock taken on a file that its last holder removed on
+    release is dropped and taken again on a new file. A filesystem without locks raises an ``OSError`` naming
     ``file``: an error, never a silent second holder."""
     file = Path(file)
-    fd = os.open(file, os.O_RDWR | os.O_CREAT, 0o666)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
+    while True:
+        fd = os.open(file, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            return None
+        except OSError as exc:
+            os.close(fd)
+            raise named_os_error(exc, file) from None
+        if _same_file(fd, file):
+            break
+        fcntl.flock(fd, fcntl.LOCK_UN)  # the holder removed this file before releasing it: open the new one
         os.close(fd)
-        return None
-    except OSError as exc:
-        os.close(fd)
-        raise named_os_error(exc, file) from None
     try:
         os.ftruncate(fd, 0)
         os.pwrite(fd, json.dumps(holder).encode(), 0)

@@ -19,6 +19,7 @@ import yaml
 from omegaconf import DictConfig, OmegaConf
 
 from repro.config.compose import ABSENT, compose_base, drop_non_identity, get_key, identity, run_keys, set_key, validate
+from repro.config.errors import UserError
 from repro.config.schema import RunConfig, budget_key, is_offline, unread_keys
 from repro.runs import migrate
 from repro.runs.fsutil import HolderLock, atomic_write_text, flock_holder, holder_words, try_flock
@@ -51,7 +52,7 @@ PACKAGES = ("torch", "numpy", "mujoco", "dm-control", "metaworld", "hydra-core",
             "pandas", "rliable", "taco-repro")
 
 
-class RunDirMismatch(ValueError):
+class RunDirMismatch(UserError, ValueError):
     """The run directory holds a run with another config."""
 
 
@@ -253,7 +254,7 @@ def write_done(path: Path, summary: dict, budget: int | None = None) -> None:
 
 
 # ---------------------------------------------------------------------------------------------- one writer
-class RunLocked(RuntimeError):
+class RunLocked(UserError, RuntimeError):
     """Another process is writing this run directory (one line naming it)."""
 
 
@@ -281,8 +282,8 @@ def writer_lock_holder(path: str | Path) -> str | None:
 def acquire_writer_lock(path: str | Path) -> WriterLock:
     """Take the run directory's writer lock now, or raise :class:`RunLocked` (never waits: a second start
     of a running run is a mistake to report, not a queue; the sweep launcher skips runs it sees locked).
-    The file stays after release (removing it would let a third process lock a fresh file while a second
-    still waits on the old one) and names the last holder for the refusal message."""
+    While held, the file names its holder for the refusal message; released, the file is removed (a run that
+    ended, done or interrupted, leaves no ``.writer.lock``; a killed one leaves it, unlocked)."""
     path = Path(path)
     lock = try_flock(path / WRITER_LOCK, {"pid": os.getpid(), "host": socket.gethostname(),
                                          "since": time.strftime("%Y-%m-%dT%H:%M:%S%z")})

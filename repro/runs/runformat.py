@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from repro.config.compose import is_folder_value
+from repro.config.errors import UserError
 
 # ---------------------------------------------------------------- file names
 CONFIG = "config.yaml"  # the resolved config, identity of the run (atomic, at start)
@@ -32,7 +33,7 @@ REPLAY = "replay"  # folder of replay episodes, so that a resume does not rewrit
 TB = "tb"  # runtime.tensorboard: TensorBoard event files mirroring eval.csv and train.csv (repro/runs/tblog.py)
 WANDB = "wandb"  # runtime.wandb: the W&B run id and the offline W&B run folder mirroring the CSVs (repro/runs/wblog.py)
 VIDEOS = "videos"  # train.save_video: frame_XXXXXXXXX.mp4 (offline: update_...) per evaluation (repro/runs/video.py)
-WRITER_LOCK = ".writer.lock"  # flock()ed by the one process writing the run; names the last holder (repro/runs/rundir.py)
+WRITER_LOCK = ".writer.lock"  # flock()ed by the one process writing the run, naming it; removed on release (rundir.py)
 
 # ---------------------------------------------------------------- CSV columns
 EVAL_COLUMNS = ("frame", "step", "episode", "episode_reward", "episode_reward_std", "episode_length", "success",
@@ -191,7 +192,7 @@ RESOLVED_CONFIG_KEYS: dict[str, str] = {
 _INT_FIELDS = ("K", "batch_size", "action_repeat", "nstep")
 
 
-class ResolvedError(ValueError):
+class ResolvedError(UserError, ValueError):
     """A resolved.json (or the values meant for one) does not follow the format."""
 
 

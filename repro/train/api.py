@@ -25,7 +25,7 @@ from repro.data.replay import ReplayBuffer
 from repro.learners import OnlineLearner, ReturnConditioned
 from repro.runs import rundir
 from repro.runs.checkpoint import save_checkpoint
-from repro.runs.fsutil import remove_torn_temporaries
+from repro.runs.fsutil import remove_torn_temporaries, writable_folder
 from repro.runs.logger import RunLogger
 from repro.runs.runformat import TRAIN
 from repro.runs.video import save_frames
@@ -48,6 +48,15 @@ T = TypeVar("T")
 T_co = TypeVar("T_co", covariant=True)
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C (SIGINT) stopped the run's loop; its message is the one line `repro train` prints (exit 130). The
+    run's files are closed and its writer lock released; its checkpoint resumes it. A KeyboardInterrupt, so code
+    that stops on Ctrl-C stops on it as before."""
+
+    def __init__(self, at: str):
+        super().__init__(f"interrupted at {at}; run the same command to resume")
+
+
 def train(overrides: list[str], echo: Callable[[str], None] = print, progress: bool | None = False) -> Path:
     """Compose the config from Hydra ``overrides`` and train it (resumable)."""
     return train_config(compose(overrides), echo=echo, progress=progress)
@@ -57,15 +66,19 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
     """Train (or resume, extend, or skip if done) the run described by ``cfg``; return its run directory.
 
     Everything that can refuse the run is checked before anything is written (the config against the run
-    directory's, the budget, the devices, the dataset, a checkpoint's dataset), so a refusal leaves the run
-    directory byte-identical. The run directory then has one writer: its writer lock is taken before the first
-    write and the state is read again under it (RunLocked when another process holds it). A failure before the
-    run's first update (no checkpoint, no train.csv row) removes a run directory this call created."""
+    directory's, the budget, the devices, the dataset, a checkpoint's dataset, a results root it cannot write), so
+    a refusal leaves the run directory byte-identical. The run directory then has one writer: its writer lock is
+    taken before the first write and the state is read again under it (RunLocked when another process holds it).
+    A failure before the run's first update (no checkpoint, no train.csv row) removes a run directory this call
+    created. Ctrl-C in the loop raises :class:`RunInterrupted` once the run's files are closed; the writer lock is
+    released (and its file removed) however the call ends, short of a kill."""
     rc = typed(cfg)
     path = rundir.run_dir(cfg)
     checked = check_start(rc, cfg, path, echo)
     if checked is None:
         return path
+    writable_folder(rc.runtime.results_root, "runtime.results_root")
+    writable_folder(path, "run directory")
     created = not path.exists()
     path.mkdir(parents=True, exist_ok=True)
     try:
@@ -80,7 +93,7 @@ def train_config(cfg: DictConfig, echo: Callable[[str], None] = print, progress:
             return path
         try:
             _start(rc, cfg, path, checked, echo, progress)
-        except Exception:
+        except BaseException:  # an error, Ctrl-C, a requeue's SystemExit
             if created and not (path / rundir.CHECKPOINT).exists() and not has_rows(path / TRAIN):
                 shutil.rmtree(path, ignore_errors=True)  # failed before its first update: leave no directory
             raise
@@ -145,7 +158,7 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
 
         _restore_run_finish(path, loop, state, resumed, bar, logger,
                             lambda c: {"frame": c.step * rc.env.action_repeat, "step": c.step, "episode": c.episode},
-                            rc.train.frames)
+                            rc.train.frames, lambda: f"frame {loop.frame}")
         if not rc.runtime.keep_replay:
             _drop_replay(path, rc.train.frames)
     finally:
@@ -192,7 +205,8 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, st
                            budget_ends=ends)
         _restore_run_finish(path, loop, state, lambda _: echo(f"resumed {path} at update {loop.update}"), bar,
                             logger, lambda updates: {"update": updates, "dataset": str(data.directory),
-                                                     "dataset_sha256": data.digest}, rc.offline.updates)
+                                                     "dataset_sha256": data.digest}, rc.offline.updates,
+                            lambda: f"update {loop.update}")
     finally:
         eval_env.close()
 
@@ -213,19 +227,22 @@ class _Closing(Protocol):
 
 def _restore_run_finish(path: Path, loop: _Loop[T], state: dict | None, resumed: Callable[[dict], None],
                         bar: ProgressBar | None, logger: _Closing, done: Callable[[T], dict[str, Any]],
-                        budget: int) -> None:
+                        budget: int, at: Callable[[], str]) -> None:
     """What an online and an offline run share once built: restore ``state`` (then ``resumed(state)``), run
     the loop, close the progress bar and the logger even when the loop fails, and mark the run done with
-    ``done(result)`` followed by its total time and finishing time, ``budget`` recorded as reached."""
+    ``done(result)`` followed by its total time and finishing time, ``budget`` recorded as reached. Ctrl-C in the
+    loop raises :class:`RunInterrupted` naming where the loop was (``at()``: ``frame N``, ``update N``)."""
     if state is not None:
         loop.restore(state)
         resumed(state)
     try:
         result = loop.run()
-    except BaseException:  # a kill, a requeue's SystemExit, an error: closed, then raised as it was
+    except BaseException as exc:  # a kill, a requeue's SystemExit, an error: closed, then raised as it was
         if bar:
             bar.close()
         logger.close(failing=True)
+        if isinstance(exc, KeyboardInterrupt) and not isinstance(exc, RunInterrupted):
+            raise RunInterrupted(at()) from None
         raise
     if bar:
         bar.close()

@@ -42,7 +42,7 @@ from repro.data.record import EPISODES, SNAPSHOTS, load_snapshot, record_dir, sn
 from repro.envs import TASKS
 from repro.learners import OnlineLearner, build_learner
 from repro.runs import rundir
-from repro.runs.fsutil import holder_words, try_flock
+from repro.runs.fsutil import holder_words, try_flock, writable_folder
 from repro.train.build import build_env, run_action_dim
 from repro.train.common import episode_seed
 from repro.train.devices import DeviceError, resolve_device
@@ -385,16 +385,15 @@ def _staging_of(staging: Path, fields: dict) -> bool:
 @contextmanager
 def _make_lock(out: Path) -> Iterator[None]:
     """An flock on ``.{name}.make.lock`` beside ``out``: one ``make`` writes a destination at a time (a second
-    refuses in one line naming the first); the kernel releases it when its holder dies; removed on success."""
+    refuses in one line naming the first); the kernel releases it when its holder dies; removed on release."""
     out.parent.mkdir(parents=True, exist_ok=True)
     file = out.parent / f".{out.name}.make.lock"
     lock = try_flock(file, {"pid": os.getpid(), "host": socket.gethostname()})
     if lock is None:
         raise MakeError(f"{out} is being made by {holder_words(file)}; wait for it to finish (re-running then finds "
                         "it made)")
-    with lock:
+    with lock:  # removed while still held: a process that opened it before takes a new one and sees out made
         yield
-        file.unlink(missing_ok=True)  # still held: a process that opened it before now sees out made
 
 
 def make(source_dir: str | Path, kind: str, transitions: int | None = None, medium_fraction: float | None = None,
@@ -418,6 +417,7 @@ def make(source_dir: str | Path, kind: str, transitions: int | None = None, medi
                 return p.out
             raise MakeError(f"{p.out} holds another dataset ({manifest.get('kind')} from "
                             f"{manifest.get('source', {}).get('run_dir')}); move it away or pass --out")
+    writable_folder(p.out, "--out" if out is not None else "dataset folder")
     staging = p.out.parent / f".{p.out.name}.partial"
     with _make_lock(p.out):
         if p.out.exists():  # another make finished it while this one waited for the lock

@@ -9,7 +9,6 @@ from typing import Optional
 import typer
 
 from repro.config.schema import DatasetKind
-from repro.data.dataset import DatasetError
 from repro.runs.console import fail
 from repro.runs.fsutil import write_error_message
 
@@ -37,7 +36,5 @@ def register(dataset_app: typer.Typer) -> None:
 
         try:
             make(source, kind, transitions, medium_fraction, seed, out, results, task, device, echo=typer.echo)
-        except DatasetError as exc:  # MakeError included
-            fail(str(exc))
         except OSError as exc:  # a full disk: the staging folder is kept and a re-run resumes from it
             fail(write_error_message(exc), 1)

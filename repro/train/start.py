@@ -13,6 +13,7 @@ from pathlib import Path
 import yaml
 from omegaconf import DictConfig
 
+from repro.config.errors import UserError
 from repro.config.schema import RunConfig, budget_key, is_offline
 from repro.data.offline_replay import OfflineData
 from repro.runs import migrate, rundir
@@ -23,11 +24,11 @@ from repro.train.devices import resolve_device
 from repro.train.offline_loop import check_resume_dataset
 
 
-class CheckpointError(ValueError):
+class CheckpointError(UserError, ValueError):
     """A run's checkpoint that cannot be read (one line)."""
 
 
-class BudgetError(ValueError):
+class BudgetError(UserError, ValueError):
     """A budget that cannot be honoured for the run directory (one line)."""
 
 
