@@ -92,9 +92,9 @@ def _count(folder: Path, pattern: str) -> int:
 
 
 def test_sigkill_and_resume_matches_uninterrupted_run(tiny_taco: Path, tiny_taco_watched: Path, tmp_path: Path):
-    """Killed twice, stopped by Ctrl-C once, then resumed: the logs, the recording, the event files and the W&B history are those of the
-    uninterrupted runs (the W&B run keeps its id), and `train.video_every=last` leaves the final evaluation's
-    video only."""
+    """Killed twice, stopped by Ctrl-C once, then resumed: the logs, the recording, the event files and the W&B
+    history are those of the uninterrupted runs (the W&B run keeps its id), and `train.video_every=last` leaves the
+    final evaluation's video only."""
     run = tmp_path / REL
     snaps, eps = run / "record" / "snapshots", run / "record" / "episodes"
     cmd = train_cmd(tmp_path, "runtime.record=true", "runtime.tensorboard=true", "runtime.wandb=true",
