@@ -42,7 +42,9 @@ class _ContentPickler(pickle.Pickler):
     """Pickles a figure as its content: without what differs between two drawings of the same figure (the ids
     that key a transform's parents, the pyplot figure number, an array's memory order) and with functions (tick
     formatters) as their name, defaults and captured values (their code is the analysis code, which the cache's code
-    version holds)."""
+    version holds). The two names left out are matplotlib internals: a pinned, tested exception (docs/deviations.md,
+    "Third-party internals still used"; if matplotlib renames them, keys hold ids and every figure is drawn again,
+    never a stale one)."""
 
     def reducer_override(self, obj: Any) -> Any:
         kind = _KINDS.get(type(obj))
