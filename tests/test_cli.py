@@ -292,6 +292,7 @@ def _outputs(file, sweep):
         (["train", "profile=tiny", f"runtime.results_root={sub}"], f"runtime.results_root {sub} cannot be made"),
         (["dataset", "export", str(file.parent), "--format", "drqv2", "--out", str(sub)], f"--out {sub} cannot be"),
         (["reproduce", "--results", str(sub)], f"--results {sub} cannot be made"),
+        (["bench", "data", "--results", str(file)], f"--results {file} is a file"),
     ]
 
 

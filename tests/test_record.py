@@ -21,12 +21,13 @@ from repro.config.compose import compose, typed
 from repro.data.dataset import check_dataset
 from repro.data.record import Recorder, load_snapshot, snapshot_steps
 from repro.runs import rundir
+from repro.runs.console import Commands
 from repro.train import make_dataset as mk
 from repro.train.make_dataset_cli import register
 
 
 def _cli() -> typer.Typer:
-    app, dataset_app = typer.Typer(), typer.Typer()
+    app, dataset_app = typer.Typer(cls=Commands), typer.Typer()  # Commands: as `repro` catches a UserError
 
     @app.callback()
     def main() -> None:  # a group, so that `dataset make` is addressed as on the real CLI

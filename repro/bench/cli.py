@@ -29,7 +29,7 @@ import typer
 from repro.bench import results as results_file
 from repro.bench.online_update import time_update
 from repro.runs.console import fail
-from repro.runs.fsutil import atomic_write_text
+from repro.runs.fsutil import atomic_write_text, writable_folder
 
 
 def replay_memory_ratio(capacity: int = 100_000, action_dim: int = 12) -> dict:
@@ -163,8 +163,14 @@ def _write(out_dir: Path, bench: results_file.BenchFile, echo: Callable[[str], N
 
 
 # ---------------------------------------------------------------- the command line
+def _writable(root: Path) -> Path:
+    """``--results`` checked before any timing (fsutil's one rule for an output folder): one line, exit 2."""
+    writable_folder(root, "--results")
+    return root
+
+
 # The options every subcommand that times an agent shares
-RESULTS = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).")
+RESULTS = typer.Option(Path("runs"), "--results", help="Results root (writes bench/).", callback=_writable)
 DEVICE = typer.Option("cpu", "--device", help="cpu or cuda.")
 REPEATS = typer.Option(2, "--repeats", "--iters", help="Timed updates per setting (median reported).")
 WARMUP = typer.Option(1, "--warmup", help="Untimed warm-up updates before the timed ones.")

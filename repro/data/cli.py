@@ -16,10 +16,10 @@ from repro.data.convert import default_import_name, export_dataset, import_datas
 from repro.data.dataset import MANIFEST, check_dataset, dataset_path, load_manifest
 from repro.data.formats import FORMATS
 from repro.data.summary import plot_returns, summarize
-from repro.runs.console import fail
+from repro.runs.console import Commands, fail
 from repro.runs.fsutil import FULL, writable_folder, write_error_message
 
-dataset_app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+dataset_app = typer.Typer(cls=Commands, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                           help="Offline datasets: inspect, check, import and export.")
 
 FORMAT_HELP = " | ".join(FORMATS)

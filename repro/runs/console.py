@@ -29,11 +29,12 @@ def fail(message: str, code: int = 2) -> NoReturn:
 
 
 class Commands(TyperGroup):
-    """The group of the `repro` app (``typer.Typer(cls=Commands)``): the one place a :class:`UserError` raised by
-    any of its commands, sub-commands included, is caught and printed by :func:`fail` (one line, exit 2). A command
-    catches an error itself only to add to its message or to choose another exit code."""
+    """The group of the `repro` app (``typer.Typer(cls=Commands)``; `repro dataset`'s too, which also runs alone):
+    the one place a :class:`UserError` raised by any of its commands, sub-commands included, is caught and printed by
+    :func:`fail` (one line, exit 2). A command catches an error itself only to add to its message or to choose
+    another exit code."""
 
-    def invoke(self, ctx: typer.Context) -> Any:
+    def invoke(self, ctx: Any) -> Any:  # the context typer gives (its base class is private to typer)
         try:
             return super().invoke(ctx)
         except UserError as exc:
