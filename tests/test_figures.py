@@ -111,6 +111,33 @@ def test_full_coverage_tables_and_claims(full_report):
     assert '<img src="data:image/png;base64,' in page and 'alt="F1"' in page
 
 
+@pytest.mark.slow
+def test_full_coverage_report_cannot_be_misread(full_report):
+    """Issue 52's rules on the full-coverage tree (every artifact; its runs stop at 100K frames, the paper's values
+    are at 1M): no reproduced value stands beside the paper's with a Δ or 'Paper in CI' (each says its budget and
+    'not comparable'), every budget says env. frames with the action repeat beside them, F4 draws no diamond beside
+    the short curves and says so, the claims summary counts the table's rows."""
+    import pandas as pd
+
+    ctx, md, _ = full_report
+    t1 = pd.read_csv(ctx.out_dir / "T1.csv")
+    shown = t1[t1["n"] > 0]
+    assert len(shown) >= 27 and not shown["comparable"].any() and shown["diff"].isna().all()
+    t1_md = (ctx.out_dir / "T1.md").read_text()
+    assert "| Paper (1M env. frames, action repeat 2) | Reproduced (100K env. frames, action repeat 2) |" in t1_md
+    rows = [ln for ln in t1_md.splitlines() if ln.startswith("| ") and "(100K frames, not comparable)" in ln]
+    assert len(rows) == len(shown) and all("| n/a | n/a |" in ln for ln in rows)  # no Δ, no Paper in CI
+    claims = pd.read_csv(ctx.out_dir / "claims.csv", keep_default_na=False).set_index("id")
+    frames = claims[claims["budget"].str.contains("frames")]["budget"]
+    assert len(frames) >= 15 and frames.str.contains(r"env\. frames \(action repeat").all()
+    assert claims.loc["action_repeat", "budget"] == "1M env. frames (action repeat 1, 2, 4)"
+    assert claims.loc["offline_gain", "budget"] == "each run's offline.updates (gradient updates)"
+    text = md.read_text()
+    assert "the runs of Quadruped Run, Hopper Hop, Walker Run" in text and "stop short" in text  # F4's caption
+    counted = next(ln for ln in text.splitlines() if " rows (the paper's " in ln)
+    assert f"{len(claims)} rows" in counted
+
+
 def test_paper_only_view_with_no_runs(tmp_path):
     app = typer.Typer()
     register(app)
