@@ -17,7 +17,7 @@ from rich.table import Table
 from repro.launch import spec as specs
 from repro.launch.spec import PlannedRun, Selection, SweepError, SweepSpec
 from repro.launch.spec.sharing import SweepFrames, shared_frames
-from repro.runs.console import console, fail
+from repro.runs.console import Commands, console, fail
 from repro.runs.fsutil import writable_folder
 
 if TYPE_CHECKING:
@@ -389,7 +389,7 @@ def _print_status(name: str, root: Path, sdir: Path) -> list[RunStatus]:
 
 def main() -> None:
     """Stand-alone entry point (``python -m repro.launch.cli``) until the main CLI registers these."""
-    app = typer.Typer(add_completion=False, no_args_is_help=True)
+    app = typer.Typer(cls=Commands, add_completion=False, no_args_is_help=True)
     register(app)
     app()
 
