@@ -12,6 +12,7 @@ from omegaconf import OmegaConf
 from repro.bench import cli as bench
 from repro.data.cli import dataset_app
 from repro.launch import cli as launch_cli
+from repro.launch import doctor
 from repro.runs.console import Commands, console, fail
 from repro.train import make_dataset_cli as make_cli
 from repro_app import analysis_cli, plan_cli, reproduce, verify_cli, watch_cli
@@ -90,7 +91,7 @@ def tasks():
     console(min_width=120).print(table)
 
 
-for _commands in (launch_cli, analysis_cli, plan_cli, bench, reproduce, verify_cli, watch_cli):
+for _commands in (launch_cli, doctor, analysis_cli, plan_cli, bench, reproduce, verify_cli, watch_cli):
     _commands.register(app)
 make_cli.register(dataset_app)  # `repro dataset make` (training layer: it rolls out policies)
 app.add_typer(dataset_app, name="dataset")

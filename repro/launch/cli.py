@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shlex
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -27,11 +28,12 @@ if TYPE_CHECKING:
 # The same flags as `repro status`, `figures` and `report`.
 RESULTS_FLAGS = ("--results-root", "--results", "-r")
 STATE_STYLE = {"done": "green", "partial": "yellow", "extend": "yellow", "absent": "dim", "mismatch": "red",
-               "running": "cyan", "queued": "blue", "failed": "red", "pending": "dim", "waiting": "magenta"}
+               "running": "cyan", "queued": "blue", "failed": "red", "cancelled": "yellow", "pending": "dim",
+               "waiting": "magenta"}
 WATCH_SECONDS = 10.0  # `repro status --watch` without N
 # `repro status --watch` stops once every run is in one of these (a waiting run needs its dataset made and the
-# sweep launched again: watching cannot change it)
-FINISHED = ("done", "failed", "waiting")
+# sweep launched again, a cancelled one the sweep launched again: watching cannot change it)
+FINISHED = ("done", "failed", "cancelled", "waiting")
 
 
 class Launcher(str, Enum):
@@ -167,9 +169,19 @@ def sweep_cmd(
     runs_per_gpu: Optional[int] = typer.Option(
         None, "--runs-per-gpu", help="Local, with --gpus: runs sharing one GPU at once (default 1)."
     ),
+    preflight: bool = typer.Option(
+        True, "--preflight/--no-preflight", help="SLURM: first run `repro doctor` as one short job with the cluster "
+        "config (rendering, GPU ids, results root, datasets, versions on the node the runs get) and submit the "
+        "grid only if it passes."
+    ),
+    preflight_wait: float = typer.Option(
+        600, "--preflight-wait", metavar="SECONDS", min=1,
+        help="SLURM: how long the preflight job may stay pending before the sweep gives up (nothing submitted)."
+    ),
 ) -> None:
     """Run (or resume) every run of a sweep; DONE runs are skipped, partial ones resume."""
-    options = LaunchOptions(launcher, max_parallel, force, cluster_config, warm_start, gpus, runs_per_gpu)
+    options = LaunchOptions(launcher, max_parallel, force, cluster_config, warm_start, gpus, runs_per_gpu,
+                            preflight, preflight_wait)
     sel = specs.selection(tasks, seeds, frames, sets, results_root)
     report = launch_sweep(name, sel, options, dry_run)
     if report is None:
@@ -191,6 +203,8 @@ class LaunchOptions:
     warm_start: bool = False
     gpus: Optional[str] = None
     runs_per_gpu: Optional[int] = None
+    preflight: bool = True  # SLURM: `repro doctor` as one job first; the grid only if it passes
+    preflight_wait: float = 600.0  # SLURM: seconds the preflight job may stay pending
 
 
 def launch_sweep(name: str, sel: Selection, options: LaunchOptions, dry_run: bool = False,
@@ -202,6 +216,7 @@ def launch_sweep(name: str, sel: Selection, options: LaunchOptions, dry_run: boo
         fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
     packing = _gpu_packing(options.gpus, options.runs_per_gpu, options.launcher, options.max_parallel,
                            options.warm_start)
+    cluster_path = _slurm_ready(options) if options.launcher == Launcher.slurm and not dry_run else None
     spec = specs.load(name)
     planned = specs.plan(specs.expand(spec, sel))
     if agents is not None:
@@ -216,10 +231,24 @@ def launch_sweep(name: str, sel: Selection, options: LaunchOptions, dry_run: boo
     if any(p.state == "mismatch" for p in planned) and not options.force:
         raise SweepError(_mismatch_error(planned, root))
     _check_wandb(planned)
-    report = _launch(spec, planned, root, options.launcher, options.max_parallel, options.force,
-                     options.cluster_config, options.warm_start, packing)
-    _print_report(report, options.launcher, spec.name)
+    from repro.launch.slurm import PreflightFailed
+
+    try:
+        report = _launch(spec, planned, root, options, cluster_path, packing)
+    except PreflightFailed as exc:  # a failed check exits 1 (a cancelled wait 130), not 2
+        fail(str(exc), code=exc.code)
+    _print_report(report, options.launcher, spec.name, root)
     return report
+
+
+def _slurm_ready(options: LaunchOptions) -> Path:
+    """The cluster config of a SLURM launch (refused in one line without one) once sbatch is there: checked before
+    the sweep is expanded, so a refusal leaves nothing behind."""
+    from repro.launch.slurm import require_cluster_config, require_sbatch
+
+    path = require_cluster_config(options.cluster_config)
+    require_sbatch()
+    return path
 
 
 def _gpu_packing(gpus: Optional[str], runs_per_gpu: Optional[int], launcher: Launcher, max_parallel: Optional[int],
@@ -254,10 +283,10 @@ def _check_wandb(planned: list[PlannedRun]) -> None:
             raise SweepError(str(exc)) from None
 
 
-def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: Launcher, max_parallel: Optional[int],
-            force: bool, cluster_config: Optional[Path], warm_start: bool = False,
-            gpus: GpuPacking | None = None) -> LaunchReport:
-    """Record the launch in the sweep's state folder and submit (SLURM) or run (local) the planned runs."""
+def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, options: LaunchOptions,
+            cluster_path: Optional[Path], gpus: GpuPacking | None = None) -> LaunchReport:
+    """Record the launch in the sweep's state folder and submit (SLURM: after the preflight job, when on) or run
+    (local) the planned runs."""
     from repro.launch.local import default_parallel, run_local
     from repro.launch.state import record_launch, state_dir
 
@@ -265,20 +294,25 @@ def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, launcher: La
     grid = {p.key: {"run_dir": str(p.run_dir), "overrides": list(p.overrides),
                     **({"dataset": p.need.to_json()} if p.need else {})} for p in planned}
     say = console().print
-    if launcher == Launcher.slurm:
-        from repro.launch.slurm import cluster_config_path, load_cluster_config, submit
+    if options.launcher == Launcher.slurm:
+        from repro.launch.doctor import inputs_for
+        from repro.launch.slurm import load_cluster_config, preflight, submit
 
-        cpath = cluster_config_path(cluster_config)
-        cluster = load_cluster_config(cpath)
-        report = submit(planned, spec.name, sdir, cluster, force, say)
+        cluster = load_cluster_config(cluster_path)
+
+        def check(claimed: list[PlannedRun]) -> None:
+            preflight(inputs_for(claimed, root), spec.name, sdir, cluster, say, options.preflight_wait)
+
+        report = submit(planned, spec.name, sdir, cluster, options.force, say, check if options.preflight else None)
         record_launch(sdir, spec.name, spec.path, "slurm", grid, report.job_ids,
-                      {"cluster_config": str(cpath) if cpath else None})
+                      {"cluster_config": str(cluster_path) if cluster_path else None,
+                       "preflight": options.preflight})
         return report
-    parallel = gpus.max_parallel if gpus is not None else (max_parallel or default_parallel())
-    extra = {"max_parallel": parallel, "warm_start": warm_start,
+    parallel = gpus.max_parallel if gpus is not None else (options.max_parallel or default_parallel())
+    extra = {"max_parallel": parallel, "warm_start": options.warm_start,
              **({"gpus": list(gpus.gpus), "runs_per_gpu": gpus.per_gpu} if gpus is not None else {})}
     record_launch(sdir, spec.name, spec.path, "local", grid, extra=extra)
-    return run_local(planned, spec.name, sdir, parallel, force, say, warm_start, gpus)
+    return run_local(planned, spec.name, sdir, parallel, options.force, say, options.warm_start, gpus)
 
 
 def status_cmd(
@@ -341,7 +375,13 @@ def default_results_root() -> Path:
         raise SweepError(str(exc)) from None
 
 
-def _print_report(report, launcher: Launcher, sweep: str) -> None:
+def status_hint(sweep: str, root: Path) -> str:
+    """The `repro status` command that follows a launch: the sweep's name and the results root it ran under (the
+    user's -r / --set runtime.results_root kept, so the command works as printed)."""
+    return f"repro status {shlex.quote(sweep)} -r {shlex.quote(str(root))}"
+
+
+def _print_report(report, launcher: Launcher, sweep: str, root: Path) -> None:
     con = console()
     parts = [f"{len(report.started)} {'submitted' if launcher == Launcher.slurm else 'started'}"]
     if launcher == Launcher.local:
@@ -354,7 +394,7 @@ def _print_report(report, launcher: Launcher, sweep: str) -> None:
         parts.append(f"{len(report.waiting)} waiting for their dataset (not started)")
     con.print(f"sweep '{sweep}': " + ", ".join(parts), highlight=False)
     if report.job_ids:
-        con.print(f"SLURM job ids: {', '.join(report.job_ids)}; follow with `repro status {sweep}`",
+        con.print(f"SLURM job ids: {', '.join(report.job_ids)}; follow with `{status_hint(sweep, root)}`",
                   highlight=False)
     for key, log in report.failed:
         con.print(f"[red]failed[/] {escape(key)}: log {escape(log)}", highlight=False)

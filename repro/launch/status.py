@@ -1,22 +1,23 @@
-"""``repro status``: where every run of a sweep stands (done / running / queued / failed / pending / waiting)."""
+"""``repro status``: where every run of a sweep stands (done / running / queued / failed / cancelled / pending /
+waiting)."""
 
 from __future__ import annotations
 
 import csv
 import io
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from repro.launch import lock
-from repro.launch.slurm_query import FAILED, QUEUED, job_states
+from repro.launch.slurm_query import FAILED, NEVER_STARTS, QUEUED, explain, job_details
 from repro.launch.state import read_record, read_state
 from repro.launch.waiting import DatasetNeed, missing_reason
 from repro.runs.health import read_saturation
 from repro.runs.runformat import EVAL, STATE_DONE, STATE_PARTIAL, TRAIN, run_state
 
-STATUSES = ("done", "running", "queued", "failed", "pending", "waiting")
+STATUSES = ("done", "running", "queued", "failed", "pending", "waiting", "cancelled")
 
 
 @dataclass
@@ -27,7 +28,8 @@ class RunStatus:
     frame: int | None
     eval_return: float | None
     job_id: str | None
-    detail: str  # failed: the error; running: where; pending: partial or not started; waiting: the dataset
+    detail: str  # failed: the error; running: where; queued: SLURM's pending reason; cancelled: before or after it
+    # started; pending: partial or not started; waiting: the dataset
     log: str | None = None  # failed runs: the file holding the error (local log or SLURM stderr)
     health: str = ""  # a saturated actor (repro/runs/health.py), whatever the status: "actor saturated since ..."
 
@@ -75,9 +77,11 @@ def _lock_owner(results_root: Path, run_dir: Path) -> lock.LockInfo | None:
 
 
 def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
-               slurm_states: dict[str, str] | None, waiting: str | None = None) -> RunStatus:
+               slurm_states: dict[str, str] | None, waiting: str | None = None,
+               slurm_reasons: Mapping[str, str] | None = None) -> RunStatus:
     """The run's status; ``waiting`` (why its dataset is not usable yet) makes a run that is neither done
-    nor held ``waiting``, even one whose earlier attempt failed."""
+    nor held ``waiting``, even one whose earlier attempt failed. ``slurm_reasons``: squeue's pending reason per
+    job id (shown, explained, for a queued run)."""
     frame, ret = progress(run_dir)
     record = read_record(sdir, key)
     budget = record.budget if record is not None else None  # done at the sweep's budget, even while extended beyond
@@ -97,12 +101,20 @@ def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
             sstate = (slurm_states or {}).get(owner.job_id, "UNKNOWN")
             status = "queued" if sstate in QUEUED else "running"
             shown = "" if sstate in ("PENDING", "RUNNING") else f"SLURM {sstate}"
-            return make(status, ", ".join(x for x in (shown, "partial" if state == STATE_PARTIAL else "") if x))
+            reason = (slurm_reasons or {}).get(owner.job_id, "") if status == "queued" else ""
+            why = explain(reason) + ("; it never starts by itself: scancel it, fix the cluster config, launch the "
+                                     "sweep again" if reason in NEVER_STARTS else "") if reason else ""
+            parts = (shown, why, "partial" if state == STATE_PARTIAL else "")
+            return make(status, ", ".join(x for x in parts if x))
         return make("running", f"pid {owner.child_pid or owner.pid} on {owner.host}")
     if waiting:
         return make("waiting", waiting)
     if record is not None:
         sstate = (slurm_states or {}).get(record.job_id or "", "")
+        if sstate == "CANCELLED" and record.status != "failed":
+            when = "before it started" if record.status == "queued" and state != STATE_PARTIAL else "while it ran"
+            resume = "partial: resumes from checkpoint; " if state == STATE_PARTIAL else ""
+            return make("cancelled", f"its job was cancelled {when} ({resume}launching the sweep again submits it)")
         if record.status == "failed" or sstate in FAILED:
             why = record.error or (f"SLURM {sstate}" if sstate else f"exit {record.returncode}")
             failed = make("failed", why)
@@ -129,9 +141,11 @@ def collect(runs: dict[str, Path], results_root: Path, sdir: Path) -> list[RunSt
         owner = _lock_owner(results_root, run_dir)
         if owner and owner.job_id:
             jobs.append(owner.job_id)
-    states = job_states(jobs) if jobs else {}
+    details = job_details(jobs) if jobs else {}
+    states = None if details is None else {j: d.state for j, d in details.items()}
+    pending = {j: d.reason for j, d in (details or {}).items() if d.reason}
     reasons = waiting_reasons(sdir, runs)
-    return [run_status(k, d, results_root, sdir, states, reasons.get(k)) for k, d in runs.items()]
+    return [run_status(k, d, results_root, sdir, states, reasons.get(k), pending) for k, d in runs.items()]
 
 
 def waiting_reasons(sdir: Path, runs: dict[str, Path]) -> dict[str, str]:
