@@ -54,6 +54,9 @@ def render_curves(
     fig, axes = panel_grid(len(tasks), ncols=ncols, size=(4.0, 3.0) if len(tasks) > 1 else (6.5, 4.2))
     any_data = drew_published = False
     short_panels = []  # panels whose runs stop short of the paper's budget: no diamond there
+    # each run's last evaluated frame (the scores' evidence; the curves' grid may stop below it)
+    last_frames = ctx.scores.drop_duplicates("run_id").set_index("run_id")["last_frame"] \
+        if paper_marks and not ctx.no_runs else None
     for ax, task in zip(axes, tasks):
         rows = curves[curves["task"] == task] if not curves.empty else curves
         if published and ctx.published_band:
@@ -62,7 +65,8 @@ def render_curves(
         if not rows.empty:
             any_data = True
             curve_panel(ax, rows, labels, colors, ctx.curve_reps, ctx.seed, per_seed=per_seed)
-        if _paper_marks(ax, task, rows, {lab: v for (t, lab), v in paper_marks.items() if t == task}, colors):
+        if _paper_marks(ax, task, rows, {lab: v for (t, lab), v in paper_marks.items() if t == task}, colors,
+                        last_frames):
             short_panels.append(task)
         ax.xaxis.set_major_formatter(FuncFormatter(frames_label))
         if hline is not None and not rows.empty:
@@ -86,15 +90,19 @@ def render_curves(
                           figures=[png], has_runs=any_data)
 
 
-def _paper_marks(ax, task: str, rows: pd.DataFrame, marks: dict[str, float], colors: dict[str, str]) -> bool:
+def _paper_marks(ax, task: str, rows: pd.DataFrame, marks: dict[str, float], colors: dict[str, str],
+                 last_frames: pd.Series | None = None) -> bool:
     """The paper's values at its budget (diamonds at 1M frames) on a panel with no runs, or whose runs reached that
     budget (analysis.comparable.reached: a run's last evaluation at or past it), the one rule of what may stand
     beside the paper's values. A panel whose runs all stop short gets no diamond but a note in the panel, "runs at
     400 frames: the paper's 1M values are not comparable" (returns True then). A panel with neither runs nor marks
-    gets a placeholder, one with marks only a legend of them."""
+    gets a placeholder, one with marks only a legend of them. ``last_frames``: each run's last evaluated frame by
+    run id (analysis.scores.final_scores' ``last_frame``); a run not in it is read from its curve."""
     paper = paper_frames()
     last = (rows.groupby("run_id")["frame"].max() if "run_id" in rows.columns else rows["frame"]) \
         if not rows.empty else pd.Series(dtype=float)
+    if last_frames is not None and not last.empty and "run_id" in rows.columns:
+        last = last_frames.reindex(last.index).fillna(last)
     short = bool(marks) and not rows.empty and not any(reached(f, paper.value) for f in last)
     if marks and not short:
         for lab, v in marks.items():
@@ -103,7 +111,8 @@ def _paper_marks(ax, task: str, rows: pd.DataFrame, marks: dict[str, float], col
         lo, hi = float(last.min()), float(last.max())
         at = short_number(hi) if lo == hi else f"{short_number(lo)}-{short_number(hi)}"
         ax.text(0.98, 0.03, f"runs at {at} frames: the paper's\n{paper.short()} values not comparable",
-                transform=ax.transAxes, ha="right", va="bottom", fontsize=7, color="#b22222", style="italic")
+                transform=ax.transAxes, ha="right", va="bottom", fontsize=7, color="#b22222", style="italic",
+                bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.85, "pad": 1.5})
     if rows.empty and not marks:
         placeholder(ax, f"no runs for {task_display(task)}")
     elif rows.empty:
