@@ -97,7 +97,38 @@ def test_a_held_lock_refuses_in_process_and_a_released_one_does_not(tmp_path: Pa
     with rundir.acquire_writer_lock(run):
         with pytest.raises(rundir.RunLocked, match=f"pid {os.getpid()} on"):
             rundir.acquire_writer_lock(run)  # flock: another open file description conflicts, same process too
-    rundir.acquire_writer_lock(run).release()
+    assert not (run / rundir.WRITER_LOCK).exists()  # released: its file removed (a run that ended leaves none)
+    with rundir.acquire_writer_lock(run):  # a new file, locked as the first was
+        assert (run / rundir.WRITER_LOCK).exists()
+        with pytest.raises(rundir.RunLocked):
+            rundir.acquire_writer_lock(run)
+    assert not any(run.iterdir())
+
+
+def test_a_lock_taken_on_a_file_its_holder_removed_is_taken_again_on_the_new_file(tmp_path: Path, monkeypatch):
+    """A start that opened .writer.lock just before its holder released it (removing the file) gets the flock of a
+    removed file: try_flock must see it and lock the file at the path, or a third start would lock a new file beside
+    it and two would write. The holder's removal is made to land between this start's open and its flock."""
+    import fcntl
+
+    from repro.runs import fsutil
+
+    real, removed = fcntl.flock, []
+
+    def flock_after_removal(fd: int, op: int) -> None:
+        if op & fcntl.LOCK_EX and not removed:
+            removed.append((tmp_path / rundir.WRITER_LOCK).unlink())  # the holder released it meanwhile
+        real(fd, op)
+
+    monkeypatch.setattr(fsutil.fcntl, "flock", flock_after_removal)
+    lock = rundir.acquire_writer_lock(tmp_path)
+    monkeypatch.undo()
+    held = os.fstat(lock.fd)
+    assert removed and (os.stat(tmp_path / rundir.WRITER_LOCK).st_ino, os.stat(tmp_path / rundir.WRITER_LOCK).st_dev) \
+        == (held.st_ino, held.st_dev)  # the lock is on the file at the path
+    with pytest.raises(rundir.RunLocked):
+        rundir.acquire_writer_lock(tmp_path)
+    lock.release()
 
 
 def _snapshot(folder: Path) -> dict[str, str]:
