@@ -112,12 +112,21 @@ def build_markdown(ctx: Context, artifacts, verdicts, findings,
     return "\n".join(lines) + "\n"
 
 
+def _budget_words(ctx: Context) -> str:
+    """The tables' budget with its unit and the action repeats of the online runs beside it: '1M env. frames (action
+    repeat 2)' (issue 52: a budget never without its unit)."""
+    if ctx.budget_label is not None or ctx.results.runs.empty:
+        return ctx.budget_text()
+    runs = ctx.results.runs
+    return ctx.frames_budget(runs[runs["dataset"].isna()]).text()
+
+
 def _header(ctx: Context, verdicts, findings) -> list[str]:
     """The title, what the scores are, what was loaded, and the claim and audit counts."""
     res = ctx.results
     lines = ["# TACO reproduction report", "",
              f"Generated {dt.datetime.now().astimezone().isoformat(timespec='seconds')} from `{res.root}`; "
-             f"scores at {ctx.budget_text()}; bootstrap: {ctx.reps:,} repetitions, random state {ctx.seed}; "
+             f"scores at {_budget_words(ctx)}; bootstrap: {ctx.reps:,} repetitions, random state {ctx.seed}; "
              "std over seeds with ddof=1.",
              "", f"Interval estimator: {ESTIMATOR} (rliable {_version('rliable')})."]
     if res.empty:
@@ -134,7 +143,7 @@ def _header(ctx: Context, verdicts, findings) -> list[str]:
 
 def _claims_section(ctx: Context, verdicts) -> str:
     claims_note = ("Each claim is judged at its own budget (column Budget, from analysis/claim_budgets.csv, not "
-                   f"from the runs; the tables below use {ctx.budget_text()}) and only from cells with at least the "
+                   f"from the runs; the tables below use {_budget_words(ctx)}) and only from cells with at least the "
                    "seeds in column Seeds that reached it; otherwise the verdict is 'not enough data' with the "
                    "reason.")
     if any(v.indicative for v in verdicts):

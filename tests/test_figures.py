@@ -133,6 +133,7 @@ def test_full_coverage_report_cannot_be_misread(full_report):
     assert claims.loc["action_repeat", "budget"] == "1M env. frames (action repeat 1, 2, 4)"
     assert claims.loc["offline_gain", "budget"] == "each run's offline.updates (gradient updates)"
     text = md.read_text()
+    assert "; scores at 100K env. frames (action repeat 1, 2, 4);" in text  # the header's budget, its unit, repeats
     assert "the runs of Quadruped Run, Hopper Hop, Walker Run" in text and "stop short" in text  # F4's caption
     counted = next(ln for ln in text.splitlines() if " rows (the paper's " in ln)
     assert f"{len(claims)} rows" in counted
