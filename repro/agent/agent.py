@@ -7,10 +7,12 @@ a metrics dict of detached 0-d tensors (no host sync); it never touches files.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import torch
 
 from repro.agent import fast
-from repro.agent.backbone import BackboneLearner
+from repro.agent.backbone import DRQV2, BackboneLearner, BackboneParts
 from repro.agent.graphs import GraphedUpdate
 from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics
 from repro.config.schema import AgentConfig
@@ -20,15 +22,15 @@ __all__ = ["ACTOR_METRICS", "CRITIC_METRICS", "Agent"]
 
 class Agent(BackboneLearner):
     """DrQ-v2 actor-critic with an optional action encoder and pluggable auxiliary objectives (learner
-    ``actor_critic``)."""
+    ``actor_critic``); on other backbone ``parts``, the online update of a DrQ-v2 variant (A-LIX: ``alix.py``)."""
 
-    update_metrics = CRITIC_METRICS + ACTOR_METRICS
+    update_metrics: ClassVar[tuple[str, ...]] = CRITIC_METRICS + ACTOR_METRICS
     explores = True  # uniform actions for the first explore_steps, then noisy policy samples
     graphed = True  # agent.fast on CUDA: update() recorded once in a CUDA graph and replayed (graphs.py)
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
-                 device: torch.device | str = "cpu", explore_steps: int = 0):
-        super().__init__(cfg, obs_shape, action_dim, device, explore_steps)
+                 device: torch.device | str = "cpu", explore_steps: int = 0, parts: BackboneParts = DRQV2):
+        super().__init__(cfg, obs_shape, action_dim, device, explore_steps, parts)
         self.graph = GraphedUpdate(self.static_update, self.device) if self.backbone.fast.graphs else None
 
     @property

@@ -1,7 +1,8 @@
 """A-LIX (Cetin et al., ICML 2022, "Stabilizing Off-Policy Deep RL from Pixels"): DrQ-v2 whose encoder mixes each
 feature map with its neighbours after every convolution (local signal mixing, LIX), by a strength S learned through
-its own gradient rule and its own optimizer settings. Online learner ``alix`` (``repro/config/alix.py``), built on the
-DrQ-v2 backbone (``backbone.py``) as the online agent is.
+its own gradient rule and its own optimizer settings. Online learner ``alix`` (``repro/config/alix.py``): the online
+agent (``agent.py``) on the DrQ-v2 backbone (``backbone.py``) given A-LIX's parts (:func:`alix_parts`: the encoder,
+the critic, its loss, the encoder's parameter groups and the input augmentation below).
 
 Written from the paper's equations and the facts of the authors' code (Aladoro/Stabilizing-Off-Policy-RL @ 34665c8:
 ``analysis_layers.py``, ``analysis_custom_autograd_functions.py``, ``analysis_modules.py``, ``analysis_optimizers.py``,
@@ -20,15 +21,17 @@ Written from the paper's equations and the facts of the authors' code (Aladoro/S
   batch-mean gradient g: with the N x N neighbourhood (replicate-padded) of g, signal = (sum of the squares over the
   neighbourhood - g^2) / (N^2 - 1) and noise = sum of (neighbour - g)^2 / (N^2 - 1). High discontinuity (ND above
   the target) gives a negative gradient, so S grows.
-* **Its optimizer**: S is a parameter group of the encoder's Adam with its own lr and betas.
+* **Its optimizer** (:func:`strength_apart`): S is a parameter group of the encoder's Adam with its own lr and betas.
 * **The critic** (:class:`ParallelCritic`): the authors' twin Q heads as batched (2, in, out) weights, orthogonal
-  with the ReLU gain (``utils.DenseParallel``), and their loss form sum over the two heads then mean.
+  with the ReLU gain (``utils.DenseParallel``), and their loss form sum over the two heads then mean
+  (:func:`parallel_critic_loss`).
+* **The input** (:func:`input_aug`): the frames as they are (the authors' NoShiftAug), or DrQ-v2's shift.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from functools import partial
 from typing import Any, cast
 
 import numpy as np
@@ -37,10 +40,11 @@ import torch.nn.functional as F
 from torch import nn
 
 from repro.agent import fast
+from repro.agent.agent import Agent
 from repro.agent.aug import RandomShift
-from repro.agent.backbone import BackboneLearner, DrQV2Backbone, _unique
-from repro.agent.losses import ACTOR_METRICS, CRITIC_METRICS, Metrics, critic_metrics
-from repro.agent.networks import ActionEncoder, Actor, Encoder, default_latent_action_dim, orthogonal_init, trunk
+from repro.agent.backbone import Augment, BackboneParts, ParamGroup
+from repro.agent.losses import Metrics, critic_metrics
+from repro.agent.networks import Encoder, orthogonal_init, trunk
 from repro.config.alix import ALIXConfig
 from repro.config.schema import AgentConfig, learner_section
 
@@ -179,103 +183,66 @@ class ParallelCritic(nn.Module):
         return qs[:, 0:1], qs[:, 1:2]
 
 
-class ALIXBackbone(DrQV2Backbone):
-    """The DrQ-v2 backbone with A-LIX's encoder, critic, encoder optimizer, input augmentation and critic loss form."""
+def strength_apart(own: ALIXConfig, encoder: nn.Module) -> list[ParamGroup]:
+    """The encoder's Adam groups (the parts' ``encoder_groups``): its convolutions at ``agent.lr`` first (also the
+    auxiliary step's, with objectives), then S with its own lr and betas (the critic step's alone)."""
+    strength = encoder.get_parameter("strength")
+    convs = [p for p in encoder.parameters() if p is not strength]
+    return [{"params": convs},
+            {"params": [strength], "lr": own.strength_lr, "betas": (own.strength_beta1, own.strength_beta2)}]
 
-    def __init__(self, cfg: AgentConfig, own: ALIXConfig, obs_shape: tuple[int, int, int], action_dim: int,
-                 device: torch.device | str = "cpu"):
-        self.own = own
-        super().__init__(cfg, obs_shape, action_dim, device, graphs=False)
 
-    def _build_networks(self, obs_shape: tuple[int, int, int]) -> None:
-        cfg, own = self.cfg, self.own
-        # the frames as float (the authors' NoShiftAug), or DrQ-v2's random shift with agent.alix.input_shift > 0
-        self.aug: Callable[[torch.Tensor], torch.Tensor] = (
-            RandomShift(pad=own.input_shift) if own.input_shift > 0 else _as_float)
-        # an Encoder (the backbone's type) with LIX; the critic below is A-LIX's own (the backbone types it as DrQ-v2's)
-        self.encoder = fast.prepare_encoder(ALIXEncoder(obs_shape, own).to(self.device), self.fast)
-        self._encode = torch.compile(self.encoder, dynamic=False) if cfg.compile or self.fast.compile \
-            else self.encoder
-        self.repr_dim = self.encoder.repr_dim
-        self.action_encoder = None
-        self.step_dim = self.action_dim
-        if cfg.action_encoder:  # not A-LIX's (its agent file: false): TACO's latent actions, as the backbone's
-            latent = cfg.latent_action_dim or default_latent_action_dim(self.action_dim, cfg.latent_action_rounding)
-            self.action_encoder = ActionEncoder(self.action_dim, latent, cfg.K, cfg.action_hidden_dim).to(self.device)
-            self.step_dim = latent
-        self.actor = Actor(self.repr_dim, self.action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
-        self.critic = ParallelCritic(self.repr_dim, self.step_dim, cfg.feature_dim, cfg.hidden_dim,  # type: ignore[assignment]
-                                     own.critic_relu_gain).to(self.device)
-        self.critic_target = ParallelCritic(self.repr_dim, self.step_dim, cfg.feature_dim,  # type: ignore[assignment]
-                                            cfg.hidden_dim, own.critic_relu_gain).to(self.device)
-        self.critic_target.load_state_dict(self.critic.state_dict())
-        self.critic_target.requires_grad_(False)
+def parallel_critic_loss(critic: nn.Module, critic_target: nn.Module, h: torch.Tensor, action: torch.Tensor,
+                         reward: torch.Tensor, discount: torch.Tensor, next_h: torch.Tensor, next_action: torch.Tensor
+                         ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], Metrics]:
+    """DrQ-v2's critic loss in the authors' form (the parts' ``critic_loss``, over :class:`ParallelCritic`): sum over
+    the two heads of (Q_i - target)^2, mean over the batch; float32 always, as the backbone's."""
+    critic_values, target_values = cast(ParallelCritic, critic).values, cast(ParallelCritic, critic_target).values
+    with torch.no_grad():
+        target_q = reward + discount * target_values(next_h, next_action).amin(dim=1, keepdim=True)
+    qs = critic_values(h, action)
+    loss = (qs - target_q).square().sum(1).mean()
+    q1, q2 = qs[:, 0:1], qs[:, 1:2]
+    return loss, (q1, q2), critic_metrics(loss, q1, q2, target_q)
 
-    def _build_optimizers(self) -> None:
-        """As the backbone's, but S is its own parameter group of the encoder's Adam (lr, betas of agent.alix), and
-        the auxiliary step (objectives, if an agent file names any) leaves S alone."""
-        lr, adam, own = self.cfg.lr, fast.adam(self.fast), self.own
-        strength = cast(ALIXEncoder, self.encoder).strength
-        convs = [p for p in self.encoder.parameters() if p is not strength]
-        self.encoder_opt = adam([{"params": convs},
-                                 {"params": [strength], "lr": own.strength_lr,
-                                  "betas": (own.strength_beta1, own.strength_beta2)}], lr=lr)
-        self.actor_opt = adam(self.actor.parameters(), lr=lr)
-        encoded = list(self.action_encoder.parameters()) if self.action_encoder is not None else []
-        self.critic_opt = adam(list(self.critic.parameters()) + encoded, lr=lr)
-        self.aux_opt = None
-        if self.objectives:
-            aux = convs + list(self.objectives.parameters()) + encoded
-            if self.shared is not None:
-                aux += list(self.shared.parameters())
-            self.aux_opt = adam(_unique(aux), lr=lr)
 
-    def critic_loss(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
-                    next_h: torch.Tensor, step: int
-                    ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], Metrics]:
-        """DrQ-v2's critic loss in the authors' form: sum over the two heads of (Q_i - target)^2, mean over the
-        batch."""
-        critic, target = cast(ParallelCritic, self.critic), cast(ParallelCritic, self.critic_target)
-        with torch.no_grad():  # float32 always, as the backbone's (its module docstring says why)
-            dist = self.actor(next_h, self.stddev(step))
-            next_action = dist.sample(clip=self.cfg.stddev_clip)
-            target_v = target.values(next_h, self.encode_action(next_action)).amin(dim=1, keepdim=True)
-            target_q = reward + discount * target_v
-        qs = critic.values(h, self.encode_action(action))
-        loss = (qs - target_q).square().sum(1).mean()
-        q1, q2 = qs[:, 0:1], qs[:, 1:2]
-        return loss, (q1, q2), critic_metrics(loss, q1, q2, target_q)
+def input_aug(input_shift: int, plan: fast.FastPlan) -> Augment:
+    """The frames as float (the authors' NoShiftAug), or DrQ-v2's random shift by ``agent.alix.input_shift`` > 0;
+    agent.fast's shift of uint8 frames is not used (``plan``: unread)."""
+    return RandomShift(pad=input_shift) if input_shift > 0 else _as_float
 
 
 def _as_float(x: torch.Tensor) -> torch.Tensor:
     return x.float()
 
 
-class ALIX(BackboneLearner):
-    """Online learner ``alix``: DrQ-v2's update (critic with the encoder, actor on sg(h), target critic) on
-    :class:`ALIXBackbone`; S moves in the critic step, through the encoder's optimizer."""
+def alix_parts(own: ALIXConfig) -> BackboneParts:
+    """A-LIX's parts of the DrQ-v2 backbone: its encoder, critic, critic loss, encoder optimizer groups and input
+    augmentation (the action encoder, actor, objectives and the other optimizers are the backbone's)."""
+    return BackboneParts(encoder=partial(ALIXEncoder, own=own),
+                         critic=partial(ParallelCritic, relu_gain=own.critic_relu_gain),
+                         critic_loss=parallel_critic_loss, encoder_groups=partial(strength_apart, own),
+                         aug=partial(input_aug, own.input_shift))
 
-    update_metrics = CRITIC_METRICS + ACTOR_METRICS + (STRENGTH_METRIC,)
-    explores = True  # uniform actions for the first train.explore_steps, then noisy policy samples
+
+class ALIX(Agent):
+    """Online learner ``alix``: DrQ-v2's online update (``agent.py``: critic with the encoder, actor on sg(h), target
+    critic, then the auxiliary step if the agent file names objectives) on the backbone with A-LIX's parts
+    (:func:`alix_parts`); S moves in the critic step, through the encoder's optimizer. Never recorded in a CUDA
+    graph."""
+
+    update_metrics = Agent.update_metrics + (STRENGTH_METRIC,)
+    graphed = False
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
                  device: torch.device | str = "cpu", explore_steps: int = 0):
-        # BackboneLearner's constructor, with A-LIX's backbone
-        self.cfg = cfg
         self.own: ALIXConfig = learner_section(cfg, ALIXConfig)
-        self.explore_steps = explore_steps
-        self.backbone = ALIXBackbone(cfg, self.own, obs_shape, action_dim, device)
-        self.sample_options = self.backbone.sample_options
-
-    @property
-    def resolved(self) -> dict[str, object]:
-        """What resolved.json records beyond the config: agent.fast's plan, when it is on."""
-        return fast.resolved(self.backbone.fast, self.cfg.fast)
+        super().__init__(cfg, obs_shape, action_dim, device, explore_steps, parts=alix_parts(self.own))
 
     @property
     def strength(self) -> torch.Tensor:
         """S as the next pass reads it (clamped to [0, 1]), detached."""
-        return cast(ALIXEncoder, self.backbone.encoder).strength.detach().clamp(0.0, 1.0)
+        return self.backbone.encoder.get_parameter("strength").detach().clamp(0.0, 1.0)
 
     def act(self, obs: np.ndarray, step: int, eval_mode: bool) -> np.ndarray:
         """The backbone's action, with the encoder in eval mode (no mixing), as the authors act."""
@@ -288,13 +255,8 @@ class ALIX(BackboneLearner):
             encoder.train(mode)
 
     def update(self, batch: dict[str, torch.Tensor], step: int) -> Metrics:
-        """One A-LIX update (the authors' ``DrQV2Agent.update``): critic and encoder (S included), actor on sg(h),
-        target critic; then the auxiliary step, if the agent file names objectives. Detached 0-d metrics."""
-        bb = self.backbone
-        h, next_h, action, reward, discount = bb.encode_batch(batch)
-        metrics = bb.critic_step(h, action, reward, discount, next_h, step)
-        metrics.update(bb.actor_step(h.detach(), step))
-        bb.update_target()
-        metrics.update(bb.aux_step(batch))
+        """One A-LIX update (the authors' ``DrQV2Agent.update``): the online agent's, then S after it. Detached 0-d
+        metrics."""
+        metrics = super().update(batch, step)
         metrics[STRENGTH_METRIC] = self.strength
         return metrics

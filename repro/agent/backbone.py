@@ -1,12 +1,17 @@
-"""The DrQ-v2 pixel backbone as one component: what the online agent (``agent.py``) and the offline learners on it
-(TD3+BC, CQL, IQL: ``repro/learners/``) own as their ``backbone`` attribute.
+"""The DrQ-v2 pixel backbone as one component: what the online agent (``agent.py``), A-LIX (``alix.py``) and the
+offline learners on it (TD3+BC, CQL, IQL: ``repro/learners/``) own as their ``backbone`` attribute.
 
 It holds the networks (encoder, optional action encoder u, actor, twin critic, target critic), the auxiliary
-objectives (``agent.objectives``) and their shared heads, the optimizers (built in one place,
-``_build_optimizers``), the augmentation ``aug`` and the encode function ``_encode`` (the compiled encoder with
-``agent.compile``), and the steps an update is made of: encoding a batch, DrQ-v2's critic loss and step, its actor
-step, the target update and the auxiliary step. Each learner's ``update()`` calls them in its reference's order.
-The losses are the pure functions of ``repro/agent/losses.py``.
+objectives (``agent.objectives``) and their shared heads, the optimizers, the augmentation ``aug`` and the encode
+function ``_encode`` (the compiled encoder with ``agent.compile``), and the steps an update is made of: encoding a
+batch, the critic loss and step, DrQ-v2's actor step, the target update and the auxiliary step. Each learner's
+``update()`` calls them in its reference's order. The losses are the pure functions of ``repro/agent/losses.py``.
+
+**Its parts** (:class:`BackboneParts`, a constructor argument, as drqv2's ``DrQV2Agent`` names its encoder, critic
+and optimizers): the encoder, the twin critic, the critic loss, the encoder optimizer's parameter groups and the
+frames' augmentation, DrQ-v2's by default. A variant passes its own (A-LIX: ``alix.py``; docs/extending.md, "A
+backbone variant"); the backbone builds them in one order, which draws the initialisation: augmentation, encoder,
+action encoder, actor, critic, target critic (a copy), objectives, optimizers.
 
 ``autocast``: with ``agent.amp`` (or ``agent.fast`` where bf16 is native) the online agent runs the encoder's
 convolutions under bfloat16 autocast and everything after them in float32: the trunks, the actor's tanh, the Q heads,
@@ -22,8 +27,8 @@ from __future__ import annotations
 from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import replace
-from typing import ClassVar, cast
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar, Protocol, cast
 
 import numpy as np
 import torch
@@ -38,6 +43,8 @@ from repro.config.compose import objective_params
 from repro.config.schema import AgentConfig
 
 EncodedBatch = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]  # h, h', a, r, discount
+Augment = Callable[[torch.Tensor], torch.Tensor]  # a batch of uint8 frames -> the encoder's input
+ParamGroup = dict[str, Any]  # one parameter group of a torch optimizer: "params" and the options it sets itself
 
 
 def soft_update(net: nn.Module, target: nn.Module, tau: float) -> None:
@@ -56,12 +63,68 @@ def optimize(loss: torch.Tensor, *opts: torch.optim.Optimizer) -> None:
         opt.step()
 
 
+class CriticLoss(Protocol):
+    """A critic loss: from the critic and its target, the features ``h`` (with the encoder's gradient), the data
+    actions as the critic takes them (``u(a)``), the reward, the discount (gamma^n x not-done), the next features
+    ``next_h`` and a policy sample at them as the critic takes it (``u(a')``, no gradient), it returns the loss,
+    (Q1, Q2) at the data actions (float32, (B, 1) each) and the critic's metrics (``losses.CRITIC_METRICS``). The
+    target is computed without gradient (the target critic's parameters take none)."""
+
+    def __call__(self, critic: nn.Module, critic_target: nn.Module, h: torch.Tensor, action: torch.Tensor,
+                 reward: torch.Tensor, discount: torch.Tensor, next_h: torch.Tensor, next_action: torch.Tensor
+                 ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], Metrics]: ...
+
+
+def twin_critic_loss(critic: nn.Module, critic_target: nn.Module, h: torch.Tensor, action: torch.Tensor,
+                     reward: torch.Tensor, discount: torch.Tensor, next_h: torch.Tensor, next_action: torch.Tensor
+                     ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], Metrics]:
+    """DrQ-v2's critic loss (a :class:`CriticLoss`): sum_i mse(Q_i(h, u(a)), r + discount x min_i Qtarget_i(h',
+    u(a'))), in float32 always (the module docstring says why)."""
+    with torch.no_grad():
+        tq1, tq2 = critic_target(next_h, next_action)
+        target_q = losses.critic_target(reward, discount, tq1, tq2)
+    q1, q2 = critic(h, action)
+    loss, (q1, q2) = losses.critic_loss(q1, q2, target_q)
+    return loss, (q1, q2), losses.critic_metrics(loss, q1, q2, target_q)
+
+
+def one_group(encoder: nn.Module) -> list[ParamGroup]:
+    """DrQ-v2's encoder optimizer: every parameter of the encoder in one group, at ``agent.lr``."""
+    return [{"params": list(encoder.parameters())}]
+
+
+@dataclass(frozen=True)
+class BackboneParts:
+    """What a backbone variant replaces, each DrQ-v2's by default. The backbone calls each once (the critic twice:
+    the critic and its target) with what it knows then; a variant binds its own settings with
+    ``functools.partial``."""
+
+    encoder: Callable[[tuple[int, int, int]], Encoder] = Encoder
+    """(C, H, W) -> the conv encoder: an :class:`Encoder` (its ``repr_dim``; acting and the objectives use it)."""
+    critic: Callable[[int, int, int, int], nn.Module] = Critic
+    """(repr_dim, action_in_dim, feature_dim, hidden_dim) -> a twin critic: ``critic(h, u(a))`` gives (Q1, Q2), each
+    (B, 1). The backbone builds two: the critic and its target (a copy, without gradient)."""
+    critic_loss: CriticLoss = twin_critic_loss
+    """The critic step's loss (:class:`CriticLoss`), over the critic this part's ``critic`` built."""
+    encoder_groups: Callable[[nn.Module], list[ParamGroup]] = one_group
+    """encoder -> the parameter groups of its Adam (torch's ``{"params": [...], option: value}``, options over
+    ``agent.lr``). The first group is also trained by the auxiliary step (with objectives); the others are the
+    critic step's alone."""
+    aug: Callable[[fast.FastPlan], Augment] = fast.shift
+    """agent.fast's plan -> the augmentation of the frames before the encoder (DrQ-v2's random shift by 4)."""
+
+
+DRQV2 = BackboneParts()  # DrQ-v2's parts: the online agent's, TD3+BC's, CQL's, IQL's
+
+
 class DrQV2Backbone:
-    """DrQ-v2's networks, optimizers and update steps, with an optional action encoder and auxiliary objectives."""
+    """DrQ-v2's networks, optimizers and update steps, with an optional action encoder and auxiliary objectives;
+    ``parts``: the encoder, critic, critic loss, encoder parameter groups and augmentation (DrQ-v2's by default)."""
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
-                 device: torch.device | str = "cpu", graphs: bool = False):
+                 device: torch.device | str = "cpu", graphs: bool = False, parts: BackboneParts = DRQV2):
         self.cfg = cfg
+        self.parts = parts
         self.device = torch.device(device)
         self.action_dim = action_dim
         # agent.fast: the speed-ups resolved for this device (repro/agent/fast.py); all off on the plain path.
@@ -69,7 +132,7 @@ class DrQV2Backbone:
         plan = fast.resolve_fast(cfg.fast, self.device)
         self.fast = plan if graphs else replace(plan, graphs=False)
         self._std: torch.Tensor | None = None  # fixed_stddev's tensor, read in place of the schedule
-        self.aug: Callable[[torch.Tensor], torch.Tensor] = fast.shift(self.fast)  # takes the raw (uint8) frames
+        self.aug: Augment = parts.aug(self.fast)  # takes the raw (uint8) frames
         self._build_networks(obs_shape)
         self._build_objectives()
         self._build_optimizers()
@@ -77,8 +140,8 @@ class DrQV2Backbone:
     # ----------------------------------------------------------------- building (in this order: it draws the init)
     def _build_networks(self, obs_shape: tuple[int, int, int]) -> None:
         """Encoder, action encoder (``agent.action_encoder``), actor, critic and its target (a copy)."""
-        cfg = self.cfg
-        self.encoder = fast.prepare_encoder(Encoder(obs_shape).to(self.device), self.fast)
+        cfg, parts = self.cfg, self.parts
+        self.encoder = fast.prepare_encoder(parts.encoder(obs_shape).to(self.device), self.fast)
         # Opt-in speedup: a compiled encoder for updates (acting uses the plain one).
         self._encode: Callable[[torch.Tensor], torch.Tensor] = (
             torch.compile(self.encoder, dynamic=False) if cfg.compile or self.fast.compile else self.encoder)
@@ -91,8 +154,8 @@ class DrQV2Backbone:
         else:
             self.step_dim = self.action_dim  # one encoded action: d_u, or |A| without an action encoder
         self.actor = Actor(repr_dim, self.action_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
-        self.critic = Critic(repr_dim, self.step_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
-        self.critic_target = Critic(repr_dim, self.step_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
+        self.critic = parts.critic(repr_dim, self.step_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
+        self.critic_target = parts.critic(repr_dim, self.step_dim, cfg.feature_dim, cfg.hidden_dim).to(self.device)
         self.critic_target.load_state_dict(self.critic.state_dict())
         self.critic_target.requires_grad_(False)
 
@@ -114,10 +177,12 @@ class DrQV2Backbone:
         self.sample_options = {"future_seq": any(o.needs_future_seq for o in self.objectives.values())}
 
     def _build_optimizers(self) -> None:
-        """Adam for the encoder, the actor, the critic (with the action encoder) and, with objectives, one for the
-        auxiliary step over the encoder, the action encoder, the shared heads and the objectives."""
+        """Adam for the encoder (over the parts' ``encoder_groups``), the actor, the critic (with the action encoder)
+        and, with objectives, one for the auxiliary step over the encoder's first group, the action encoder, the
+        shared heads and the objectives."""
         lr, adam = self.cfg.lr, fast.adam(self.fast)  # agent.fast: fused Adam
-        self.encoder_opt = adam(self.encoder.parameters(), lr=lr)
+        groups = self.parts.encoder_groups(self.encoder)
+        self.encoder_opt = adam(groups, lr=lr)
         self.actor_opt = adam(self.actor.parameters(), lr=lr)
         critic_params = list(self.critic.parameters())
         if self.action_encoder is not None:
@@ -125,7 +190,7 @@ class DrQV2Backbone:
         self.critic_opt = adam(critic_params, lr=lr)
         self.aux_opt: torch.optim.Optimizer | None = None
         if self.objectives:
-            aux_params = list(self.encoder.parameters()) + list(self.objectives.parameters())
+            aux_params = list(groups[0]["params"]) + list(self.objectives.parameters())
             if self.action_encoder is not None:
                 aux_params += list(self.action_encoder.parameters())
             if self.shared is not None:
@@ -231,17 +296,14 @@ class DrQV2Backbone:
     def critic_loss(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
                     next_h: torch.Tensor, step: int
                     ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], Metrics]:
-        """DrQ-v2's critic loss sum_i mse(Q_i(h, u(a)), r + discount x min_i Qtarget_i(h', u(a'))), a' a
-        clipped-noise policy sample at h'; returns the loss, (Q1, Q2) at the data actions and the metrics. In
-        float32 always (the module docstring says why)."""
+        """The parts' critic loss (DrQ-v2's: :func:`twin_critic_loss`) at a' a clipped-noise policy sample at h';
+        returns the loss, (Q1, Q2) at the data actions and the metrics. In float32 always (the module docstring
+        says why)."""
         with torch.no_grad():
             dist = self.actor(next_h, self.stddev(step))
             next_action = self.encode_action(dist.sample(clip=self.cfg.stddev_clip))
-            tq1, tq2 = self.critic_target(next_h, next_action)
-            target_q = losses.critic_target(reward, discount, tq1, tq2)
-        q1, q2 = self.critic(h, self.encode_action(action))
-        loss, (q1, q2) = losses.critic_loss(q1, q2, target_q)
-        return loss, (q1, q2), losses.critic_metrics(loss, q1, q2, target_q)
+        return self.parts.critic_loss(self.critic, self.critic_target, h, self.encode_action(action), reward,
+                                      discount, next_h, next_action)
 
     def critic_step(self, h: torch.Tensor, action: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor,
                     next_h: torch.Tensor, step: int) -> Metrics:
@@ -290,8 +352,9 @@ class BackboneLearner(LearnerBase, ModuleSet):
     """What a learner that owns a ``DrQV2Backbone`` (as ``backbone``) forwards to it: its modules and optimizers
     (a learner with networks of its own extends them), acting, the noise schedule, the objectives' weights, the
     action encoder and the auxiliary step's metric names after the learner's own ``update_metrics``. Its
-    constructor builds the backbone (the learner registry's signature); a learner with networks of its own builds
-    them after it. Not a learner itself: a learner adds ``update()``."""
+    constructor builds the backbone (the learner registry's signature, and the backbone's ``parts``: a variant's
+    learner passes its own, as A-LIX does); a learner with networks of its own builds them after it. Not a learner
+    itself: a learner adds ``update()``."""
 
     untrained = ("critic_target",)  # the target critic follows by soft updates: not counted
     update_metrics: ClassVar[tuple[str, ...]]  # the train.csv columns of update(), before the auxiliary step's
@@ -299,10 +362,10 @@ class BackboneLearner(LearnerBase, ModuleSet):
     graphed: ClassVar[bool] = False  # whether update() is recorded in a CUDA graph where agent.fast allows it
 
     def __init__(self, cfg: AgentConfig, obs_shape: tuple[int, int, int], action_dim: int,
-                 device: torch.device | str = "cpu", explore_steps: int = 0):
+                 device: torch.device | str = "cpu", explore_steps: int = 0, parts: BackboneParts = DRQV2):
         self.cfg = cfg
         self.explore_steps = explore_steps if self.explores else 0  # agent steps of uniform random actions
-        self.backbone = DrQV2Backbone(cfg, obs_shape, action_dim, device, graphs=self.graphed)
+        self.backbone = DrQV2Backbone(cfg, obs_shape, action_dim, device, graphs=self.graphed, parts=parts)
         self.sample_options = self.backbone.sample_options  # what the replay returns for the objectives
 
     def modules(self) -> dict[str, nn.Module]:
