@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import importlib
+import math
 import typing
+from typing import Annotated
 
 import pandas as pd
 import pytest
 from omegaconf import OmegaConf
 
 from repro.config import schema
+from repro.config.bounds import Bound, Text, declared
 from repro.config.schema import (
     DatasetKind,
     LearnerName,
@@ -45,12 +50,20 @@ def test_a_registry_is_built_from_the_registrations_and_names_a_factory_that_doe
         importlib.reload(mod)
 
 
+@dataclasses.dataclass
+class _Misdeclared:
+    """A section whose bound is on a field that holds no number."""
+
+    lambda_from: Annotated[schema.LambdaFrom, Bound(ge=0)]
+
+
 def test_a_built_in_registration_is_checked_as_a_plugin_s(monkeypatch):
-    """A built-in spec without a factory, or with a range naming no field of its section, is refused as a plugin's."""
+    """A built-in spec without a factory, or with a bound on a field of its section that holds no number, is refused
+    as a plugin's."""
     for spec, message in ((schema.LearnerSpec("newname", offline=True, label="New"), "factory must be 'module:attr"),
                           (schema.LearnerSpec("newname", offline=True, label="New", factory="m:a",
-                                              section=schema.CQLConfig, ranges={"alpah": (0.0, True)}),
-                           "ranges names 'alpah'")):
+                                              section=_Misdeclared),
+                           "section _Misdeclared: field 'lambda_from' has a bound but is LambdaFrom, not a number.")):
         monkeypatch.setattr(schema, "BUILTIN_LEARNERS", (*schema.BUILTIN_LEARNERS, spec))
         schema.learner_specs.cache_clear()
         try:
@@ -378,3 +391,197 @@ def test_no_generic_module_names_a_built_in_learner():
                  if isinstance(node, ast.Attribute) and node.attr in names
                  or isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in names]
         assert not named, (module, named)
+
+
+# ------------------------------------------------------------------------ every declared bound, read by one loop
+def _declared_checks() -> list[tuple[str, typing.Any, typing.Any]]:
+    """``(key, type, check)`` of every field that declares its allowed values in its annotation: the run config's,
+    each built-in learner's own section (``agent.<learner>``), each built-in objective's parameters."""
+    fields = [*declared(schema.RunConfig)]
+    fields += [f for spec in schema.BUILTIN_LEARNERS if spec.section is not None
+               for f in declared(spec.section, f"agent.{spec.name}.")]
+    fields += [f for spec in schema.BUILTIN_OBJECTIVES if spec.params is not None
+               for f in declared(spec.params, f"agent.objective_params.{spec.name}.")]
+    return [(key, kind, check) for key, kind, check in fields if check is not None]
+
+
+DECLARED = {key: (kind, check) for key, kind, check in _declared_checks()}
+
+
+def _reading(key: str) -> tuple[list[str], str]:
+    """Overrides choosing an agent file whose runs read ``key``, and the key as an override sets it (``+`` where the
+    agent file does not hold it)."""
+    from repro.config.compose import agent_learner, config_groups
+
+    parts, agents = key.split("."), config_groups()["agent"]
+    if parts[:2] == ["agent", "objective_params"]:
+        if parts[2] in agents:  # spr.yaml, atc.yaml write their objective's parameters out
+            return [f"agent={parts[2]}"], key
+        return ["agent=taco", f"+agent.objectives.{parts[2]}=1.0"], f"+{key}"
+    if parts[0] == "agent" and parts[1] in schema.learner_names():
+        agent = next(a for a in agents if agent_learner(a) == parts[1])
+        return [f"agent={agent}", *(["offline.dataset=medium"] if is_offline(parts[1]) else [])], key
+    if parts[0] == "offline":
+        return ["agent=bc", "offline.dataset=medium"], key
+    return ["agent=taco"], key
+
+
+def _outside(bound: Bound, number: type) -> list[typing.Any]:
+    """A value just outside each limit the bound has."""
+    values = [number(bound.ge - 1)] if bound.ge is not None else [number(bound.gt)] if bound.gt is not None else []
+    values += [number(bound.le + 1)] if bound.le is not None else [number(bound.lt)] if bound.lt is not None else []
+    values += [number(bound.low + 1)] if bound.even and bound.low is not None else []  # an odd number within
+    return values + ([math.inf] if bound.finite else [])
+
+
+@functools.cache
+def _composed(agent: tuple[str, ...]) -> dict:
+    """The config ``agent``'s overrides compose to, as plain containers (composed once per agent)."""
+    from repro.config.compose import compose
+
+    return OmegaConf.to_container(compose(list(agent)), resolve=True, enum_to_str=True)  # type: ignore[return-value]
+
+
+def _validate_with(agent: list[str], setting: str, value: typing.Any) -> str | None:
+    """The ConfigError line validating ``agent``'s config with ``setting`` (a key, ``+`` where the agent file lacks
+    it) set to ``value``, as the override ``setting=value`` sets it; None when it validates."""
+    from repro.config.compose import ConfigError, set_key, validate
+
+    data = copy.deepcopy(_composed(tuple(agent)))
+    set_key(data, setting.lstrip("+"), value)
+    try:
+        validate(OmegaConf.create(data))
+    except ConfigError as err:
+        return str(err)
+    return None
+
+
+@pytest.mark.parametrize("key", sorted(k for k, (_, check) in DECLARED.items() if isinstance(check, Bound)))
+def test_every_declared_bound_refuses_a_value_outside_it_in_one_line_naming_key_and_bound(key: str):
+    """Every bound declared in a field's annotation (one line beside the field: no table elsewhere) is checked, by
+    the one loop of repro.config.compose: a value just outside each of its limits, set in the composed config of an
+    agent whose runs read the key, as an override sets it, is one ConfigError line naming the key, the allowed values
+    and the value; the limit itself, where it is allowed, is not refused by it. A field the loop missed fails here.
+    (The tests above give such values as command-line overrides: one compose each, too slow for every bound.)"""
+    kind, bound = DECLARED[key]
+    agent, setting = _reading(key)
+    if bound.each:  # a mapping (agent.objectives): each of its values is bounded
+        setting, key = f"{setting}.taco", f"{key}.taco"
+    plain = [a for a in (*typing.get_args(kind), kind) if a in (int, float)]
+    number = plain[0] if plain else float
+    values = _outside(bound, number)
+    assert values, key
+    for value in values:
+        line = _validate_with(agent, setting, value)
+        assert line is not None and line.startswith(f"{key} ") and bound.text() in line \
+            and line.endswith(f"(got {value}).") and "\n" not in line, (key, value, line)
+        if not (bound.even or bound.what or (isinstance(value, float) and math.isinf(value))):
+            assert line == f"{key} must be {bound.text()} (got {value}).", line
+    for edge in (bound.ge, bound.le):  # an inclusive limit is allowed (a bound is not off by one)
+        if edge is not None:  # (a rule relating fields may refuse it, replay.capacity=1: not this bound)
+            line = _validate_with(agent, setting, number(edge)) or ""
+            assert not line.startswith((f"{key} must be", f"{key} is ")), (key, edge, line)
+
+
+@pytest.mark.parametrize("key", sorted(k for k, (_, check) in DECLARED.items() if isinstance(check, Text)))
+def test_every_declared_text_check_refuses_in_one_line(key: str):
+    _, check = DECLARED[key]
+    agent, setting = _reading(key)
+    bad = "" if check.refusal(key, "a/b") is None else "a/b"
+    assert refusal([*agent, f"{setting}={bad}"]) == check.says.format(key=key, value=bad)
+
+
+# What was bounded before the bounds moved into the fields' annotations (issue 51): compose.py's RANGES, validate's
+# inline ifs, _check_learner's list, the objectives' weights, the name checks and the registrations' ``ranges``.
+BOUNDED_BEFORE = {
+    *(f"agent.{k}" for k in ("K", "batch_size", "nstep", "stddev_schedule.step_scale", "feature_dim", "hidden_dim",
+                             "action_hidden_dim", "latent_action_dim", "lr", "stddev_clip", "discount",
+                             "critic_target_tau", "objectives", "name")),
+    *(f"env.{k}" for k in ("action_repeat", "frame_stack", "image_size", "max_episode_frames", "distracting_dims")),
+    *(f"train.{k}" for k in ("frames", "eval_every_frames", "update_every_steps", "seed_frames", "explore_steps",
+                             "checkpoint_every_episodes", "eval_episodes", "video_size")),
+    *(f"offline.{k}" for k in ("updates", "eval_every_updates", "checkpoint_every_updates", "log_every_updates",
+                               "eval_episodes")),
+    "replay.capacity", "seed", "experiment", "variant", "task.name", "runtime.results_root", "agent.td3bc.alpha",
+    *(f"agent.cql.{k}" for k in ("alpha", "n_samples", "temperature")),
+    *(f"agent.iql.{k}" for k in ("expectile", "beta", "max_weight", "actor_lr_cosine_updates")),
+    *(f"agent.dt.{k}" for k in ("context", "embed_dim", "n_layers", "n_heads", "dropout", "lr", "weight_decay",
+                                "warmup_steps", "grad_clip", "batch_size", "rtg_scale", "max_timestep")),
+    *(f"agent.alix.{k}" for k in ("max_shift", "kernel", "target", "eps", "strength_init", "strength_lr",
+                                  "strength_beta1", "strength_beta2", "input_shift")),
+    *(f"agent.objective_params.{k}" for k in ("spr.momentum", "spr.projection_dim", "atc.momentum",
+                                              "atc.predictor_hidden")),
+}
+
+
+def test_no_bound_was_lost_when_the_bounds_moved_into_the_fields():
+    assert not BOUNDED_BEFORE - set(DECLARED), sorted(BOUNDED_BEFORE - set(DECLARED))
+
+
+def test_a_bound_is_read_from_an_annotation_optional_outside_or_inside():
+    from repro.config.bounds import check_in
+
+    bound = Bound(ge=1)
+    assert check_in(Annotated[typing.Optional[int], bound]) == bound
+    assert check_in(typing.Optional[Annotated[int, bound]]) == bound
+    assert check_in(typing.Optional[int]) is None and check_in(int) is None
+
+
+def test_a_bound_added_by_one_line_in_a_field_s_annotation_is_enforced(monkeypatch):
+    """A newcomer bounds a field by its annotation alone (here TD3+BC's alpha, given an upper limit): no table, no
+    registration, no check elsewhere changes, and the run is refused in one line."""
+    from repro.config import compose as compose_module
+
+    overrides = ["agent=td3bc", "offline.dataset=medium", "agent.td3bc.alpha=11"]
+    assert compose_module.compose(overrides).agent.td3bc.alpha == 11.0
+    monkeypatch.setitem(schema.TD3BCConfig.__annotations__, "alpha", "Annotated[float, Bound(ge=0.0, le=10.0)]")
+    compose_module._declared.cache_clear()
+    try:
+        assert refusal(overrides) == "agent.td3bc.alpha must be in [0.0, 10.0] (got 11.0)."
+    finally:
+        monkeypatch.undo()
+        compose_module._declared.cache_clear()
+
+
+def test_no_bound_is_declared_outside_the_fields():
+    """The ranges tables, the specs' bound tuples and the hand lists are gone: a registration carries no bound, and
+    compose.py names no bound table."""
+    from repro.config import compose as compose_module
+    from repro.config.plugins import LearnerSpec, ObjectiveSpec
+
+    assert not {"ranges"} & {f.name for kind in (LearnerSpec, ObjectiveSpec) for f in dataclasses.fields(kind)}
+    assert not hasattr(compose_module, "RANGES") and not hasattr(compose_module, "FINITE")
+    assert not hasattr(schema, "registered_ranges")
+
+
+def test_the_config_layer_reads_omegaconf_through_its_public_api():
+    """No private attribute of another object (OmegaConf's node API: ``_metadata``, ``_get_node()``, ``_value()``,
+    ``_is_missing()``) and no private name imported, in repro/config/."""
+    import ast
+    from pathlib import Path
+
+    found = []
+    for path in sorted((Path(schema.__file__).resolve().parent).glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__") \
+                    and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
+                found.append(f"{path.name}:{node.lineno} {ast.unparse(node)}")
+            if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] != "repro":
+                private = [a.name for a in node.names if a.name.startswith("_")]
+                if private or any(part.startswith("_") and not part.startswith("__")
+                                  for part in (node.module or "").split(".")):
+                    found.append(f"{path.name}:{node.lineno} from {node.module} import {private}")
+    assert not found, found
+
+
+def test_every_yaml_value_in_repro_conf_is_commented():
+    """Every ``key: value`` line of the packaged YAML (the values' one source) says what the value is."""
+    from repro.config.compose import CONF_DIR
+
+    bare = []
+    for path in sorted(CONF_DIR.rglob("*.yaml")):
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            key, sep, value = line.partition(":")
+            if sep and value.strip() and not line.lstrip().startswith(("#", "-")) and "#" not in line:
+                bare.append(f"{path.relative_to(CONF_DIR)}:{number}: {line.strip()}")
+    assert not bare, bare

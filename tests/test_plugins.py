@@ -11,6 +11,7 @@ import itertools
 import math
 import re
 from pathlib import Path
+from typing import Annotated
 
 import pandas as pd
 import pytest
@@ -34,7 +35,7 @@ from repro.config.compose import (
     run_keys,
     typed,
 )
-from repro.config.plugins import LearnerSpec, PluginError, check_spec, discover, load_factory
+from repro.config.plugins import Bound, LearnerSpec, PluginError, check_spec, discover, load_factory
 from repro.config.schema import is_offline, learner_names, objective_names, unread_keys
 from repro.learners import build_learner
 from repro.runs import rundir
@@ -226,9 +227,8 @@ def test_an_objective_reads_its_registered_params_typed():
     rc = typed(compose(["agent=toy_inv", "task=cheetah_run", "profile=tiny",
                         "agent.objective_params.toy_inv.hidden_dim=8"]))
     assert build_learner(rc.agent, (9, 84, 84), 6, "cpu").backbone.objectives["toy_inv"].head[0].out_features == 8
-    for params, message in ((dict, "params must be a dataclass"), (RWBCFields, "must give every field a default"),
-                            (None, "ranges names 'hidden_dim', which is not a field of its params.")):
-        spec = ObjectiveSpec("toy_x", factory="m:a", params=params, ranges={"hidden_dim": (1, True)})
+    for params, message in ((dict, "params must be a dataclass"), (RWBCFields, "must give every field a default")):
+        spec = ObjectiveSpec("toy_x", factory="m:a", params=params)
         with pytest.raises(PluginError, match=re.escape(message)):
             check_spec(spec, "toy_x")
 
@@ -263,18 +263,25 @@ def test_a_plugin_setting_out_of_its_registered_range_is_one_line_and_exit_2(tmp
     compose(["agent=toy_inv", "agent.objective_params.toy_inv.hidden_dim=null"])
 
 
-@pytest.mark.parametrize("ranges, message", [
-    ({"temperatur": (0.0, False)}, "ranges names 'temperatur', which is not a field of its section."),
-    ({"temperature": 0.0}, "ranges['temperature'] must be (low, inclusive)"),
-    ({"temperature": (0.0, "no")}, "ranges['temperature'] must be (low, inclusive)"),
-    ({"temperature": (1.0, True, 0.5, True)}, "ranges['temperature'] must be (low, inclusive) or (low, inclusive, "
-                                              "high, inclusive)"),
+@pytest.mark.parametrize("limits, message", [
+    ({"ge": 1.0, "le": 0.5}, "Bound: the lower limit 1.0 is above the upper limit 0.5."),
+    ({"ge": 0.0, "gt": 0.0}, "Bound: give one lower limit (ge or gt) and one upper limit (le or lt) at most."),
+    ({"gt": "0"}, "Bound: gt must be a number (got '0')."),
+    ({}, "Bound: give a limit (ge, gt, le or lt), finite or even."),
 ])
-def test_unusable_ranges_are_a_one_line_registration_error(ranges, message: str):
-    from taco_repro_toy import RWBCConfig
+def test_an_unusable_bound_is_a_one_line_error_where_it_is_declared(limits, message: str):
+    with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
+        Bound(**limits)
 
-    spec = LearnerSpec("toy_x", offline=True, label="X", section=RWBCConfig, factory="m:a", ranges=ranges)
-    with pytest.raises(PluginError, match=re.escape(message)):
+
+def test_a_bound_on_a_field_that_holds_no_number_is_a_one_line_registration_error():
+    @dataclasses.dataclass
+    class Section:
+        temperature: Annotated[str, Bound(gt=0.0)]
+
+    spec = LearnerSpec("toy_x", offline=True, label="X", section=Section, factory="m:a")
+    with pytest.raises(PluginError, match=re.escape("toy_x: section Section: field 'temperature' has a bound but is "
+                                                    "str, not a number.")):
         check_spec(spec, "toy_x")
 
 

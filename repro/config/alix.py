@@ -11,29 +11,29 @@ and their switches in ``docs/deviations.md`` ("A-LIX").
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
-from repro.config.plugins import LearnerSpec
+from repro.config.plugins import Bound, LearnerSpec
 
 
 @dataclass
 class ALIXConfig:
     """``agent.alix``: the learner's own section (values: conf/agent/alix.yaml)."""
 
-    max_shift: float  # LocalSignalMixing's `pad`: the largest mixing shift, in feature-map cells (strength 1)
+    max_shift: Annotated[float, Bound(gt=0.0)]  # LocalSignalMixing's `pad`: the largest shift, in cells (strength 1)
     fixed_batch: bool  # one random shift per batch and layer (the authors' `fixed_batch: true`); false: per sample
-    strength_init: float  # ParameterizedReg's `parameter_init`: the strength S at the start, in [0, 1]
-    kernel: int  # the rule's N: side of the neighbourhood over which the gradients' discontinuity is measured (odd)
-    target: float  # the rule's `target_capped_ratio`: the mean log(1 + ND) the strength is tuned towards
-    eps: float  # the rule's stabilising constant in ND = noise / (signal + eps)
-    strength_lr: float  # Adam learning rate of S (its own parameter group of the encoder's optimizer)
-    strength_beta1: float  # Adam beta1 of S
-    strength_beta2: float  # Adam beta2 of S
-    input_shift: int  # DrQ-v2's random shift of the input frames, in pixels (0: none, the authors' NoShiftAug)
+    strength_init: Annotated[float, Bound(ge=0.0, le=1.0)]  # ParameterizedReg's `parameter_init`: S at the start
+    # the rule's N: side of the neighbourhood over which the gradients' discontinuity is measured (odd)
+    kernel: Annotated[int, Bound(ge=3)]
+    # the rule's `target_capped_ratio`: the mean log(1 + ND) the strength is tuned towards
+    target: Annotated[float, Bound(gt=0.0)]
+    eps: Annotated[float, Bound(ge=0.0)]  # the rule's stabilising constant in ND = noise / (signal + eps)
+    strength_lr: Annotated[float, Bound(ge=0.0)]  # Adam learning rate of S (its parameter group of the encoder's Adam)
+    strength_beta1: Annotated[float, Bound(ge=0.0, lt=1.0)]  # Adam beta1 of S
+    strength_beta2: Annotated[float, Bound(ge=0.0, lt=1.0)]  # Adam beta2 of S
+    # DrQ-v2's random shift of the input frames, in pixels (0: none, the authors' NoShiftAug)
+    input_shift: Annotated[int, Bound(ge=0)]
     critic_relu_gain: bool  # the twin Q heads' orthogonal init with the ReLU gain (the authors' DenseParallel init)
 
 
-SPEC = LearnerSpec(name="alix", offline=False, label="A-LIX", section=ALIXConfig, factory="repro.agent.alix:ALIX",
-                   ranges={"max_shift": (0.0, False), "kernel": (3, True), "target": (0.0, False),
-                           "eps": (0.0, True), "strength_init": (0.0, True, 1.0, True), "strength_lr": (0.0, True),
-                           "strength_beta1": (0.0, True, 1.0, False), "strength_beta2": (0.0, True, 1.0, False),
-                           "input_shift": (0, True)})
+SPEC = LearnerSpec(name="alix", offline=False, label="A-LIX", section=ALIXConfig, factory="repro.agent.alix:ALIX")

@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import functools
-import math
 import os
 import re
 import typing
@@ -14,11 +13,12 @@ from pathlib import Path
 from typing import Any, cast
 
 import yaml
-from omegaconf import BooleanNode, DictConfig, FloatNode, IntegerNode, OmegaConf, StringNode, open_dict
+from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException, ValidationError
 
+from repro.config.bounds import NAME_PATTERN, Check, declared, is_mapping
 from repro.config.errors import UserError
-from repro.config.plugins import Bound, PluginError, bound_text, in_bound, load_factory
+from repro.config.plugins import PluginError, load_factory
 from repro.config.schema import (
     AGENT_FIELDS,
     BUDGET_KEYS,
@@ -33,13 +33,12 @@ from repro.config.schema import (
     objective_names,
     objective_specs,
     plugin_conf_dirs,
-    registered_ranges,
     section_type,
     unread_keys,
 )
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
-NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
+NAME_RE = re.compile(NAME_PATTERN)  # a run directory component (repro/config/bounds.py A_NAME)
 
 
 class ConfigError(UserError, ValueError):
@@ -265,115 +264,134 @@ def compose_base() -> DictConfig:
 
 def validate(raw: DictConfig) -> DictConfig:
     """Resolve interpolations, check types against the schema (a closed set of values is a :class:`Choice`
-    Enum there) and the values' ranges."""
-    schema: DictConfig | None = None
+    Enum there), then every field's declared allowed values (:func:`_check_fields`) and the rules that relate
+    fields (:func:`_check_learner`)."""
+    learner: str | None = None  # known once the schema is made
     try:
         OmegaConf.resolve(raw)
         schema = _structure(raw)
-        _check_flags(schema, raw)
+        learner = str(OmegaConf.select(raw, "agent.learner"))
+        for key, kind, _ in _run_fields(learner):  # before the merge reads a number as a flag
+            if _plain(kind) is bool:
+                _check_flag(key, kind, OmegaConf.select(raw, key, default=None))
         cfg = cast(DictConfig, OmegaConf.merge(schema, raw))  # dict merged into dict
     except OmegaConfBaseException as exc:
-        key = getattr(exc, "full_key", None)
-        allowed = choice_fields().get(str(key))
-        if key and allowed is not None:  # OmegaConf's own message names Enum members, not the values to write
-            value = OmegaConf.select(raw, str(key), default=None)
-            raise ConfigError(f"{key}={value} is not one of {', '.join(allowed.values())}.") from None
-        # what the schema holds at the key (None when the error came before the schema was made: an interpolation)
-        node = _node_at(schema, str(key)) if key and schema is not None else None
-        given = OmegaConf.select(raw, str(key), default=None) if key else None
-        if isinstance(node, DictConfig) and not isinstance(given, DictConfig):
-            section = node._metadata.ref_type
-            if not (isinstance(section, type) and dataclasses.is_dataclass(section)):
-                raise ConfigError(f"{key} is a mapping: set its entries one by one, e.g. {key}.<name>=... (got "
-                                  f"{given!r}).") from None
-            names = [f.name for f in dataclasses.fields(section)]
-            raise ConfigError(f"{key} is a section ({', '.join(names)}): set its values one by one, e.g. "
-                              f"{key}.{names[0]}=... (got {given!r}).") from None
-        kind = _leaf_kind(node) if isinstance(exc, ValidationError) else None
-        if kind is not None:  # in this module's words (_type_text), as the objectives' parameters are
-            raise ConfigError(f"{key} must be {_type_text(kind)} (got {given!r}).") from None
-        first = str(exc).strip().splitlines()[0]
-        raise ConfigError(f"{key}: {first}" if key else first) from None
-    missing = sorted(OmegaConf.missing_keys(cfg))  # the schema has types only: the YAML gives every value
+        raise ConfigError(_type_refusal(exc, raw, learner)) from None
+    missing = sorted(OmegaConf.missing_keys(cfg))  # the schema gives no value: the YAML gives every one
     if missing:
         raise ConfigError(f"no value for {', '.join(missing)} (the packaged YAML under repro/conf/ gives every "
                           "field one; a config file or override must not drop it).")
-    for key in ("experiment", "variant", "task.name", "agent.name"):
-        value = str(OmegaConf.select(cfg, key))
-        if not NAME_RE.match(value):
-            raise ConfigError(f"{key}='{value}' may only contain letters, digits, '_', '.' and '-'.")
-    check_option("task", str(cfg.task.name), " in task.name (a task file of repro/conf/task/ names each task)")
-    if not str(cfg.runtime.results_root).strip():  # `runtime.results_root=$UNSET`: runs would land in the cwd
-        raise ConfigError("runtime.results_root is empty: name the folder the runs go under (default: runs).")
     _check_objectives(cfg)
-    _check_ranges(cfg)
-    if cfg.seed < 0:
-        raise ConfigError(f"seed must be >= 0 (got {cfg.seed}).")
-    if cfg.env.distracting_dims < 0 or cfg.train.eval_episodes < 0:
-        raise ConfigError("env.distracting_dims and train.eval_episodes must be >= 0.")
-    if cfg.train.video_size < 16 or cfg.train.video_size % 2:
-        raise ConfigError(f"train.video_size must be an even number >= 16 (got {cfg.train.video_size}).")
+    _check_fields(cfg)
+    check_option("task", str(cfg.task.name), " in task.name (a task file of repro/conf/task/ names each task)")
     _check_learner(cfg)
     return cfg
 
 
-def _section(node: Any) -> Any:
-    """A schema node, with a section the schema types but leaves to the YAML (``agent``: MISSING) as its type's
-    (made once per type: the callers only read it)."""
-    kind = node._metadata.ref_type if isinstance(node, DictConfig) and node._is_missing() else None
-    return _structured(kind) if isinstance(kind, type) and dataclasses.is_dataclass(kind) else node
+def _type_refusal(exc: OmegaConfBaseException, raw: DictConfig, learner: str | None) -> str:
+    """The one line for a value OmegaConf refused at the key it names, in this module's words (:func:`_type_text`,
+    as the objectives' parameters are); ``learner``: the run's, None when the error came before the schema was made
+    (an interpolation)."""
+    key = getattr(exc, "full_key", None)
+    allowed = choice_fields().get(str(key))
+    if key and allowed is not None:  # OmegaConf's own message names Enum members, not the values to write
+        value = OmegaConf.select(raw, str(key), default=None)
+        return f"{key}={value} is not one of {', '.join(allowed.values())}."
+    kind = _kind_at(str(key), learner) if key and learner is not None else None
+    given = OmegaConf.select(raw, str(key), default=None) if key else None
+    if (is_mapping(kind) or _is_section(kind)) and not isinstance(given, DictConfig):
+        if not _is_section(kind):
+            return f"{key} is a mapping: set its entries one by one, e.g. {key}.<name>=... (got {given!r})."
+        names = [f.name for f in dataclasses.fields(cast(type, kind))]
+        return (f"{key} is a section ({', '.join(names)}): set its values one by one, e.g. {key}.{names[0]}=... "
+                f"(got {given!r}).")
+    if isinstance(exc, ValidationError) and _is_plain(kind):
+        return f"{key} must be {_type_text(kind)} (got {given!r})."
+    first = str(exc).strip().splitlines()[0]
+    return f"{key}: {first}" if key else first
+
+
+Field = tuple[str, Any, "Check | None"]  # dotted key, type, declared check (repro/config/bounds.py)
 
 
 @functools.cache
-def _structured(kind: type) -> DictConfig:
-    return OmegaConf.structured(kind)
+def _declared(section: type, prefix: str) -> tuple[Field, ...]:
+    return tuple(declared(section, prefix))
 
 
-_LEAF_KINDS = {BooleanNode: bool, IntegerNode: int, FloatNode: float, StringNode: str}
+def _run_fields(learner: str) -> tuple[Field, ...]:
+    """Every field of a run of ``learner``: :class:`RunConfig`'s, then its learner's own section (``agent.<learner>``,
+    when it registers one), sections included (as their dataclass types)."""
+    section = section_type(learner)
+    own = ((f"agent.{learner}", section, None), *_declared(section, f"agent.{learner}.")) if section else ()
+    return (*_declared(RunConfig, ""), *own)
 
 
-def _node_at(schema: DictConfig, key: str) -> Any:
-    """The schema's node at ``key`` (sections the YAML fills as their types'), None when the schema has none."""
-    node: Any = schema
-    for part in key.split("."):
-        node = _section(node)
-        if not isinstance(node, DictConfig) or part not in node.keys():  # ``in`` is False for a MISSING value
-            return None
-        node = node._get_node(part)
-    return node
+def _params_fields(objective: str) -> tuple[Field, ...]:
+    """The fields of a registered objective's parameters (``agent.objective_params.<objective>.<setting>``)."""
+    spec = objective_specs().get(objective)
+    if spec is None or spec.params is None:
+        return ()
+    return _declared(spec.params, f"agent.objective_params.{objective}.")
 
 
-def _leaf_kind(node: Any) -> Any:
-    """The type a schema node gives its value (``int``, ``float | None`` ...), None when it is not a plain value."""
-    kind = _LEAF_KINDS.get(type(node))
-    return None if kind is None else kind | None if node._is_optional() else kind
+def _check_fields(cfg: DictConfig) -> None:
+    """The one check of every declared allowed value (a ``Bound`` or a ``Text`` in a field's annotation,
+    repro/config/bounds.py: the run config's fields, its learner's section's, the parameters of the objectives it
+    names), before anything is built or written: torch's optimizers and the networks would otherwise reject such a
+    value with a traceback after the run directory exists. A key the run does not read
+    (:func:`repro.config.schema.unread_keys`) and a null value are not checked."""
+    learner = str(cfg.agent.learner)
+    unread = unread_keys(learner)
+    fields = [*_run_fields(learner), *(f for name in cfg.agent.objectives for f in _params_fields(str(name)))]
+    for key, _, check in fields:
+        if check is None or any(key == k or key.startswith(f"{k}.") for k in unread):
+            continue
+        line = check.refusal(key, OmegaConf.select(cfg, key, default=None))
+        if line is not None:
+            raise ConfigError(line)
 
 
-def _check_flags(schema: DictConfig, raw: DictConfig, prefix: str = "") -> None:
+def _kind_at(key: str, learner: str) -> Any:
+    """The type the schema gives the value at ``key`` in a run of ``learner`` (a mapping's entry: its values'
+    type), None when it gives none."""
+    kinds = {k: kind for k, kind, _ in _run_fields(learner)}
+    if key in kinds:
+        return kinds[key]
+    parent = kinds.get(key.rpartition(".")[0])
+    return typing.get_args(parent)[1] if is_mapping(parent) and len(typing.get_args(parent)) == 2 else None
+
+
+def _is_section(kind: Any) -> bool:
+    return isinstance(kind, type) and dataclasses.is_dataclass(kind)
+
+
+def _plain(kind: Any) -> Any:
+    """``kind`` without ``Optional``: ``int`` for ``Optional[int]``."""
+    args = [a for a in typing.get_args(kind) if a is not type(None)]
+    return args[0] if len(args) == 1 and type(None) in typing.get_args(kind) else kind
+
+
+def _is_plain(kind: Any) -> bool:
+    """Whether ``kind`` is a plain value's type (a flag, a number, a string; Optional or not)."""
+    return _plain(kind) in (bool, int, float, str)
+
+
+def _check_flag(key: str, kind: Any, value: Any) -> None:
     """ConfigError for a number where the schema has a flag (``agent.fast=2``): OmegaConf would read any number but 0
     as true and 0 as false."""
-    for key in map(str, schema):
-        node, given = _section(schema._get_node(key)), raw._get_node(key) if key in raw else None
-        if isinstance(node, DictConfig) and isinstance(given, DictConfig):
-            _check_flags(node, given, f"{prefix}{key}.")
-        elif isinstance(node, BooleanNode) and given is not None and not isinstance(given, DictConfig):
-            value = given._value()
-            if isinstance(value, (int, float)) and not isinstance(value, bool):
-                raise ConfigError(f"{prefix}{key} must be {_type_text(_leaf_kind(node))} (got {value!r}).")
+    if _plain(kind) is bool and isinstance(value, (int, float)) and not isinstance(value, bool):
+        raise ConfigError(f"{key} must be {_type_text(kind)} (got {value!r}).")
 
 
 def _check_objectives(cfg: DictConfig) -> None:
     """Every name of ``agent.objectives`` and ``agent.objective_params`` is a registered objective, and every
     objective's parameters read as its registered ``params`` (:func:`objective_params`). The config itself is left as
-    given (its run's identity)."""
+    given (its run's identity). (A weight's allowed values are declared beside ``AgentConfig.objectives``.)"""
     for section in ("objectives", "objective_params"):
         for name in cfg.agent[section]:
             if name not in objective_names():
                 raise ConfigError(unknown_objective(str(name), f"agent.{section}"))
-    for name, weight in cfg.agent.objectives.items():
-        if not (0.0 <= weight < math.inf):  # NaN included
-            raise ConfigError(f"agent.objectives.{name} is a loss weight: a finite number >= 0, 0 disables it "
-                              f"(got {weight}).")
     for name, given in cfg.agent.objective_params.items():
         objective_params(str(name), given)
 
@@ -423,7 +441,8 @@ def objective_params(name: str, given: Any = None) -> Any:
         return None
     hints = typing.get_type_hints(kind)
     node = OmegaConf.structured(kind)
-    _check_flags(node, OmegaConf.create(dict(given)), f"{where}.")
+    for key, value in given.items():
+        _check_flag(f"{where}.{key}", hints[key], value)
     for key, value in given.items():
         try:
             node[key] = value
@@ -459,45 +478,6 @@ def _structure(raw: DictConfig) -> DictConfig:
     return schema
 
 
-# The allowed values of each numeric key every run holds (counts, sizes, rates): key -> a bound
-# (repro/config/plugins.py ``Bound``: (low, inclusive) or (low, inclusive, high, inclusive)); a learner's own section
-# and the objectives' parameters are bounded by their registrations (``ranges``). Checked before anything is built
-# or written: torch's optimizers and the networks would otherwise reject such a value with a traceback after the run
-# directory exists.
-RANGES: dict[str, Bound] = {
-    **{key: (1, True) for key in ("agent.K", "agent.batch_size", "agent.nstep", "agent.stddev_schedule.step_scale",
-                                  "env.action_repeat", "env.frame_stack", "train.frames", "train.eval_every_frames",
-                                  "train.update_every_steps", "replay.capacity", "agent.feature_dim",
-                                  "agent.hidden_dim", "agent.action_hidden_dim", "agent.latent_action_dim")},
-    "agent.lr": (0.0, False),  # and finite (FINITE)
-    "agent.stddev_clip": (0.0, True),
-    "agent.discount": (0.0, True, 1.0, True),
-    "agent.critic_target_tau": (0.0, True, 1.0, True),
-    "env.image_size": (16, True),
-    "train.seed_frames": (0, True),
-    "train.explore_steps": (0, True),
-    "train.checkpoint_every_episodes": (1, True),  # the loop takes the episode count modulo it
-    "env.max_episode_frames": (1, True),  # null: the suite's own episode length
-}
-FINITE = ("agent.lr",)  # an infinite learning rate trains NaN weights (NaN is in no range: torch's Adam refuses it)
-
-
-def _check_ranges(cfg: DictConfig) -> None:
-    """One line for a value out of its range (:data:`RANGES`, and the ranges registered with the run's learner and
-    objectives), before anything is built or written. A null value is not checked."""
-    ranges = {**RANGES, **registered_ranges(str(cfg.agent.learner), [str(k) for k in cfg.agent.objectives])}
-    for key, bound in ranges.items():
-        value = OmegaConf.select(cfg, key)
-        if value is None:
-            continue
-        if not isinstance(value, (int, float)) or isinstance(value, bool):
-            raise ConfigError(f"{key} must be a number {bound_text(bound)} (got {value!r}).")
-        if not in_bound(value, bound):
-            raise ConfigError(f"{key} must be {bound_text(bound)} (got {value}).")
-        if key in FINITE and math.isinf(value):
-            raise ConfigError(f"{key} must be a finite number {bound_text(bound)} (got {value}).")
-
-
 def _check_horizon(cfg: DictConfig) -> None:
     """An online run samples transitions with ``max(agent.K, agent.nstep)`` steps ahead in their episode
     (repro/data/replay.py). That needs a replay of at least that many slots plus the frame stack, and episodes at
@@ -520,7 +500,10 @@ def _check_horizon(cfg: DictConfig) -> None:
 
 
 def _check_learner(cfg: DictConfig) -> None:
-    """``offline.*`` is consistent with ``agent.learner`` (a registered learner, checked by :func:`_structure`)."""
+    """The rules that relate fields to ``agent.learner`` (a registered learner, checked by :func:`_structure`):
+    ``offline.dataset`` is given to offline learners only, and is a folder (made one spelling) or a dataset kind; an
+    online run's horizon fits its replay and episodes (:func:`_check_horizon`); what the learner resolves from its
+    config (:func:`_resolve`)."""
     learner = str(cfg.agent.learner)
     dataset = cfg.offline.dataset
     if not is_offline(learner):
@@ -536,12 +519,6 @@ def _check_learner(cfg: DictConfig) -> None:
     if dataset is not None and not is_folder_value(str(dataset)) and not NAME_RE.match(str(dataset)):
         raise ConfigError(f"offline.dataset='{dataset}': a dataset kind may only contain letters, digits, '_', '.' "
                           "and '-' (a folder needs a '/', e.g. ./my_dataset).")
-    for key in ("offline.updates", "offline.eval_every_updates", "offline.checkpoint_every_updates",
-                "offline.log_every_updates"):
-        if OmegaConf.select(cfg, key) < 1:
-            raise ConfigError(f"{key} must be >= 1 (got {OmegaConf.select(cfg, key)}).")
-    if cfg.offline.eval_episodes < 0:
-        raise ConfigError(f"offline.eval_episodes must be >= 0 (got {cfg.offline.eval_episodes}).")
     _resolve(cfg)
 
 

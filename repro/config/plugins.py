@@ -12,22 +12,20 @@ docs/extending.md walks through one of each.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
-from dataclasses import MISSING, dataclass, field, fields, is_dataclass
+from dataclasses import MISSING, dataclass, fields, is_dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import TypeVar
 
+from repro.config.bounds import A_NAME, Bound, Text, check_declarations
 from repro.config.errors import UserError
+
+__all__ = ["A_NAME", "Bound", "LEARNER_GROUP", "LearnerSpec", "OBJECTIVE_GROUP", "ObjectiveSpec", "PluginError", "Text",
+           "check_spec", "discover", "load_factory"]
 
 LEARNER_GROUP = "taco_repro.learners"
 OBJECTIVE_GROUP = "taco_repro.objectives"
 NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
-# setting -> its allowed values: (low, inclusive) for a lower bound alone, (low, inclusive, high, inclusive) for both
-# (low None: an upper bound alone); ``inclusive``: whether the bound itself is allowed. (0.0, False): > 0;
-# (0.0, True, 1.0, True): in [0, 1].
-Bound = tuple[float, bool] | tuple[float | None, bool, float, bool]
-Ranges = Mapping[str, Bound]
 
 
 class PluginError(UserError, ValueError):
@@ -46,9 +44,9 @@ class LearnerSpec:
     (the built-in learners' too: ``repro/learners/registry.py`` builds its table from the registrations).
     ``conf``: a folder holding ``agent/<agent>.yaml`` files that use it (added to Hydra's search path, so
     ``agent=<agent>`` composes).
-    ``ranges``: the allowed values of numeric fields of ``section``, ``{field: bound}`` (a :data:`Bound`:
-    ``(low, inclusive)`` or ``(low, inclusive, high, inclusive)``), in the form of ``repro.config.compose.RANGES``
-    and checked with it (one line, exit 2, before a run writes anything); a null value is not checked.
+    A field of ``section`` declares its allowed values in its annotation (``temperature: Annotated[float,
+    Bound(gt=0.0)]``: :mod:`repro.config.bounds`), checked with every other field's (one line, exit 2, before a run
+    writes anything).
     ``named_by_objectives``: its label names its runs without objectives only; a run with objectives is named by
     their labels alone (the built-in online actor-critic: the paper's TACO, SPR, CURL are DrQ-v2 with objectives);
     otherwise a run's label is the learner's label, then its objectives' (``analysis.identity.method_label``).
@@ -64,7 +62,6 @@ class LearnerSpec:
     section: type | None = None
     factory: str | None = None
     conf: str | Path | None = None
-    ranges: Ranges = field(default_factory=dict)
     named_by_objectives: bool = False
     resolve: str | None = None
 
@@ -73,8 +70,7 @@ class LearnerSpec:
 class ObjectiveSpec:
     """An auxiliary objective: ``name`` is its key in ``agent.objectives``; ``label`` its part of a method's label
     (``taco`` -> ``TACO``, ``CQL+TACO``; None: the name); ``factory``, ``conf``: as :class:`LearnerSpec` (the class
-    is an ``repro.agent.objectives.base.Objective``); ``ranges``: as :class:`LearnerSpec`'s, of its settings
-    ``agent.objective_params.<name>.<setting>``, checked in the runs whose ``agent.objectives`` names it.
+    is an ``repro.agent.objectives.base.Objective``).
     ``companions``: registered objectives that the method named ``label`` trains with it (the paper's TACO is the
     TACO, CURL and reward losses): with all of them enabled, ``label`` alone names the lot; with some off, the label
     says which (``TACO w/o CURL``).
@@ -82,13 +78,13 @@ class ObjectiveSpec:
     ``agent.objective_params.<name>.<setting>``. A run's values are checked against it (a misspelled setting, a value
     of the wrong type, an integer given as a float: one line, exit 2, before a run writes anything) and the objective
     reads them as an instance of it (``ObjectiveContext.params``). None: it takes no parameters (any given is refused).
-    ``ranges`` name fields of ``params``."""
+    A field declares its allowed values in its annotation, as a learner's ``section`` does (``hidden_dim:
+    Annotated[Optional[int], Bound(ge=1)] = None``), checked in the runs whose ``agent.objectives`` names it."""
 
     name: str
     label: str | None = None
     factory: str | None = None
     conf: str | Path | None = None
-    ranges: Ranges = field(default_factory=dict)
     companions: tuple[str, ...] = ()
     params: type | None = None
 
@@ -121,62 +117,11 @@ def check_spec(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
         if no_default:
             raise PluginError(f"{where}: params {spec.params.__name__} must give every field a default (the "
                               f"objective's own; missing for {', '.join(no_default)}).")
-    check_ranges(spec, where)
-
-
-def check_ranges(spec: LearnerSpec | ObjectiveSpec, where: str) -> None:
-    """PluginError (one line) for ``ranges`` that cannot be checked: not ``{name: bound}`` (:data:`Bound`), or naming
-    no field of its section (a learner's) or of its ``params`` (an objective's)."""
-    if not isinstance(spec.ranges, Mapping):
-        raise PluginError(f"{where}: ranges must be a mapping setting -> (low, inclusive) (got {spec.ranges!r}).")
     typed = spec.section if isinstance(spec, LearnerSpec) else spec.params
-    known = {f.name for f in fields(typed)} if typed is not None else set()
-    for key, bound in spec.ranges.items():
-        if key not in known:
-            raise PluginError(f"{where}: ranges names '{key}', which is not a field of its "
-                              f"{'section' if isinstance(spec, LearnerSpec) else 'params'}.")
-        if not is_bound(bound):
-            raise PluginError(f"{where}: ranges['{key}'] must be (low, inclusive) or (low, inclusive, high, "
-                              f"inclusive), e.g. (0.0, False) for > 0, (0.0, False, 1.0, False) for in (0, 1) "
-                              f"(got {bound!r}).")
-
-
-def _number(x: object) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
-def is_bound(bound: object) -> bool:
-    """Whether ``bound`` is a :data:`Bound`."""
-    if not isinstance(bound, tuple) or len(bound) not in (2, 4):
-        return False
-    if len(bound) == 2:
-        return _number(bound[0]) and isinstance(bound[1], bool)
-    low, low_in, high, high_in = bound
-    return ((low is None or _number(low)) and isinstance(low_in, bool) and _number(high)
-            and isinstance(high_in, bool) and (low is None or low <= high))
-
-
-def bound_text(bound: Bound) -> str:
-    """``> 0.0``, ``>= 1``, ``in (0.0, 1.0)``, ``in [0.0, 1.0]``, ``<= 1.0``: the allowed values in words."""
-    if len(bound) == 2:
-        return f"{'>=' if bound[1] else '>'} {bound[0]}"
-    low, low_in, high, high_in = bound
-    if low is None:
-        return f"{'<=' if high_in else '<'} {high}"
-    return f"in {'[' if low_in else '('}{low}, {high}{']' if high_in else ')'}"
-
-
-def in_bound(value: float, bound: Bound) -> bool:
-    """Whether ``value`` is allowed by ``bound`` (NaN never is)."""
-    if value != value:
-        return False
-    low, low_in = bound[0], bound[1]
-    if low is not None and (value < low or (value == low and not low_in)):
-        return False
-    if len(bound) == 4:
-        high, high_in = bound[2], bound[3]
-        return value < high or (value == high and high_in)
-    return True
+    problem = check_declarations(typed) if typed is not None else None
+    if typed is not None and problem is not None:
+        raise PluginError(f"{where}: {'section' if isinstance(spec, LearnerSpec) else 'params'} {typed.__name__}: "
+                          f"{problem}")
 
 
 def discover(group: str, kind: type[Spec]) -> tuple[Spec, ...]:

@@ -1,7 +1,8 @@
 """Typed schema of the run config: code reads these dataclasses, never raw strings.
 
-The dataclasses give each field its type; its value (and the comment that explains it) lives in the packaged
-YAML under repro/conf/ only. A closed set of values is a :class:`Choice` Enum.
+The dataclasses give each field its type and, in it, its allowed values (``Annotated[int, Bound(ge=1)]``:
+repro/config/bounds.py; checked by repro.config.compose.validate in one loop); its value (and the comment that
+explains it) lives in the packaged YAML under repro/conf/ only. A closed set of values is a :class:`Choice` Enum.
 """
 
 from __future__ import annotations
@@ -10,16 +11,15 @@ import dataclasses
 import enum
 import math
 import typing
-from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cache
-from typing import Any, Optional, TypeVar
+from typing import Annotated, Any, Optional, TypeVar
 
 from repro.config import alix
+from repro.config.bounds import A_NAME, Bound, Text
 from repro.config.plugins import (
     LEARNER_GROUP,
     OBJECTIVE_GROUP,
-    Bound,
     LearnerSpec,
     ObjectiveSpec,
     PluginError,
@@ -230,7 +230,7 @@ class StdSchedule:
     duration: int
     # the schedule counts step_scale x the step it is called with: 1 online (agent steps); 2 offline, where it
     # is called with the update count and V-D4RL evaluates it at its loop step (update_every_steps 2: 2u)
-    step_scale: int
+    step_scale: Annotated[int, Bound(ge=1)]
 
     def __call__(self, step: int) -> float:
         """Linear interpolation from ``start`` to ``end`` over ``duration`` schedule steps, at schedule step
@@ -244,9 +244,9 @@ class CQLConfig:
     """CQL's conservative regulariser (Kumar et al. 2020, continuous form); used by learner ``cql``
     (values: conf/agent/shared/cql.yaml)."""
 
-    alpha: Optional[float]  # None: the paper's Table 6 value for the run's task and dataset
-    n_samples: int
-    temperature: float
+    alpha: Annotated[Optional[float], Bound(ge=0.0)]  # None: Table 6's value for the run's task and dataset
+    n_samples: Annotated[int, Bound(ge=1)]
+    temperature: Annotated[float, Bound(gt=0.0)]
     importance_sampling: bool
     include_data_in_logsumexp: bool
     clip_policy_samples: bool
@@ -257,7 +257,7 @@ class TD3BCConfig:
     """TD3+BC's actor loss (Fujimoto & Gu 2021, eq. 5; V-D4RL's DrQ+BC on the DrQ-v2 backbone; values:
     conf/agent/shared/td3bc.yaml)."""
 
-    alpha: float
+    alpha: Annotated[float, Bound(ge=0.0)]
     lambda_from: LambdaFrom
 
 
@@ -265,11 +265,11 @@ class TD3BCConfig:
 class IQLConfig:
     """Implicit Q-learning (Kostrikov et al. 2022; values: conf/agent/shared/iql.yaml)."""
 
-    expectile: float
-    beta: float
-    max_weight: float
+    expectile: Annotated[float, Bound(gt=0.0, lt=1.0)]
+    beta: Annotated[float, Bound(ge=0.0)]
+    max_weight: Annotated[float, Bound(gt=0.0)]
     value_for_targets: ValueForTargets
-    actor_lr_cosine_updates: Optional[int]  # None: a constant actor learning rate
+    actor_lr_cosine_updates: Annotated[Optional[int], Bound(ge=1)]  # None: a constant actor learning rate
     learned_log_std: bool
     reward_scaling: RewardScaling
 
@@ -279,18 +279,18 @@ class DTConfig:
     """Decision Transformer (Chen et al. 2021, the gym setting of github kzl/decision-transformer; values:
     conf/agent/shared/dt.yaml)."""
 
-    context: int
-    embed_dim: int
-    n_layers: int
-    n_heads: int
-    dropout: float
-    lr: float
-    weight_decay: float
-    warmup_steps: int
-    grad_clip: float
-    batch_size: int
-    rtg_scale: float
-    max_timestep: int
+    context: Annotated[int, Bound(ge=1)]
+    embed_dim: Annotated[int, Bound(ge=1)]
+    n_layers: Annotated[int, Bound(ge=1)]
+    n_heads: Annotated[int, Bound(ge=1)]
+    dropout: Annotated[float, Bound(ge=0.0, lt=1.0)]
+    lr: Annotated[float, Bound(gt=0.0)]
+    weight_decay: Annotated[float, Bound(ge=0.0)]
+    warmup_steps: Annotated[int, Bound(ge=1)]
+    grad_clip: Annotated[float, Bound(gt=0.0)]
+    batch_size: Annotated[int, Bound(ge=1)]
+    rtg_scale: Annotated[float, Bound(gt=0.0)]
+    max_timestep: Annotated[int, Bound(ge=1)]
     activation: DTActivation
     init: DTInit
     ff_dropout: bool
@@ -303,8 +303,10 @@ class SPRParams:
     config: a default here is the objective's own (SPR's), used where the agent file gives none (conf/agent/spr.yaml
     writes them all out, with their comments)."""
 
-    momentum: float = 0.0  # target <- m target + (1 - m) online; SPR with augmentation: 0 (a stop-gradient copy)
-    projection_dim: Optional[int] = None  # width of the projection g and predictor q; None: agent.hidden_dim
+    # target <- m target + (1 - m) online (1: the target would never move); with augmentation: 0 (a stop-gradient copy)
+    momentum: Annotated[float, Bound(ge=0.0, lt=1.0)] = 0.0
+    # width of the projection g and predictor q; None: agent.hidden_dim
+    projection_dim: Annotated[Optional[int], Bound(ge=1)] = None
     rollout: bool = True  # roll the transition model out over the K actions, a loss at every step
 
 
@@ -313,8 +315,8 @@ class ATCParams:
     """``agent.objective_params.atc`` (repro/agent/objectives/atc.py); defaults: ATC's on DMControl (as
     :class:`SPRParams`)."""
 
-    momentum: float = 0.99  # target update rate tau = 0.01 every update
-    predictor_hidden: int = 512  # hidden size of the residual anchor MLP
+    momentum: Annotated[float, Bound(ge=0.0, lt=1.0)] = 0.99  # target update rate tau = 0.01 every update
+    predictor_hidden: Annotated[int, Bound(ge=1)] = 512  # hidden size of the residual anchor MLP
 
 
 @dataclass
@@ -323,24 +325,26 @@ class AgentConfig:
     from conf/config.yaml unless the agent file sets them). A learner's own settings are its registered ``section``,
     composed by its own agent files only (a built-in one's from conf/agent/shared/)."""
 
-    name: str
+    name: Annotated[str, A_NAME]
     learner: str  # a registered learner (learner_names(); checked by repro.config.compose.validate)
-    lr: float
-    feature_dim: int
-    hidden_dim: int
-    batch_size: int
-    K: int
-    nstep: int
-    discount: float
-    critic_target_tau: float
-    stddev_clip: float
+    lr: Annotated[float, Bound(gt=0.0, finite=True)]  # an infinite learning rate trains NaN weights
+    feature_dim: Annotated[int, Bound(ge=1)]
+    hidden_dim: Annotated[int, Bound(ge=1)]
+    batch_size: Annotated[int, Bound(ge=1)]
+    K: Annotated[int, Bound(ge=1)]
+    nstep: Annotated[int, Bound(ge=1)]
+    discount: Annotated[float, Bound(ge=0.0, le=1.0)]
+    critic_target_tau: Annotated[float, Bound(ge=0.0, le=1.0)]
+    stddev_clip: Annotated[float, Bound(ge=0.0)]
     stddev_schedule: StdSchedule
     action_encoder: bool
-    latent_action_dim: Optional[int]  # None: from |A| and latent_action_rounding
+    latent_action_dim: Annotated[Optional[int], Bound(ge=1)]  # None: from |A| and latent_action_rounding
     latent_action_rounding: LatentRounding
-    action_hidden_dim: int
+    action_hidden_dim: Annotated[int, Bound(ge=1)]
     reward_target: RewardTarget
-    objectives: dict[str, float]  # a registered objective (objective_names()) -> loss weight
+    # a registered objective (objective_names()) -> its loss weight (a negative one would maximise that loss)
+    objectives: Annotated[dict[str, float], Bound(ge=0, finite=True, each=True, what="a loss weight",
+                                                  note="0 disables it")]
     objective_params: dict[str, Any]  # a registered objective -> its parameters (typed by its registered ``params``,
     # checked by repro.config.compose.validate; an objective reads them typed: compose.objective_params)
     compile: bool
@@ -354,7 +358,7 @@ class AgentConfig:
 class TaskConfig:
     """A task (conf/task/<task>.yaml and the preset it inherits, conf/preset/)."""
 
-    name: str
+    name: Annotated[str, A_NAME]  # and a task file of repro/conf/task/ (checked by repro.config.compose.validate)
     suite: Suite
     preset: Preset
     std_duration: int
@@ -364,32 +368,32 @@ class TaskConfig:
 
 @dataclass
 class EnvConfig:
-    action_repeat: int
-    frame_stack: int
-    image_size: int
-    distracting_dims: int
-    max_episode_frames: Optional[int]
+    action_repeat: Annotated[int, Bound(ge=1)]
+    frame_stack: Annotated[int, Bound(ge=1)]
+    image_size: Annotated[int, Bound(ge=16)]
+    distracting_dims: Annotated[int, Bound(ge=0)]
+    max_episode_frames: Annotated[Optional[int], Bound(ge=1)]  # None: the suite's own episode length
     camera: Optional[Any]
 
 
 @dataclass
 class TrainConfig:
-    frames: int
-    seed_frames: int
-    explore_steps: int
-    update_every_steps: int
-    eval_every_frames: int
-    eval_episodes: int
-    checkpoint_every_episodes: int
+    frames: Annotated[int, Bound(ge=1)]
+    seed_frames: Annotated[int, Bound(ge=0)]
+    explore_steps: Annotated[int, Bound(ge=0)]
+    update_every_steps: Annotated[int, Bound(ge=1)]
+    eval_every_frames: Annotated[int, Bound(ge=1)]
+    eval_episodes: Annotated[int, Bound(ge=0)]
+    checkpoint_every_episodes: Annotated[int, Bound(ge=1)]  # the loop takes the episode count modulo it
     save_frames: bool
     save_video: bool
     video_every: VideoEvery
-    video_size: int
+    video_size: Annotated[int, Bound(ge=16, even=True)]
 
 
 @dataclass
 class ReplayConfig:
-    capacity: int
+    capacity: Annotated[int, Bound(ge=1)]  # and room for a transition's horizon (compose._check_horizon)
     device: Device
 
 
@@ -397,17 +401,18 @@ class ReplayConfig:
 class OfflineConfig:
     """Offline training (a fixed dataset, no environment interaction but evaluation)."""
 
-    dataset: Optional[str]
-    updates: int
-    eval_every_updates: int
-    eval_episodes: int
-    checkpoint_every_updates: int
-    log_every_updates: int
+    dataset: Optional[str]  # a dataset kind (a name) or a folder (checked by repro.config.compose._check_learner)
+    updates: Annotated[int, Bound(ge=1)]
+    eval_every_updates: Annotated[int, Bound(ge=1)]
+    eval_episodes: Annotated[int, Bound(ge=0)]
+    checkpoint_every_updates: Annotated[int, Bound(ge=1)]
+    log_every_updates: Annotated[int, Bound(ge=1)]
 
 
 @dataclass
 class RuntimeConfig:
-    results_root: str
+    # `runtime.results_root=$UNSET` in a script: the runs would land in the working folder
+    results_root: Annotated[str, Text(r"\S", "{key} is empty: name the folder the runs go under (default: runs).")]
     device: Device
     progress: Any
     threads: Optional[int]
@@ -423,12 +428,12 @@ class RuntimeConfig:
 
 @dataclass
 class RunConfig:
-    """The run config. Fields are types only: every value, with its comment, is in the packaged YAML
-    (repro/conf/, top level conf/config.yaml), its one source."""
+    """The run config. Fields are types and allowed values only: every value, with its comment, is in the packaged
+    YAML (repro/conf/, top level conf/config.yaml), its one source."""
 
-    experiment: str
-    variant: str
-    seed: int
+    experiment: Annotated[str, A_NAME]
+    variant: Annotated[str, A_NAME]
+    seed: Annotated[int, Bound(ge=0)]
     agent: AgentConfig
     task: TaskConfig
     env: EnvConfig
@@ -436,6 +441,7 @@ class RunConfig:
     replay: ReplayConfig
     offline: OfflineConfig
     runtime: RuntimeConfig
+
 
 def choice_fields(section: type = RunConfig, prefix: str = "") -> dict[str, type[Choice]]:
     """Dotted config key -> its :class:`Choice` Enum, for every field of ``section`` (and of its sub-sections)
@@ -458,42 +464,31 @@ def choice_fields(section: type = RunConfig, prefix: str = "") -> dict[str, type
 # ------------------------------------------------------------------------------------ the registry (one source)
 # The built-in learners and objectives, registered as a plugin registers its own (repro/config/plugins.py): each
 # names its code by ``factory``, which repro/learners/registry.py and repro/agent/objectives/ import to build their
-# tables from these registrations. ``ranges``: the allowed values of a learner's own section (checked in its runs
-# only) and of an objective's parameters. Order: the paper's (bench reports, help texts).
-_POSITIVE, _AT_LEAST_1, _NON_NEGATIVE, _OPEN_UNIT = (0.0, False), (1, True), (0.0, True), (0.0, False, 1.0, False)
+# tables from these registrations. The allowed values of a learner's own section and of an objective's parameters
+# are declared beside their fields (above). Order: the paper's (bench reports, help texts).
 BUILTIN_LEARNERS = (
     LearnerSpec(LearnerName.actor_critic.value, offline=False, label="DrQ-v2", named_by_objectives=True,
                 factory="repro.agent.agent:Agent"),
     LearnerSpec(LearnerName.bc.value, offline=True, label="BC", factory="repro.learners.bc:BC"),
     LearnerSpec(LearnerName.td3bc.value, offline=True, label="TD3+BC", section=TD3BCConfig,
-                factory="repro.learners.td3bc:TD3BC", ranges={"alpha": _NON_NEGATIVE}),
+                factory="repro.learners.td3bc:TD3BC"),
     LearnerSpec(LearnerName.cql.value, offline=True, label="CQL", section=CQLConfig, factory="repro.learners.cql:CQL",
-                resolve="repro.config.paper_defaults:resolve_cql_alpha",
-                ranges={"alpha": _NON_NEGATIVE, "n_samples": _AT_LEAST_1, "temperature": _POSITIVE}),
-    LearnerSpec(LearnerName.iql.value, offline=True, label="IQL", section=IQLConfig, factory="repro.learners.iql:IQL",
-                ranges={"expectile": _OPEN_UNIT, "beta": _NON_NEGATIVE, "max_weight": _POSITIVE,
-                        "actor_lr_cosine_updates": _AT_LEAST_1}),
-    LearnerSpec(LearnerName.dt.value, offline=True, label="DT", section=DTConfig, factory="repro.learners.dt:DT",
-                ranges={"context": _AT_LEAST_1, "embed_dim": _AT_LEAST_1, "n_layers": _AT_LEAST_1,
-                        "n_heads": _AT_LEAST_1, "dropout": (0.0, True, 1.0, False), "lr": _POSITIVE,
-                        "weight_decay": _NON_NEGATIVE, "warmup_steps": _AT_LEAST_1, "grad_clip": _POSITIVE,
-                        "batch_size": _AT_LEAST_1, "rtg_scale": _POSITIVE, "max_timestep": _AT_LEAST_1}),
+                resolve="repro.config.paper_defaults:resolve_cql_alpha"),
+    LearnerSpec(LearnerName.iql.value, offline=True, label="IQL", section=IQLConfig, factory="repro.learners.iql:IQL"),
+    LearnerSpec(LearnerName.dt.value, offline=True, label="DT", section=DTConfig, factory="repro.learners.dt:DT"),
     alix.SPEC,  # A-LIX (online; issue 38): its own section agent.alix and factory, declared as a plugin's
 )
 _WITH_CURL_AND_REWARD = (ObjectiveName.curl.value, ObjectiveName.reward.value)  # TACO's loss: TACO + CURL + reward;
 # the Table 2 objectives replace TACO's term and keep the other two
-_MOMENTUM = (0.0, True, 1.0, False)  # target <- m target + (1 - m) online (1: the target would never move)
 BUILTIN_OBJECTIVES = (
     ObjectiveSpec(ObjectiveName.taco.value, label="TACO", companions=_WITH_CURL_AND_REWARD,
                   factory="repro.agent.objectives.taco:TACOObjective"),
     ObjectiveSpec(ObjectiveName.curl.value, label="CURL", factory="repro.agent.objectives.taco:CURLObjective"),
     ObjectiveSpec(ObjectiveName.reward.value, label="Reward", factory="repro.agent.objectives.taco:RewardObjective"),
     ObjectiveSpec(ObjectiveName.spr.value, label="SPR", companions=_WITH_CURL_AND_REWARD,
-                  factory="repro.agent.objectives.spr:SPRObjective", params=SPRParams,
-                  ranges={"momentum": _MOMENTUM, "projection_dim": _AT_LEAST_1}),
+                  factory="repro.agent.objectives.spr:SPRObjective", params=SPRParams),
     ObjectiveSpec(ObjectiveName.atc.value, label="ATC", companions=_WITH_CURL_AND_REWARD,
-                  factory="repro.agent.objectives.atc:ATCObjective", params=ATCParams,
-                  ranges={"momentum": _MOMENTUM, "predictor_hidden": _AT_LEAST_1}),
+                  factory="repro.agent.objectives.atc:ATCObjective", params=ATCParams),
     ObjectiveSpec(ObjectiveName.driml.value, label="DRIML", companions=_WITH_CURL_AND_REWARD,
                   factory="repro.agent.objectives.driml:DRIMLObjective"),
 )
@@ -568,23 +563,6 @@ def section_type(learner: str) -> type | None:
     registers)."""
     spec = learner_specs().get(str(learner))
     return None if spec is None else spec.section
-
-
-def registered_ranges(learner: str, objectives: Iterable[str]) -> dict[str, Bound]:
-    """The registered ranges of a run's learner section and objective parameters (``LearnerSpec.ranges``,
-    ``ObjectiveSpec.ranges``) by their dotted keys, in the form of ``repro.config.compose.RANGES``:
-    ``agent.<learner>.<field>`` and ``agent.objective_params.<objective>.<setting>``. Unregistered names give none
-    (their own check names them)."""
-    out: dict[str, Bound] = {}
-    spec = learner_specs().get(str(learner))
-    if spec is not None:
-        out.update({f"agent.{spec.name}.{key}": bound for key, bound in spec.ranges.items()})
-    for name in objectives:
-        objective = objective_specs().get(str(name))
-        if objective is not None:
-            out.update({f"agent.objective_params.{objective.name}.{key}": bound
-                        for key, bound in objective.ranges.items()})
-    return out
 
 
 S = TypeVar("S")
