@@ -3,6 +3,7 @@ authors' published curves (analysis/verify.py) and write the verdicts and the fi
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import Optional
 
@@ -14,6 +15,7 @@ from repro.launch.cli import (
     LaunchOptions,
     default_results_root,
     launch_sweep,
+    status_hint,
 )
 from repro.launch.spec import Selection
 from repro.runs.console import console, fail
@@ -112,7 +114,10 @@ def verify_cmd(
         if report.interrupted:
             raise typer.Exit(130)
         if launcher == Launcher.slurm:
-            say("submitted: judge the runs when they are done with `repro verify --judge-only`", highlight=False)
+            root = results_root if results_root is not None else _root_from(root_sets)
+            judge = f"repro verify --judge-only -r {shlex.quote(str(root))} -o {shlex.quote(str(out))}"
+            say(f"submitted: follow them with `{status_hint(SWEEP, root)}`, judge them when they are done with "
+                f"`{judge}`", highlight=False)
             return
     root = results_root if results_root is not None else _root_from(root_sets)
     raise typer.Exit(judge_and_write(root, out, min_seeds, keep_runs))
