@@ -74,7 +74,7 @@ test-fast: $(STAMP) $(WANDB_STAMP) $(PLUGIN_STAMP) browser
 	$(BIN)/python -m pytest -q -ra $(XDIST) -m "not slow and not slurm" $(PYTEST_ARGS)
 
 bench: $(STAMP)
-	$(BIN)/repro bench
+	$(BIN)/repro bench update
 
 clean:
 	rm -rf $(VENV) runs results

@@ -4,7 +4,7 @@
 #                       a 10K-frame TACO B1024 run (4000 seed frames, 6000 timed), plain and fast (agent.fast), each
 #                       timed phase by phase and as it trains (--overlap: the env step overlapping the queued update)
 #   graphs.xml          tests/test_graphs.py on the GPU (JUnit): the CUDA-graph update (agent.fast) against eager
-#   bench-compile.json  `repro bench --compile` at B256 and B1024 (last: it takes what time is left)
+#   bench-compile.json  `repro bench update --compile` at B256 and B1024 (last: it takes what time is left)
 #   amp_check.json      plain against amp: the losses of 5 updates from the same weights and batches
 #   fast_check.json     plain against fast (agent.fast): the same
 #   packing.json        2 and 4 runs sharing GPU 0 (`repro sweep --gpus 0 --runs-per-gpu N`): FPS from train.csv
@@ -38,12 +38,12 @@ STEPS="$WORK/steps.jsonl"
 START=$(date +%s)
 
 if [ "$QUICK" = 1 ]; then
-  BATCH=(--algo drqv2 --batch 8); UPD=(--warmup 0 --repeats 1)
-  E2E=(--algo drqv2 --frames 40 --seed-frames 20); AMP_CHECK=(--batch 8 --updates 2 --hidden-dim 64)
+  BATCH=(--agent drqv2 --batch 8); UPD=(--warmup 0 --repeats 1)
+  E2E=(--agent drqv2 --frames 40 --seed-frames 20); AMP_CHECK=(--batch 8 --updates 2 --hidden-dim 64)
   PACK_AGENT=drqv2; PACK_FRAMES=100; PACK_SET=(profile=tiny); PACK_SEED_FRAMES=80  # one 50-step episode each
 else
   BATCH=(--batch 256 --batch 1024); UPD=(--warmup 3 --repeats 10)
-  E2E=(--algo taco --batch 1024 --frames 6000 --seed-frames 4000); AMP_CHECK=(--batch 256 --updates 5)
+  E2E=(--agent taco --batch 1024 --frames 6000 --seed-frames 4000); AMP_CHECK=(--batch 256 --updates 5)
   PACK_AGENT=taco; PACK_FRAMES=4000; PACK_SET=(agent.batch_size=256 replay.capacity=100000); PACK_SEED_FRAMES=1000
 fi
 

@@ -56,6 +56,9 @@ def plan_cmd(
                                                   "$REPRO_SLURM_CONFIG or ~/.config/taco-repro/slurm.yaml)."),
     device_memory_gb: Optional[float] = typer.Option(None, "--device-memory-gb", help="The device's memory (runs "
                                                      "per device; default: the bench JSON's device_memory_bytes)."),
+    host_memory_gb: Optional[float] = typer.Option(None, "--host-memory-gb", help="The memory of the host the "
+                                                   "devices share (runs per device: each run holds its replay there; "
+                                                   "default: this machine's)."),
     sims: int = typer.Option(2000, "--sims", help="Simulated draws per claim and seed count."),
     max_seeds: int = typer.Option(50, "--max-seeds", help="Largest seeds per cell searched for 80% power."),
     seed: int = typer.Option(DEFAULT_SEED, "--seed", help="Random state of the simulation (and of the bootstraps)."),
@@ -69,10 +72,10 @@ def plan_cmd(
     on your hardware (from your `repro bench` JSON); with --claims each claim's power and the seeds it needs."""
     if not sweeps and not all_ and not claims:
         fail("name sweeps (e.g. 'repro plan main'), or pass --all or --claims")
-    if devices < 1 or sims < 10 or max_seeds < 2 or reps < 1 or min_seeds < 1 or (
-            device_memory_gb is not None and device_memory_gb <= 0):
+    if devices < 1 or sims < 10 or max_seeds < 2 or reps < 1 or min_seeds < 1 or any(
+            gb is not None and gb <= 0 for gb in (device_memory_gb, host_memory_gb)):
         fail("--devices must be >= 1, --sims >= 10, --max-seeds >= 2, --reps and --min-seeds >= 1, "
-              "--device-memory-gb > 0")
+             "--device-memory-gb and --host-memory-gb > 0")
     if device is not None and device not in ("cuda", "cpu"):
         fail(f"--device must be cuda or cpu (got {device!r})")
     if (seeds_n is not None and seeds_n < 1) or (frames is not None and frames < 1):
@@ -85,7 +88,7 @@ def plan_cmd(
 
         selection = specs.selection(tasks, seeds_n, frames, sets, results.expanduser().absolute())
         _plan_sweeps(sweeps or [], all_, results, out, bench_file, device, devices, cluster_config,
-                     device_memory_gb, selection)
+                     (device_memory_gb, host_memory_gb), selection)
     if claims:
         from analysis.cache import opened
 
@@ -103,24 +106,46 @@ def _cluster(cluster_config: Optional[Path]):
 
 
 def _plan_sweeps(names: list[str], all_: bool, results: Path, out: Path, bench_file: Optional[Path],
-                 device: Optional[str], devices: int, cluster_config: Optional[Path], device_memory_gb: Optional[float],
-                 selection) -> None:
+                 device: Optional[str], devices: int, cluster_config: Optional[Path],
+                 memory_gb: tuple[Optional[float], Optional[float]], selection) -> None:
     from repro.launch import spec as specs
-    from repro.launch.cost import GB, find_bench, plan_sweeps, totals
-    from repro_app.plan import plan_notes, write_plan
+    from repro.launch.cost import (
+        GB,
+        NoBench,
+        PlanError,
+        bench_commands,
+        find_bench,
+        machine_memory,
+        plan_sweeps,
+        totals,
+        unpriced_runs,
+    )
+    from repro_app.plan import Memory, plan_frames, plan_notes, write_plan
 
-    bench = find_bench(results, device, bench_file)  # PlanError (one line naming `repro bench`) without one
-    cluster, where = _cluster(cluster_config)
     chosen = specs.sweep_names() if all_ else names
+    try:
+        bench = find_bench(results, device, bench_file)
+    except NoBench as exc:  # one line naming the command that prices every run of these sweeps
+        every = plan_sweeps(chosen, None, selection, memory=False)
+        where = f" for device {exc.device}" if exc.device else ""
+        commands = " then ".join(f"`{c}`" for c in bench_commands(unpriced_runs(every), exc.device or "cuda",
+                                                                     results))
+        raise PlanError(f"no `repro bench` file{where} under {exc.folder}: run {commands} first (every agent, batch "
+                        f"and path of {', '.join(chosen)}{'' if exc.device else '; --device cpu for this CPU'}), "
+                        "or pass --bench FILE") from None
+    cluster, where = _cluster(cluster_config)
     costs = plan_sweeps(chosen, bench, selection)
     slots, limit = cluster.array_parallelism, cluster.time_min
-    rows = [totals(n, [c for c in costs if c.sweep == specs.load(n).name], devices, slots, limit) for n in chosen]
+    sweep_names = [specs.load(n).name for n in chosen]  # a sweep given as a YAML path: its name
+    rows = [totals(n, [c for c in costs if c.sweep == n], devices, slots, limit) for n in sweep_names]
     rows.append(totals("Total", costs, devices, slots, limit))
-    memory = int(device_memory_gb * GB) if device_memory_gb else bench.device_memory_bytes
-    notes = plan_notes(bench, costs, devices, slots, where, memory)
-    table = write_plan(out, rows, notes, memory, devices, slots)
-    from repro_app.plan import plan_frames
-
+    device_gb, host_gb = memory_gb
+    memory = Memory(int(device_gb * GB) if device_gb else bench.device_memory_bytes,
+                    int(host_gb * GB) if host_gb else machine_memory(), devices,
+                    "--host-memory-gb" if host_gb else "this machine's; --host-memory-gb for the nodes'")
+    notes = plan_notes(bench, costs, devices, slots, where, memory, rows[-1], sweep_names, results, cluster.mem_gb)
+    table = write_plan(out, rows, notes, memory, devices, slots,
+                       bench_commands(unpriced_runs(costs), bench.device, results))
     _print(plan_frames(rows, memory, devices, slots)[1], table.caption, notes)
     typer.echo(f"Wrote {', '.join(str(p) for p in table.files)}")
 

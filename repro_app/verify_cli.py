@@ -109,7 +109,7 @@ def verify_cmd(
                               agents=chosen, variants=kinds)
         if report is None:  # --dry-run
             _print_cost(Selection(seeds=seeds, frames=frames, sets=root_sets), chosen, kinds,
-                        results_root if results_root is not None else _root_from(root_sets))
+                        results_root if results_root is not None else _root_from(root_sets), cuda)
             return
         if report.interrupted:
             raise typer.Exit(130)
@@ -201,28 +201,44 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = Fals
     return 1 if any(r.verdict in (BELOW, ABOVE, NOT_LEARNED) for r in rows) else 0
 
 
-def _print_cost(sel: Selection, agents: tuple[str, ...], variants: tuple[str, ...], root: Path) -> None:
-    """What `repro plan` expects the planned runs to take on the device of the newest bench file under ``root``
-    (``repro/launch/cost.py``), or the command that writes one."""
-    from repro.launch.cost import PlanError, find_bench, makespan, plan_sweeps
+def _print_cost(sel: Selection, agents: tuple[str, ...], variants: tuple[str, ...], root: Path,
+                cuda: bool = True) -> None:
+    """What `repro plan` expects the planned runs to take on this machine's kind of device (``cuda``: a GPU, else the
+    CPU), from the newest bench file of that device under ``root`` (``repro/launch/cost.py``), or the command that
+    writes one for that device (a CPU machine is never told to bench CUDA)."""
+    from repro.launch.cost import NoBench, PlanError, bench_commands, find_bench, makespan, plan_sweeps, unpriced_runs
 
     con = console()
+    device = "cuda" if cuda else "cpu"
+
+    def planned(bench):
+        return [c for c in plan_sweeps([SWEEP], bench, sel, memory=False)
+                if c.algo in agents and c.run_dir.parent.parent.name in variants]  # verify/agent/VARIANT/task/seed_N
+
     try:
-        bench = find_bench(root)
+        bench = find_bench(root, device)
+    except NoBench:
+        command = " then ".join(f"`{c}`" for c in bench_commands(unpriced_runs(planned(None)), device, root))
+        con.print(f"expected time: unknown (no `repro bench` file for device {device} under {root / 'bench'}: "
+                  f"{command or '`repro bench update --device ' + device + '`'} times these runs here)",
+                  highlight=False, soft_wrap=True)
+        return
     except PlanError as exc:
         con.print(f"expected time: unknown ({exc})", highlight=False, soft_wrap=True)
         return
-    costs = [c for c in plan_sweeps([SWEEP], bench, sel, memory=False)
-             if c.algo in agents and c.run_dir.parent.parent.name in variants]  # root/verify/agent/VARIANT/task/seed_N
+    costs = planned(bench)
     hours = [c.hours(c.frames - c.trained) for c in costs if c.frames > c.trained]
     if any(h is None for h in hours):
-        missing = sorted({c.missing for c in costs if c.fps is None and c.missing})
-        con.print("expected time: the bench file does not time every run; " + "; ".join(missing), highlight=False,
-                  soft_wrap=True)
+        command = " then ".join(f"`{c}`" for c in bench_commands(unpriced_runs(costs), device, root))
+        con.print(f"expected time: the bench file {bench.path} does not time every run; {command} times them",
+                  highlight=False, soft_wrap=True)
         return
     priced = [h for h in hours if h is not None]
+    loaded = sorted({f"{c.setting} (load {c.load:.1f} on {c.cores} cores)" for c in costs if c.under_load})
     con.print(f"expected time on {bench.hardware} ({bench.path}): {sum(priced):.2f} device-hours, "
-              f"{makespan(priced, 1):.2f} h one run at a time (repro plan verify)", highlight=False, soft_wrap=True)
+              f"{makespan(priced, 1):.2f} h one run at a time (repro plan verify)"
+              + (f"; timed under load, so too long: {', '.join(loaded)}" if loaded else ""),
+              highlight=False, soft_wrap=True)
 
 
 def register(app: typer.Typer) -> None:

@@ -35,7 +35,7 @@ def test_same_run_ratios_pair_only_measured_settings():
 def test_bench_prints_same_run_ratios_and_no_constant(tmp_path):
     # one algorithm (the cheaper one) at two tiny batches keeps this fast; pairs across algorithms are
     # covered by the test above
-    args = ["bench", "--algo", "drqv2", "--batch", "2", "--batch", "4", "--repeats", "2", "--warmup", "0",
+    args = ["bench", "update", "--agent", "drqv2", "--batch", "2", "--batch", "4", "--repeats", "2", "--warmup", "0",
             "--fast", "--results", str(tmp_path)]
     result = CliRunner().invoke(_app(), args)
     assert result.exit_code == 0, result.output
@@ -45,11 +45,11 @@ def test_bench_prints_same_run_ratios_and_no_constant(tmp_path):
     assert ratio_lines and all("measured in this run" in ln for ln in ratio_lines if " / " in ln)
     assert "upstream" not in out.lower() and "paper" not in out.lower()
     report = json.loads(next((tmp_path / "bench").glob("bench-*.json")).read_text())
-    secs = {(r["agent"], r["batch_size"]): r["update_seconds"] for r in report["results"] if r["speedup"] == "plain"}
+    secs = {(r["agent"], r["batch_size"]): r["update_seconds"] for r in report["results"] if r["path"] == "plain"}
     assert report["ratios"] == same_run_ratios(secs)
     assert all(r["warmup"] == 0 and r["repeats"] == 2 and len(r["seconds_each"]) == 2 for r in report["results"])
     # --fast: timed beside the plain path of the same batch (alternated), as a ratio to it
-    fast = {r["batch_size"]: r for r in report["results"] if r["speedup"] == "fast"}
+    fast = {r["batch_size"]: r for r in report["results"] if r["path"] == "fast"}
     assert set(fast) == {2, 4} and all(r["alternated"] for r in report["results"])
     for b, row in fast.items():
         assert row["speedup_vs_plain"] == round(secs[("drqv2", b)] / row["update_seconds"], 3)
@@ -61,13 +61,13 @@ def test_bench_prints_same_run_ratios_and_no_constant(tmp_path):
 def test_every_online_agent_is_timed_on_a_batch_drawn_as_training_draws_it(tmp_path):
     """Every registered online agent, built-in or a plugin's (the offline ones: the --offline test below), is timed by
     `repro bench` at a tiny size, on a batch sampled from a ReplayBuffer with what its objectives ask for: a batch
-    made by hand had no future_obs_seq and `repro bench --algo spr` failed."""
+    made by hand had no future_obs_seq and `repro bench update --agent spr` failed."""
     from repro.bench.online_update import replay_batch
 
     agents = online_agents()
     assert {"taco", "drqv2", "spr", "curl", "atc", "driml"} <= set(agents)
-    args = ["bench", *(x for a in agents for x in ("--algo", a)), "--batch", "2", "--repeats", "1", "--warmup", "0",
-            "--results", str(tmp_path)]
+    args = ["bench", "update", *(x for a in agents for x in ("--agent", a)), "--batch", "2", "--repeats", "1",
+            "--warmup", "0", "--results", str(tmp_path)]
     result = CliRunner().invoke(_app(), args)
     assert result.exit_code == 0, result.output
     report = json.loads(next((tmp_path / "bench").glob("bench-*.json")).read_text())
@@ -79,10 +79,10 @@ def test_every_online_agent_is_timed_on_a_batch_drawn_as_training_draws_it(tmp_p
 
 
 @pytest.mark.parametrize("args, needle", [(["--batch", "0"], "--batch must be >= 1"),
-                                          (["--algo", "tacoo"], "unknown online agent 'tacoo'. Did you mean: taco"),
-                                          (["--algo", "td3bc"], "unknown online agent 'td3bc'")])
+                                          (["--agent", "tacoo"], "unknown online agent 'tacoo'. Did you mean: taco"),
+                                          (["--agent", "td3bc"], "unknown online agent 'td3bc'")])
 def test_bench_bad_input_is_one_line(tmp_path, args, needle):
-    result = CliRunner().invoke(_app(), ["bench", *args, "--results", str(tmp_path)])
+    result = CliRunner().invoke(_app(), ["bench", "update", *args, "--results", str(tmp_path)])
     assert result.exit_code == 2
     lines = [ln for ln in result.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and needle in lines[0] and "Traceback" not in result.output
@@ -96,7 +96,7 @@ OFFLINE_LINE = re.compile(r"^(\w+) B(\d+)( \(its own batch size\))? / drqv2 B(\d
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_offline_bench_prints_each_learners_ratio_to_drqv2_from_this_run(tmp_path):
-    args = ["bench", "--offline", "--batch", "2", "--iters", "1", "--warmup", "0", "--dt-batch", "1",
+    args = ["bench", "offline", "--batch", "2", "--repeats", "1", "--warmup", "0", "--dt-batch", "1",
             "--results", str(tmp_path)]
     result = CliRunner().invoke(_app(), args)
     assert result.exit_code == 0, result.output
@@ -137,7 +137,7 @@ def test_an_unregistered_learner_is_skipped_with_its_reason(monkeypatch):
 # ------------------------------------------------------------------------------------------ offline data
 
 def test_offline_data_bench_loads_a_dataset_and_compares_sampling_with_the_online_buffer(tmp_path):
-    args = ["bench", "--offline-data", "--transitions", "2000", "--episode-length", "250", "--batch", "32",
+    args = ["bench", "data", "--transitions", "2000", "--episode-length", "250", "--batch", "32",
             "--sample-batches", "5", "--results", str(tmp_path)]
     result = CliRunner().invoke(_app(), args)
     assert result.exit_code == 0, result.output
@@ -162,9 +162,9 @@ def test_synthetic_episodes_split_the_transitions_and_follow_the_dataset_contrac
     assert not np.array_equal(ep["frames"][0], ep["frames"][1])  # the square moves
 
 
-@pytest.mark.parametrize("args, needle", [(["--offline", "--learner", "sac"], "unknown offline learner 'sac'"),
-                                          (["--offline-data", "--transitions", "0"], "--transitions"),
-                                          (["--offline", "--dt-batch", "0"], "--dt-batch must be >= 1")])
+@pytest.mark.parametrize("args, needle", [(["offline", "--agent", "sac"], "unknown offline agent 'sac'"),
+                                          (["data", "--transitions", "0"], "--transitions"),
+                                          (["offline", "--dt-batch", "0"], "--dt-batch must be >= 1")])
 def test_offline_bench_bad_input_is_one_line(tmp_path, args, needle):
     result = CliRunner().invoke(_app(), ["bench", *args, "--results", str(tmp_path)])
     assert result.exit_code == 2
@@ -209,14 +209,14 @@ def _encoder_forward_flops(batch: int) -> int:
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_roofline_counts_the_updates_flops_and_names_the_kernels(tmp_path):
-    """`repro bench --roofline`: the DrQ-v2 update's forward convolutions are its two encoder passes (obs and
+    """`repro bench roofline`: the DrQ-v2 update's forward convolutions are its two encoder passes (obs and
     next_obs) at the batch asked for, the peak convolution's FLOPs are its shape's, and each path's rate is its
     FLOPs over its measured seconds against the peak of its dtype, with the kernels that take its time."""
     import torch
 
     from repro.bench.roofline import TOP_KERNELS, conv_flops, flop_op, kernel_table
 
-    args = ["bench", "--roofline", "--algo", "drqv2", "--batch", "4", "--amp", "--repeats", "1", "--warmup", "0",
+    args = ["bench", "roofline", "--agent", "drqv2", "--batch", "4", "--amp", "--repeats", "1", "--warmup", "0",
             "--results", str(tmp_path)]
     result = CliRunner().invoke(_app(), args)
     assert result.exit_code == 0, result.output
@@ -245,33 +245,127 @@ def test_roofline_counts_the_updates_flops_and_names_the_kernels(tmp_path):
     assert sum(r["flops"] for r in rows if r["flop_op"] == "aten.convolution") == pytest.approx(1000, abs=len(rows))
 
 
-def test_roofline_with_another_mode_is_one_line(tmp_path):
-    result = CliRunner().invoke(_app(), ["bench", "--roofline", "--e2e", "--results", str(tmp_path)])
-    assert result.exit_code == 2 and "--roofline times the online update" in result.output
-
-
 # ------------------------------------------------------------------------------------------ subcommands
-def test_each_mode_is_a_subcommand_and_the_old_flags_point_to_it(tmp_path):
+def test_each_mode_is_a_subcommand_and_the_old_forms_are_gone(tmp_path):
+    """One form: `repro bench MODE --agent ...` (the one-command form `repro bench --e2e ...` and the other names of
+    an agent file, --algo and --learner, are gone: issue 51)."""
     data = ["--transitions", "300", "--episode-length", "100", "--batch", "8", "--sample-batches", "2"]
     new = CliRunner().invoke(_app(), ["bench", "data", *data, "--results", str(tmp_path / "new")])
     assert new.exit_code == 0, new.output
-    assert "note:" not in new.output
-    old = CliRunner().invoke(_app(), ["bench", "--offline-data", *data, "--results", str(tmp_path / "old")])
-    assert old.exit_code == 0, old.output
-    last = old.output.strip().splitlines()[-1]
-    assert last == (f"note: the new form of this command is `repro bench data --transitions 300 --episode-length 100 "
-                    f"--sample-batches 2 --batch 8 --results {tmp_path / 'old'}` (`repro bench --help`)")
-    for root in ("new", "old"):
-        written = json.loads(next((tmp_path / root / "bench").glob("bench-offline-data-*.json")).read_text())
-        assert written["kind"] == "data" and written["transitions"] == 300
+    written = json.loads(next((tmp_path / "new" / "bench").glob("bench-offline-data-*.json")).read_text())
+    assert written["kind"] == "data" and written["transitions"] == 300
     # each subcommand has its own options and help; bad input stays one line
     helps = CliRunner().invoke(_app(), ["bench", "--help"]).output
     assert all(sub in helps for sub in ("update", "e2e", "offline", "data", "roofline"))
     assert "--overlap" in CliRunner().invoke(_app(), ["bench", "e2e", "--help"]).output
     assert "--overlap" not in CliRunner().invoke(_app(), ["bench", "update", "--help"]).output
-    for args, needle in ((["--offline-data", "--frames", "5"], "--frames is not an option of `repro bench data`"),
-                         (["--algo", "taco", "update"], "options go after the subcommand: `repro bench update --algo"),
-                         (["update", "--batch", "0"], "--batch must be >= 1"),
+    for sub in ("update", "e2e", "offline", "roofline"):
+        options = CliRunner().invoke(_app(), ["bench", sub, "--help"], terminal_width=200).output
+        assert "--agent" in options and "--algo" not in options and "--learner" not in options, sub
+    for args, needle in ((["update", "--batch", "0"], "--batch must be >= 1"),
                          (["e2e", "--task", "nope"], "unknown task 'nope'")):
         bad = CliRunner().invoke(_app(), ["bench", *args])
         assert bad.exit_code == 2 and len(bad.output.strip().splitlines()) == 1 and needle in bad.output, bad.output
+    for old in (["--offline-data", *data], ["--e2e"], ["update", "--algo", "taco"], ["offline", "--learner", "cql"],
+                ["update", "--iters", "2"]):
+        gone = CliRunner().invoke(_app(), ["bench", *old, "--results", str(tmp_path / "old")])
+        assert gone.exit_code == 2 and "No such option" in gone.output, (old, gone.output)
+    assert not (tmp_path / "old").exists()
+
+
+# ---------------------------------------------------------------------------------- merged files, load, progress
+def _fake_time_update(seconds: dict[tuple[str, int, str], float]):
+    """A stand-in for repro.bench.online_update.time_update: rows of the shape it writes, with ``seconds``' times
+    (the real one times a B256 update in seconds; what is tested here is what the bench does with the rows)."""
+
+    def time_update(agent, batch_size, repeats=2, device="cpu", paths=(), warmup=1, **_):
+        return [{"agent": agent, "batch_size": batch_size, "path": p, "update_seconds": seconds[(agent, batch_size, p)],
+                 "frames_per_update": 4, "fps_estimate": 4 / seconds[(agent, batch_size, p)], "repeats": repeats,
+                 "warmup": warmup} for p in ("plain", *paths)]
+
+    return time_update
+
+
+def test_a_second_bench_merges_into_the_file_and_each_entry_records_the_load(tmp_path, monkeypatch):
+    """`repro bench update` twice, with different agents: the second keeps the first's entries and replaces only those
+    of the same (agent, batch, path) (a second bench used to replace the file, and the plan's headline moved with
+    whichever ran last); every entry records the machine's 1-minute load average and cores beside it."""
+    import os
+
+    from repro.bench import cli as bench_cli
+    from repro.bench import results as br
+
+    times = {("taco", 8, "plain"): 2.0, ("taco", 8, "fast"): 0.5, ("drqv2", 8, "plain"): 1.0, ("drqv2", 8, "fast"): 0.4,
+             ("alix", 8, "plain"): 3.0, ("alix", 16, "plain"): 4.0}
+    monkeypatch.setattr(bench_cli, "time_update", _fake_time_update(times))
+    first = CliRunner().invoke(_app(), ["bench", "update", "--agent", "taco", "--agent", "drqv2", "--batch", "8",
+                                        "--fast", "--results", str(tmp_path)])
+    assert first.exit_code == 0, first.output
+    path = next((tmp_path / "bench").glob("bench-*-cpu.json"))
+    assert {u.key for u in br.read(path).updates} == {("taco", 8, "plain"), ("taco", 8, "fast"),
+                                                      ("drqv2", 8, "plain"), ("drqv2", 8, "fast")}
+    times.update({("drqv2", 8, "plain"): 0.25, ("drqv2", 16, "plain"): 0.75})
+    second = CliRunner().invoke(_app(), ["bench", "update", "--agent", "drqv2", "--agent", "alix", "--batch", "8",
+                                         "--batch", "16", "--results", str(tmp_path)])
+    assert second.exit_code == 0, second.output
+    assert "4 entries timed now (1 replacing an entry of the same setting), 3 kept from earlier benches" in \
+        second.output
+    bench = br.read(path)
+    seconds = {u.key: u.update_seconds for u in bench.updates}
+    assert seconds[("taco", 8, "plain")] == 2.0 and seconds[("taco", 8, "fast")] == 0.5  # kept
+    assert seconds[("drqv2", 8, "plain")] == 0.25 and seconds[("drqv2", 16, "plain")] == 0.75  # replaced, added
+    assert seconds[("alix", 8, "plain")] == 3.0 and len(seconds) == 7
+    assert [u.key for u in bench.updates][:4] == [("taco", 8, "plain"), ("taco", 8, "fast"), ("drqv2", 8, "plain"),
+                                                  ("drqv2", 8, "fast")]  # replaced in place
+    raw = json.loads(path.read_text())
+    assert raw["format"] == br.FORMAT and all("path" in r and "speedup" not in r for r in raw["results"])
+    for entry in bench.updates:  # the load beside each entry: a load average, on this machine's cores
+        assert entry.load is not None and entry.load >= 0 and entry.cores == os.cpu_count()
+    assert f"on {os.cpu_count()} cores" in second.output
+
+
+def test_a_bench_shows_each_setting_as_it_is_timed(tmp_path, monkeypatch):
+    """On a terminal `repro bench update` shows a progress bar naming the setting being timed; in a log each
+    setting's line comes as it is done, after a first line naming all of them (it printed nothing for minutes)."""
+    import io
+
+    from rich.console import Console
+
+    from repro.bench import cli as bench_cli
+    from repro.bench import progress
+
+    screen = io.StringIO()
+    monkeypatch.setattr(progress, "_bar_console", lambda: Console(file=screen, force_terminal=True, width=120))
+    times = {("taco", 8, "plain"): 0.5, ("drqv2", 8, "plain"): 0.25}
+    order: list[str] = []
+    fake = _fake_time_update(times)
+
+    def time_update(agent, batch_size, **kw):
+        order.append(f"timed {agent}")
+        return fake(agent, batch_size, **kw)
+
+    monkeypatch.setattr(bench_cli, "time_update", time_update)
+    bench_cli.run_bench([("taco", 8), ("drqv2", 8)], 1, "cpu", tmp_path, echo=order.append, progress=True)
+    assert "timing taco B8 (plain)" in screen.getvalue() and "2/2" in screen.getvalue()
+    assert order[0].startswith("timing 2 setting(s): taco B8, drqv2 B8; paths plain")
+    assert order[1] == "timed taco" and order[2].startswith("  taco batch     8: ") and order[3] == "timed drqv2"
+    screen.truncate(0)
+    bench_cli.run_bench([("taco", 8)], 1, "cpu", tmp_path, echo=lambda s: None, progress=False)
+    assert screen.getvalue() == ""  # not a terminal: no bar
+
+
+def test_a_file_of_format_2_reads_and_is_written_with_the_fields_own_key(tmp_path):
+    """Format 2 wrote the field ``path`` as "speedup": such a file still reads, and a bench that merges into it writes
+    every entry, old and new, with the key "path"."""
+    from repro.bench import results as br
+
+    path = tmp_path / "bench" / br.file_name(br.ONLINE, "cpu")
+    path.parent.mkdir()
+    path.write_text(json.dumps({"kind": "online", "format": 2, "device": "cpu", "results": [
+        {"agent": "taco", "batch_size": 8, "speedup": "fast", "update_seconds": 0.5, "frames_per_update": 4}]}))
+    assert [u.key for u in br.read(path).updates] == [("taco", 8, "fast")]
+    bench = br.read_or_new(path, br.ONLINE, "cpu")
+    bench.merge(updates=[br.UpdateEntry("drqv2", 8, "plain", 1.0)])
+    written = bench.to_json()
+    assert [(r["agent"], r["path"]) for r in written["results"]] == [("taco", "fast"), ("drqv2", "plain")]
+    assert written["format"] == br.FORMAT == 3 and not any("speedup" in r for r in written["results"])

@@ -1,4 +1,4 @@
-"""`repro bench --e2e` (repro/bench/e2e.py): a tiny real training loop's JSON has every phase, the phases add up to
+"""`repro bench e2e` (repro/bench/e2e.py): a tiny real training loop's JSON has every phase, the phases add up to
 the loop's wall clock, FPS is frames over that wall clock, and `repro plan` reads the entries by path."""
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ def _app() -> typer.Typer:
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_e2e_json_has_every_phase_summing_to_the_wall_clock(tmp_path):
     bench_dir = tmp_path / "bench"
-    args = ["bench", "e2e", "--algo", "drqv2", "--amp", "--frames", "100", "--seed-frames", "20",
+    args = ["bench", "e2e", "--agent", "drqv2", "--amp", "--frames", "100", "--seed-frames", "20",
             "--results", str(tmp_path)]
     result = CliRunner().invoke(_app(), args)
     assert result.exit_code == 0, result.output
@@ -33,7 +33,7 @@ def test_e2e_json_has_every_phase_summing_to_the_wall_clock(tmp_path):
     report = json.loads(path.read_text())
     entries = report["e2e"]
     assert report["kind"] == "online" and report["format"] == bench_results.FORMAT
-    assert [(e["agent"], e["speedup"], e["profile"], e["batch_size"]) for e in entries] == [
+    assert [(e["agent"], e["path"], e["profile"], e["batch_size"]) for e in entries] == [
         ("drqv2", "plain", "tiny", 8), ("drqv2", "amp", "tiny", 8)]
     for e in entries:
         assert set(e["phases"]) == set(PHASES)
@@ -50,18 +50,18 @@ def test_e2e_json_has_every_phase_summing_to_the_wall_clock(tmp_path):
     report["results"] = [{"algo": "drqv2", "batch_size": 8, "speedup": "plain", "update_seconds": 0.5}]
     stale = {**entries[0], "phase_sync": False, "seconds": 99.0}  # an earlier --overlap entry: replaced
     path.write_text(json.dumps({**report, "e2e": [*entries, stale]}))
-    short = ["bench", "--e2e", "--algo", "drqv2", "--frames", "20", "--seed-frames", "20", "--results", str(tmp_path)]
+    short = ["bench", "e2e", "--agent", "drqv2", "--frames", "20", "--seed-frames", "20", "--results", str(tmp_path)]
     result = CliRunner().invoke(_app(), [*short, "--overlap"])  # without --amp, and shorter
     assert result.exit_code == 0, result.output
     again = json.loads(path.read_text())
-    assert [(e["speedup"], e["phase_sync"]) for e in again["e2e"]] == [("plain", True), ("amp", True),
+    assert [(e["path"], e["phase_sync"]) for e in again["e2e"]] == [("plain", True), ("amp", True),
                                                                       ("plain", False)]
     bench = bench_results.read(path)
     (update,) = bench.updates
     assert (update.agent, update.batch_size, update.path, update.update_seconds) == ("drqv2", 8, "plain", 0.5)
     assert again["e2e"][:2] == entries and again["e2e"][2]["seconds"] != 99.0
+    assert all("load" in e and "cores" in e for e in again["e2e"])  # the machine's load beside each entry
     assert "as it trains" in result.output and set(again["e2e"][2]["phases"]) == set(PHASES)
-    assert "the new form of this command is `repro bench e2e --algo drqv2 --frames 20" in result.output  # old flags
     # the one FPS (`repro plan`, T4/T5) takes the loop as it trains where there is one
     assert bench_results.rate(bench, "drqv2", 8, "plain").fps == pytest.approx(again["e2e"][2]["fps"], rel=1e-3)
     assert bench_results.rate(bench, "drqv2", 8, "amp").fps == pytest.approx(entries[1]["fps"], rel=1e-3)
@@ -69,8 +69,8 @@ def test_e2e_json_has_every_phase_summing_to_the_wall_clock(tmp_path):
 
 @pytest.mark.parametrize("args, needle", [(["--frames", "0"], "--frames must be >= 1"),
                                           (["--task", "nope"], "unknown task 'nope'"),
-                                          (["--offline"], "drop --offline")])
+                                          (["--agent", "td3bc"], "unknown online agent 'td3bc'")])
 def test_e2e_bad_input_is_one_line_exit_2(tmp_path, args, needle):
-    result = CliRunner().invoke(_app(), ["bench", "--e2e", *args, "--results", str(tmp_path)])
+    result = CliRunner().invoke(_app(), ["bench", "e2e", *args, "--results", str(tmp_path)])
     assert result.exit_code == 2 and needle in result.output, result.output
     assert len(result.output.strip().splitlines()) == 1

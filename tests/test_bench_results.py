@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 
-from repro.bench import SPEEDUP_FLAGS
 from repro.bench import results as br
 from repro.config.compose import compose, typed
 
@@ -66,6 +65,7 @@ def test_todays_files_round_trip_and_say_their_kind(tmp_path):
         assert again == first and again.to_json()["format"] == br.FORMAT and again.to_json()["kind"] == first.kind
     written = br.parse(OLD_ONLINE).to_json()
     assert all("agent" in r and "algo" not in r for r in [*written["results"], *written["e2e"]])  # one agent key
+    assert all("path" in r and "speedup" not in r for r in [*written["results"], *written["e2e"]])  # the field's key
 
 
 @pytest.mark.parametrize("data, needle", [
@@ -86,7 +86,7 @@ def test_a_bad_file_is_one_line_naming_it(tmp_path, data, needle):
 
 
 def test_the_path_a_run_trains_with_is_the_bench_vocabulary():
-    assert list(SPEEDUP_FLAGS) == list(br.PATHS)  # `repro bench` times exactly the paths a run can train with
+    assert list(br.PATH_FLAGS) == list(br.PATHS)  # `repro bench` times exactly the paths a run can train with
     for path, flags in br.PATH_FLAGS.items():
         assert br.path_of(typed(compose(["agent=taco", *flags])).agent) == path
     # agent.fast wins over what else is on (its FastPlan, resolved on the device, may hold amp and compile)
@@ -142,3 +142,26 @@ def test_a_run_is_labelled_with_the_path_it_trained_with(tmp_path):
     meas = speed_measurements(results)
     assert sorted(zip(meas["fps"], meas["speedup"], meas["source"])) == [
         (10.0, "plain", "runs (speed)"), (30.0, "fast", "runs (speed) [fast]")]
+
+
+def test_a_merge_replaces_the_entries_of_the_same_setting_and_keeps_the_others():
+    """BenchFile.merge: an update entry of the same (agent, batch, path), an e2e entry of the same setting and timing,
+    an offline entry of the same (agent, batch) replaced in its place; every other entry kept, the new ones after."""
+    bench = br.parse({"device": "cpu", "results": [
+        {"agent": "taco", "batch_size": 8, "path": "plain", "update_seconds": 2.0},
+        {"agent": "taco", "batch_size": 8, "path": "fast", "update_seconds": 1.0}]})
+    bench.merge(updates=[br.UpdateEntry("taco", 8, "fast", 0.5, load=3.5, cores=2),
+                         br.UpdateEntry("alix", 8, "plain", 3.0, load=0.5, cores=2)])
+    assert [(u.key, u.update_seconds) for u in bench.updates] == [
+        (("taco", 8, "plain"), 2.0), (("taco", 8, "fast"), 0.5), (("alix", 8, "plain"), 3.0)]
+    assert bench.under_load() == [bench.updates[1]] and not br.under_load(bench.updates[2])
+    assert br.rate(bench, "taco", 8, "fast") == br.Rate(8.0, br.UPDATE_BOUND, None, 3.5, 2)  # the load comes along
+    offline = br.parse({"device": "cpu", "kind": "offline", "results": [
+        {"agent": "drqv2", "batch_size": 256, "update_seconds": 0.4}, {"agent": "cql", "batch_size": 256,
+                                                                        "update_seconds": 0.8}]})
+    offline.merge(offline=[br.OfflineEntry("cql", 256, 0.6), br.OfflineEntry("cql", 512, 1.2)])
+    assert [(e.key, e.update_seconds) for e in offline.offline] == [
+        (("drqv2", 256), 0.4), (("cql", 256), 0.6), (("cql", 512), 1.2)]
+    again = br.parse(json.loads(json.dumps(bench.to_json())))
+    assert again == bench and again.updates[1].load == 3.5 and again.updates[1].cores == 2
+    assert br.loaded(2.01, 2) and not br.loaded(2.0, 2) and not br.loaded(None, 2)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import math
+import re
+from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +23,7 @@ from analysis.cells import CellSource, means_table
 from analysis.claim_budget import ClaimBudget
 from analysis.context import Context
 from analysis.load import Results
+from helpers import bench_app
 from repro.launch.cost import RunBudget, find_bench, frames_to_train, makespan, plan_sweeps, totals
 from repro_app.cli import app
 
@@ -309,10 +312,10 @@ def test_a_run_the_bench_does_not_time_names_the_command_that_would(tmp_path):
     _bench_file(tmp_path, "cuda", [_upd("taco", "plain", 1.0)])
     costs = plan_sweeps(["tiny"], find_bench(tmp_path, "cuda"), results_root=tmp_path, memory=False)
     missing = {c.missing for c in costs if c.missing}
-    assert missing == {"repro bench update --device cuda --algo drqv2 --batch 8"}
+    assert missing == {"repro bench update --device cuda --agent drqv2 --batch 8"}
     amp = plan_sweeps(["tiny"], find_bench(tmp_path, "cuda"), specs_selection(("agent.amp=true",)),
                       results_root=tmp_path, memory=False)
-    assert {c.missing for c in amp} == {f"repro bench update --device cuda --algo {a} --batch 8 --amp"
+    assert {c.missing for c in amp} == {f"repro bench update --device cuda --agent {a} --batch 8 --amp"
                                         for a in ("taco", "drqv2")}
 
 
@@ -323,8 +326,8 @@ def specs_selection(sets: tuple[str, ...]):
 
 
 def test_a_plugin_online_agent_is_priced(tmp_path):
-    """An online agent of a plugin (tests/plugin_example's toy_utd) is priced like a built-in one: `repro bench
-    --algo` times it, so the plan reads its entry (there was a hand list of the agents `repro bench` times)."""
+    """An online agent of a plugin (tests/plugin_example's toy_utd) is priced like a built-in one: `repro bench update
+    --agent` times it, so the plan reads its entry (there was a hand list of the agents `repro bench` times)."""
     from repro.config.compose import online_agents
 
     if "toy_utd" not in online_agents():
@@ -417,3 +420,169 @@ def test_a_kept_composition_equals_composing_and_is_a_fresh_copy(tmp_path: Path)
         again = composed(overrides)
     assert second.hits == {"compose": 1}
     assert OmegaConf.to_container(again) == OmegaConf.to_container(compose(overrides))
+
+
+# ---------------------------------------------------------------- every run counted, packing, one memory figure
+MIX = """name: mix
+description: two agents at two batch sizes on two paths
+artifacts: []
+experiment: mix
+tasks: [cheetah_run]
+agents: [taco, drqv2]
+seeds: 1
+frames: 400
+eval: {every_frames: 200, episodes: 1}
+common: [profile=tiny]
+variants: {base: [], big: [agent.batch_size=16, agent.fast=true]}
+"""
+
+
+def _parse_bench(command: str) -> tuple[str, dict]:
+    """A `repro bench SUB ...` command as printed, parsed by `repro bench`'s own command line (click): (SUB, its
+    parameters)."""
+    import shlex
+
+    from typer.main import get_command
+
+    words = shlex.split(command)
+    assert words[:2] == ["repro", "bench"], command
+    sub = get_command(bench_app()).commands["bench"].commands[words[2]]  # type: ignore[attr-defined]
+    return words[2], sub.make_context(words[2], words[3:]).params
+
+
+def test_the_headline_counts_every_run_and_names_the_one_command_that_prices_the_rest(tmp_path, monkeypatch):
+    """Issue 50: the plan headlined the priced runs' hours as the sweep's cost, the unpriced ones in a table cell. Now
+    the headline counts every run: those priced with their hours, those not priced by setting, and the one `repro
+    bench` command that prices them all; parsed back by `repro bench`'s own command line it covers every unpriced
+    (agent, batch, path), and run (its timings stood in for) it leaves nothing unpriced. An entry timed under load is
+    flagged in the notes."""
+    from repro.bench import cli as bench_cli
+    from repro.bench import results as br
+    from repro.bench.results import FORMAT
+    from repro.launch.cost import unpriced_runs
+    from test_bench import _fake_time_update
+
+    sweep = tmp_path / "mix.yaml"
+    sweep.write_text(MIX)
+    bench = tmp_path / "runs" / "bench" / br.file_name(br.ONLINE, "cpu")
+    bench.parent.mkdir(parents=True)
+    bench.write_text(json.dumps({"kind": "online", "format": FORMAT, "hardware": "Test cpu", "device": "cpu",
+                                 "results": [{**_upd("taco", "plain", 0.5), "load": 9.0, "cores": 2}]}))
+    costs = plan_sweeps([str(sweep)], find_bench(tmp_path / "runs"), results_root=tmp_path / "runs", memory=False)
+    total = totals("Total", costs, 1, 1)
+    assert (total.runs, total.to_train, total.priced, total.unpriced) == (4, 4, 1, 3)
+    assert total.unpriced_settings == {"drqv2 B8": 1, "taco B16 fast": 1, "drqv2 B16 fast": 1}
+    out = tmp_path / "out"
+    args = ["plan", str(sweep), "-r", str(tmp_path / "runs"), "-o", str(out)]
+    res = CliRunner().invoke(app, args, terminal_width=400)
+    assert res.exit_code == 0, res.output
+    caption = (out / "plan.md").read_text().splitlines()[0]
+    assert "Cost of mix: 4 runs, 4 to train; 1 priced, " in caption, caption
+    assert "3 not priced (drqv2 B8: 1, taco B16 fast: 1, drqv2 B16 fast: 1)" in caption, caption
+    (command,) = re.findall(r"`(repro bench [^`]+)`", caption)
+    assert command == (f"repro bench update --device cpu --agent drqv2 --agent taco --batch 8 --batch 16 --fast "
+                       f"--results {tmp_path / 'runs'}")
+    sub, params = _parse_bench(command)
+    paths = {"plain", *(p for p in ("amp", "compile", "fast") if params[p if p != "compile" else "compile_"])}
+    timed = {(a, b, p) for a in params["agent"] for b in params["batch"] for p in paths}
+    assert sub == "update" and params["device"] == "cpu" and params["results_root"] == tmp_path / "runs"
+    assert {(c.algo, c.batch_size, c.path) for c in unpriced_runs(costs)} <= timed
+    notes = " ".join(res.output.split())
+    assert "Timed under load" in notes and "taco B8 (load 9.0 on 2 cores)" in notes
+    # run it (the timings stood in for): the next plan prices every run, and says nothing is left out
+    monkeypatch.setattr(bench_cli, "time_update", _fake_time_update(defaultdict(lambda: 0.25)))
+    ran = CliRunner().invoke(bench_app(), ["bench", *command.split()[2:]])
+    assert ran.exit_code == 0, ran.output
+    again = CliRunner().invoke(app, args, terminal_width=400)
+    assert again.exit_code == 0, again.output
+    caption = (out / "plan.md").read_text().splitlines()[0]
+    assert "not priced" not in caption and caption.startswith("**plan.** Cost of mix: 4 runs, 4 to train, ")
+    assert pd.read_csv(out / "plan.csv")["unpriced"].tolist() == [0, 0]
+
+
+def test_without_a_bench_file_the_one_line_names_the_command_for_every_run(tmp_path):
+    sweep = tmp_path / "mix.yaml"
+    sweep.write_text(MIX)
+    res = CliRunner().invoke(app, ["plan", str(sweep), "-r", str(tmp_path), "--device", "cpu"], terminal_width=400)
+    assert res.exit_code == 2 and len(res.output.strip().splitlines()) == 1, res.output
+    assert (f"run `repro bench update --device cpu --agent taco --agent drqv2 --batch 8 --batch 16 --fast --results "
+            f"{tmp_path}` first") in res.output
+
+
+def test_runs_per_device_is_the_smaller_of_the_device_and_the_host_bound(tmp_path):
+    """Runs per device = min(device memory / a run's device bytes, host memory / (a run's host bytes x devices)): an
+    80 GB GPU held '<= 569' runs while each needed 19.8 GiB of host memory. The advice names --runs-per-gpu."""
+    from repro.launch.cost import GB, Packing, packing
+
+    assert packing(GB, 10 * GB, 80 * GB, 64 * GB) == Packing(6, "host memory")
+    assert packing(GB, 10 * GB, 80 * GB, 64 * GB, devices=2) == Packing(3, "host memory")
+    assert packing(20 * GB, GB, 80 * GB, 512 * GB, measured=False) == Packing(4, "device memory", upper=True)
+    assert packing(20 * GB, GB, None, 512 * GB) == Packing(512, "host memory")
+    assert packing(20 * GB, GB, None, None) == Packing(None)
+    root = tmp_path / "runs"
+    _bench_file(root, "cuda", [_upd(a, "plain", 0.5) for a in ("taco", "drqv2")])
+    host = max(c.host_bytes for c in plan_sweeps(["tiny"], None, results_root=root, memory=False))
+    gb = 3.5 * host / GB  # room for three runs' replays
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["plan", "tiny", "-r", str(root), "-o", str(out), "--device-memory-gb", "80",
+                                   "--host-memory-gb", f"{gb:.9f}"], terminal_width=400)
+    assert res.exit_code == 0, res.output
+    table = pd.read_csv(out / "plan.csv")
+    assert list(table["runs_per_device"]) == ["3 (host memory)"] * 2 and list(table["runs_per_device_n"]) == [3, 3]
+    notes = " ".join(res.output.split())
+    assert "bound by the host memory" in notes and "`repro sweep tiny --gpus 0 --runs-per-gpu 3` packs them" in notes
+    small = CliRunner().invoke(app, ["plan", "tiny", "-r", str(root), "-o", str(out), "--device-memory-gb", "0.05",
+                                     "--host-memory-gb", "1000"], terminal_width=400)
+    assert small.exit_code == 0, small.output
+    (n,) = set(pd.read_csv(out / "plan.csv")["runs_per_device_n"])
+    assert set(pd.read_csv(out / "plan.csv")["runs_per_device"]) == {f"<= {n} (device memory: networks only)"}
+    bad = CliRunner().invoke(app, ["plan", "tiny", "-r", str(root), "--host-memory-gb", "0"])
+    assert bad.exit_code == 2 and "--host-memory-gb > 0" in bad.output
+
+
+def test_one_host_memory_figure_in_the_plan_the_launcher_example_and_the_docs():
+    """A run's host memory is its replay at capacity (capacity x frame bytes and the rest of a transition): the figure
+    `repro plan main` prints (TACO's 1M transitions) is the one sweeps/launchers/example.yaml and docs/plan.md quote
+    (example.yaml said ~30 GB)."""
+    from repro.launch import spec as specs
+    from repro_app.plan import _gb
+
+    costs = plan_sweeps(["main"], None, specs.selection("quadruped_run,walker_run", 1), memory=False)
+    figure = _gb(max(c.host_bytes for c in costs))
+    assert figure == "19.8 GiB"
+    root = Path(__file__).resolve().parents[1]
+    for doc in ("sweeps/launchers/example.yaml", "docs/plan.md"):
+        text = (root / doc).read_text()
+        assert figure in text and "30 GB" not in text, doc
+
+
+def test_the_bench_command_of_docs_plan_prices_every_run_of_main():
+    """docs/plan.md's `repro bench` command is the one `repro plan main` names: every agent, batch and path of main
+    (A-LIX, and DrQ-v2 and A-LIX at 512 on walker_run, included)."""
+    from repro.launch import spec as specs
+    from repro.launch.cost import bench_commands
+
+    costs = plan_sweeps(["main"], None, specs.selection(seeds=1), memory=False)  # the seeds do not change a setting
+    (command,) = bench_commands(costs, "cuda", Path("runs"))
+    assert {(c.algo, c.batch_size) for c in costs} >= {("alix", 256), ("drqv2", 512), ("taco", 1024)}
+    assert command in " ".join((Path(__file__).resolve().parents[1] / "docs" / "plan.md").read_text().split())
+    _, params = _parse_bench(command)
+    assert {(c.algo, c.batch_size, c.path) for c in costs} <= {
+        (a, b, "plain") for a in params["agent"] for b in params["batch"]}
+
+
+def test_verify_dry_run_on_a_cpu_machine_never_suggests_cuda(tmp_path, monkeypatch):
+    """`repro verify --dry-run` on a machine without a GPU said so, then told the user to run `repro bench update
+    --device cuda`: it names the CPU bench of the CPU check's run now (even with a CUDA bench file under the root), and
+    the CPU check's one measured time."""
+    from repro_app import verify_cli
+    from repro_app.verify_cli import CPU_CHECK_TIME
+
+    monkeypatch.setattr(verify_cli, "_has_cuda", lambda: False)
+    _bench_file(tmp_path, "cuda", [_upd("drqv2", "fast", 0.05, batch=256)])
+    res = CliRunner().invoke(app, ["verify", "--dry-run", "-r", str(tmp_path)], terminal_width=400)
+    assert res.exit_code == 0, res.output
+    out = " ".join(res.output.split())
+    assert "--device cuda" not in out and CPU_CHECK_TIME in out, out
+    assert (f"`repro bench update --device cpu --agent drqv2 --batch 256 --fast --results {tmp_path}` times these "
+            "runs here") in out, out

@@ -62,7 +62,7 @@ def test_the_example_registers_through_its_entry_points_only():
     assert {"toy_rwbc", "toy_utd", "toy_inv"} <= set(config_groups()["agent"])  # its conf folder is on the search path
     # the bench list: the built-in offline agent files in the paper's order, then the plugin's
     assert offline_agents() == ("bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "dt", "toy_rwbc")
-    assert {"taco", "drqv2", "toy_inv", "toy_utd"} <= set(online_agents())  # `repro bench --algo`'s choices
+    assert {"taco", "drqv2", "toy_inv", "toy_utd"} <= set(online_agents())  # `repro bench update --agent`'s choices
     assert not set(online_agents()) & set(offline_agents())
     labels = algo_labels()
     assert (labels["toyrwbc"], labels["toyutd"], labels["toyinv"]) == ("RWBC", "DrQ-v2-UTD", "InvDyn")
@@ -154,8 +154,8 @@ def test_docs_extending_states_the_files_a_plugin_method_costs():
 
 
 def test_the_update_bench_times_the_online_plugin_learner(tmp_path):
-    """`repro bench --algo toy_utd`: the plugin's online learner is built through the registry and timed."""
-    args = ["bench", "--algo", "toy_utd", "--batch", "2", "--repeats", "1", "--warmup", "0", "--results",
+    """`repro bench update --agent toy_utd`: the plugin's online learner is built through the registry and timed."""
+    args = ["bench", "update", "--agent", "toy_utd", "--batch", "2", "--repeats", "1", "--warmup", "0", "--results",
             str(tmp_path)]
     result = CliRunner().invoke(bench_app(), args)
     assert result.exit_code == 0, result.output

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from repro.bench import SPEEDUP_FLAGS
+from repro.bench.results import PATH_FLAGS
 
 LOSSES = ("critic_loss", "actor_loss", "aux_loss", "taco_loss", "curl_loss", "reward_loss")
 
@@ -43,12 +43,12 @@ def losses(flags: list[str], device: str, batch: int, updates: int, hidden: int 
 
 def compare(path: str, device: str, batch: int, updates: int, rel: float, abs_: float, hidden: int | None = None,
             algo: str = "taco", image: int = 84) -> dict[str, Any]:
-    """``path`` (a key of SPEEDUP_FLAGS) against plain over ``updates`` updates, per loss: the mean over the updates
+    """``path`` (a key of PATH_FLAGS) against plain over ``updates`` updates, per loss: the mean over the updates
     on both paths and its difference over the allowance ``abs_ + rel x |plain mean|`` (``mean_over_allowed``, <= 1:
     within), the largest single update's difference over its own allowance (``max_over_allowed``: reported, not
     judged, as one update of a small batch swings with a few flipped Adam signs) and finiteness."""
     plain = losses([], device, batch, updates, hidden, algo, image)
-    other = losses(SPEEDUP_FLAGS[path], device, batch, updates, hidden, algo, image)
+    other = losses(PATH_FLAGS[path], device, batch, updates, hidden, algo, image)
     worst: dict[str, dict[str, Any]] = {}
     for key in plain[0]:
         p = [row[key] for row in plain]

@@ -2,8 +2,8 @@
 episodes (random frames, actions in [-1, 1], rewards in [0, 1]) put into the online ReplayBuffer as a run puts them,
 then sampled with what the learner and its objectives ask for (``learner.sample_options``: SPR's future frame
 sequence, ...), or, for a sequence learner (Decision Transformer), windows from its own sampler (``make_sampler``), at
-its own batch size. A synthetic batch made by hand misses what an objective needs (``repro bench --algo spr`` failed
-with "the batch has no future_obs_seq"); this one has what training gives it."""
+its own batch size. A synthetic batch made by hand misses what an objective needs (``repro bench update --agent spr``
+failed with "the batch has no future_obs_seq"); this one has what training gives it."""
 
 from __future__ import annotations
 

@@ -84,7 +84,7 @@ def run_data_bench(transitions: int = 100_000, batch_size: int = 256, iters: int
                    work_dir: Path | None = None, echo: Callable[[str], None] = print, seed: int = 0) -> dict[str, Any]:
     """Write, load and sample a dataset of ``transitions``; print ratios measured in this run."""
     if transitions < 1 or batch_size < 1 or iters < 1 or episode_length < K:
-        raise ValueError("--transitions, --batch and --iters must be >= 1 and the episode length >= K")
+        raise ValueError("--transitions, --batch and --sample-batches must be >= 1 and the episode length >= K")
     tmp = Path(tempfile.mkdtemp(prefix="repro-bench-data-", dir=work_dir))
     try:
         lengths = episode_lengths(transitions, episode_length)

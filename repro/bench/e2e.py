@@ -1,4 +1,4 @@
-"""`repro bench --e2e`: a short real training run, timed per phase (docs/performance.md).
+"""`repro bench e2e`: a short real training run, timed per phase (docs/performance.md).
 
 The run is built as ``repro train`` builds one (repro/train/build.py: environment, agent, replay) and trained by the
 online loop itself, :class:`repro.train.online_loop.OnlineLoop`, without evaluation or checkpoints (its logs and
@@ -17,9 +17,9 @@ On CUDA the device is synchronized before each clock reading (here only: trainin
 the device work it queued. The phases are timed one by one and the loop's wall clock separately; their sum falls
 short of the wall clock only by the loop's own overhead (tests/test_bench_e2e.py bounds it).
 
-``phase_sync=False`` (``--e2e --overlap``) times the loop as it trains: the phases' clocks no longer wait for the device
-(an update's phase is then the time to queue it, and its kernels run on while the environment steps and renders),
-only the wall clock's two readings do. Its FPS against the synchronized entry's is what the overlap of the
+``phase_sync=False`` (``repro bench e2e --overlap``) times the loop as it trains: the phases' clocks no longer wait for
+the device (an update's phase is then the time to queue it, and its kernels run on while the environment steps and
+renders), only the wall clock's two readings do. Its FPS against the synchronized entry's is what the overlap of the
 environment with the queued update gains (nothing on the CPU, where every kernel runs before its call returns).
 """
 
@@ -29,11 +29,11 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from repro.bench import SPEEDUP_FLAGS
 from repro.bench.clock import now
+from repro.bench.results import PATH_FLAGS
 
 PHASES = ("env_step", "render", "replay_sample", "update", "act", "other")
-TINY = "tiny"  # the main job's profile (repro/conf/profile/tiny.yaml): what --e2e times without --batch
+TINY = "tiny"  # the main job's profile (repro/conf/profile/tiny.yaml): what `repro bench e2e` times without --batch
 
 
 class PhaseTimer:
@@ -116,7 +116,7 @@ def instrument(loop: Any, timer: PhaseTimer) -> list[int]:
     return updates
 
 
-def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plain", frames: int = 100,
+def run_e2e(algo: str, batch_size: int | None, device: str, path: str = "plain", frames: int = 100,
             task: str = "cheetah_run", warmup: int = 1, seed_frames: int | None = None,
             phase_sync: bool = True) -> dict[str, Any]:
     """Build a run of ``algo`` on ``task`` (the tiny profile when ``batch_size`` is None, else the agent's own
@@ -139,7 +139,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
     from repro.train.build import build_agent, build_env
     from repro.train.online_loop import OnlineLoop
 
-    overrides = [f"agent={algo}", f"task={task}", *SPEEDUP_FLAGS[speedup]]
+    overrides = [f"agent={algo}", f"task={task}", *PATH_FLAGS[path]]
     overrides += [f"profile={TINY}"] if batch_size is None else [f"agent.batch_size={batch_size}"]
     rc = typed(compose(overrides))
     repeat = rc.env.action_repeat
@@ -190,7 +190,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, speedup: str = "plai
     timed_frames = timed_steps * repeat
     entry: dict[str, Any] = {
         "agent": algo, "batch_size": rc.agent.batch_size, "profile": TINY if batch_size is None else None,
-        "speedup": speedup, "phase_sync": phase_sync, "device": device, "task": task, "frames": timed_frames,
+        "path": path, "phase_sync": phase_sync, "device": device, "task": task, "frames": timed_frames,
         "seed_frames": seed_steps * repeat,
         "updates": updates[0], "warmup": warmup, "seconds": round(wall, 4),
         "phases": {k: round(v, 4) for k, v in seconds.items()}, "fps": round(timed_frames / wall, 3),

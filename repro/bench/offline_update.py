@@ -20,6 +20,8 @@ import torch
 from repro.agent.protocol import SequenceLearner
 from repro.bench.batches import FRAME_SHAPE, synthetic_episodes, training_batch
 from repro.bench.clock import timed
+from repro.bench.progress import Steps
+from repro.bench.results import machine_load
 from repro.config.compose import ConfigError, compose, config_groups, offline_agents, typed
 from repro.envs import get_task
 from repro.learners.registry import LEARNERS, build_learner
@@ -70,11 +72,14 @@ def time_learner(agent: str, batch_size: int, task: str, episodes: Sequence[Mapp
 
 def run_offline_bench(batch_size: int, repeats: int, warmup: int, device: str, agents: Sequence[str] | None = None,
                       task: str = "cheetah_run", echo: Callable[[str], None] = print,
-                      own_batch: int | None = None) -> dict[str, Any]:
-    """Time DrQ-v2 and each available offline learner; print each one's ratio to DrQ-v2 measured here.
-    ``own_batch`` replaces the batch size of learners that have their own (DT's 64)."""
+                      own_batch: int | None = None, steps: Steps | None = None) -> dict[str, Any]:
+    """Time DrQ-v2 and each available offline learner, each entry with the machine's load then; print each one's
+    ratio to DrQ-v2 measured here. ``own_batch`` replaces the batch size of learners that have their own (DT's 64);
+    ``steps``: the progress bar to advance."""
     episodes = synthetic_episodes(action_dim=get_task(task).action_dim)
-    ref = time_learner(REFERENCE, batch_size, task, episodes, repeats, warmup, device)
+    steps = steps or Steps(0, enabled=False)
+    with steps.item(f"{REFERENCE} B{batch_size} (online reference)"):
+        ref = {**time_learner(REFERENCE, batch_size, task, episodes, repeats, warmup, device), **machine_load()}
     echo(f"{REFERENCE} (online) batch {ref['batch_size']}: {ref['update_seconds']:.4f} s/update "
          f"({warmup} warm-up + {repeats} timed updates, median, {device})")
     rows, ratios, skipped = [ref], {}, {}
@@ -83,8 +88,12 @@ def run_offline_bench(batch_size: int, repeats: int, warmup: int, device: str, a
         if why:
             skipped[agent] = why
             echo(f"{agent}: skipped ({why})")
+            with steps.item(f"{agent} (skipped)"):
+                pass
             continue
-        row = time_learner(agent, batch_size, task, episodes, repeats, warmup, device, own_batch)
+        with steps.item(f"{agent} B{batch_size}"):
+            row = {**time_learner(agent, batch_size, task, episodes, repeats, warmup, device, own_batch),
+                   **machine_load()}
         row["over_drqv2"] = row["update_seconds"] / ref["update_seconds"]
         rows.append(row)
         ratios[f"{agent}_b{row['batch_size']}_over_{REFERENCE}_b{ref['batch_size']}"] = round(row["over_drqv2"], 3)

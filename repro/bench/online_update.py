@@ -9,8 +9,8 @@ import statistics
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from repro.bench import SPEEDUP_FLAGS
 from repro.bench.clock import timed
+from repro.bench.results import PATH_FLAGS
 
 if TYPE_CHECKING:
     import torch
@@ -59,17 +59,17 @@ def replay_batch(agent: Any, rc: Any, batch_size: int, device: str, image: int =
 
 
 def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
-                device: str = "cpu", speedups: tuple[str, ...] = (), warmup: int = 1,
+                device: str = "cpu", paths: tuple[str, ...] = (), warmup: int = 1,
                 overrides: Sequence[str] = ()) -> list[dict]:
-    """Median wall-clock seconds of one full agent update on the plain path and on each of ``speedups``, over
+    """Median wall-clock seconds of one full agent update on the plain path and on each of ``paths``, over
     ``repeats`` timed updates after ``warmup`` untimed ones (same batch every time, drawn as training draws it:
     :func:`replay_batch`). The paths' agents live side by side and their timed updates alternate (plain, path 1,
     ..., plain, path 1, ...), so background load falls on every path alike. One row per path, plain first.
     ``overrides``: more config overrides (a test's ``profile=tiny``)."""
-    paths = ("plain", *speedups)
+    paths = ("plain", *paths)
     agents = {}
     for path in paths:
-        agents[path], rc = build_agent(algo, batch_size, task, device, [*overrides, *SPEEDUP_FLAGS[path]])
+        agents[path], rc = build_agent(algo, batch_size, task, device, [*overrides, *PATH_FLAGS[path]])
     batch = replay_batch(agents["plain"], rc, batch_size, device)
     times = alternated_times(agents, batch, warmup, repeats, device)
     rows = []
@@ -78,7 +78,7 @@ def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: 
         # one update every 2 agent steps at action repeat 2 = 4 frames per update (update-bound estimate)
         per_update = rc.train.update_every_steps * rc.env.action_repeat
         fps = per_update / seconds
-        rows.append({"agent": algo, "batch_size": batch_size, "speedup": path, "update_seconds": round(seconds, 4),
+        rows.append({"agent": algo, "batch_size": batch_size, "path": path, "update_seconds": round(seconds, 4),
                      "frames_per_update": per_update, "fps_estimate": round(fps, 3), "repeats": repeats,
                      "warmup": warmup, "alternated": True,
                      "seconds_each": [round(t, 4) for t in times[path]]})

@@ -6,10 +6,14 @@ docs/performance.md.
 Files, under ``{results_root}/bench/``: ``bench-<host>-<device>.json`` (the online update entries, ``results``, and
 the end-to-end entries, ``e2e``), ``bench-offline-<host>-<device>.json`` (one update of each offline learner),
 ``bench-offline-data-<host>.json`` (a dataset's load and sampling) and ``bench-roofline-<host>-<device>.json``.
-Each file written now says its ``kind`` and ``format`` (:data:`FORMAT`) and names the agent of every entry ``agent``
-(typed: :class:`UpdateEntry`, :class:`E2EEntry`, :class:`OfflineEntry`, :class:`DataEntry`); the files of earlier
-versions (no ``kind``, the online agent under ``algo``, no ``speedup``, ``fps`` or ``fps_estimate`` instead of the
-frames per update, ``hardware`` as an object) are read as they are.
+Each file written now says its ``kind`` and ``format`` (:data:`FORMAT`), names the agent of every entry ``agent`` and
+its speed-up path ``path`` (typed: :class:`UpdateEntry`, :class:`E2EEntry`, :class:`OfflineEntry`, :class:`DataEntry`),
+and records beside each timed entry the machine's 1-minute load average and its cores (``load``, ``cores``: an entry
+with load > cores was timed under load, :func:`under_load`). A new bench merges into the file of its host and device:
+its entries replace those of the same setting (:meth:`BenchFile.merge`) and the others stay. The files of earlier
+versions (format 2: the path under ``speedup``; format 1: no ``kind``, the online agent under ``algo``, no path at all,
+``fps`` or ``fps_estimate`` instead of the frames per update, ``hardware`` as an object) are read as they are and
+written in today's format.
 
 One FPS (:func:`rate`): frames / seconds of the end-to-end entry of the agent, batch size and path (the one timed as
 the loop trains, ``phase_sync`` false, where there is one: it is what a run sees), else update-bound, frames per
@@ -23,6 +27,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import socket
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -31,7 +36,7 @@ from typing import Any
 
 from repro.config.errors import UserError
 
-FORMAT = 2  # 1: files without ``kind``/``format`` (the online agent under ``algo``)
+FORMAT = 3  # 2: the path under "speedup"; 1: files without ``kind``/``format`` (the online agent under ``algo``)
 ONLINE, OFFLINE, DATA, ROOFLINE = "online", "offline", "data", "roofline"
 KINDS = (ONLINE, OFFLINE, DATA, ROOFLINE)
 # The speed-up paths: what a run trains with (:func:`path_of`) and the config overrides that turn each on
@@ -72,8 +77,8 @@ def _positive(value: Any, what: str) -> float:
     return x
 
 
-def _path(value: Any) -> str:
-    path = str(value or "plain")
+def _path(r: Mapping[str, Any]) -> str:
+    path = str(r.get("path", r.get("speedup")) or "plain")  # format 2 and earlier: "speedup"
     if path not in PATHS:
         raise ValueError(f"unknown speed-up path {path!r} (one of {', '.join(PATHS)})")
     return path
@@ -95,10 +100,41 @@ def _optional_int(value: Any) -> int | None:
     return int(value) if value else None
 
 
-_UPDATE_KEYS = {"agent", "algo", "batch_size", "speedup", "update_seconds", "frames_per_update", "fps_estimate", "fps",
-                "peak_device_bytes"}
-_E2E_KEYS = {"agent", "algo", "batch_size", "speedup", "frames", "seconds", "phase_sync", "profile", "phases",
-             "peak_device_bytes", "fps"}
+def _optional_float(value: Any) -> float | None:
+    return None if value is None else float(value)
+
+
+def machine_load() -> dict[str, Any]:
+    """The machine's 1-minute load average and its cores, recorded beside each entry a bench times (``load``,
+    ``cores``); empty where the system has no load average."""
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return {}
+    return {"load": round(load, 2), "cores": os.cpu_count() or 1}
+
+
+def loaded(load: float | None, cores: int | None) -> bool:
+    """Whether a load average of ``load`` on ``cores`` cores is a machine under load: above its cores, so other
+    work shared them with what was timed (whose time is then too long)."""
+    return load is not None and bool(cores) and load > (cores or 0)
+
+
+def under_load(entry: Any) -> bool:
+    """Whether ``entry`` (an entry with ``load`` and ``cores``) was timed under load (:func:`loaded`)."""
+    return loaded(getattr(entry, "load", None), getattr(entry, "cores", None))
+
+
+def _load_json(entry: Any) -> dict[str, Any]:
+    return {} if entry.load is None else {"load": entry.load, "cores": entry.cores}
+
+
+_LOAD_KEYS = {"load", "cores"}
+_UPDATE_KEYS = {"agent", "algo", "batch_size", "path", "speedup", "update_seconds", "frames_per_update",
+                "fps_estimate", "fps", "peak_device_bytes", *_LOAD_KEYS}
+_E2E_KEYS = {"agent", "algo", "batch_size", "path", "speedup", "frames", "seconds", "phase_sync", "profile", "phases",
+             "peak_device_bytes", "fps", *_LOAD_KEYS}
+_OFFLINE_KEYS = {"agent", "algo", "batch_size", "update_seconds", *_LOAD_KEYS}
 
 
 @dataclass(frozen=True)
@@ -111,11 +147,18 @@ class UpdateEntry:
     update_seconds: float
     frames_per_update: float = BENCH_FRAMES_PER_UPDATE  # of the bench's config (a run may have its own)
     peak_device_bytes: int | None = None
+    load: float | None = None  # the machine's 1-minute load average when it was timed (None: not recorded)
+    cores: int | None = None  # the machine's cores then
     extra: dict[str, Any] = field(default_factory=dict, compare=False)  # repeats, seconds_each, ...
 
     @property
     def fps(self) -> float:
         return self.frames_per_update / self.update_seconds
+
+    @property
+    def key(self) -> tuple[str, int, str]:
+        """What a later measurement of the same setting replaces: (agent, batch size, path)."""
+        return (self.agent, self.batch_size, self.path)
 
     @classmethod
     def read(cls, r: Mapping[str, Any]) -> UpdateEntry:
@@ -124,14 +167,15 @@ class UpdateEntry:
         if fpu is None:  # format 1: the update-bound estimate it printed, at its config's frames per update
             estimate = r.get("fps_estimate", r.get("fps"))
             fpu = float(estimate) * seconds if estimate else BENCH_FRAMES_PER_UPDATE
-        return cls(_agent(r), int(r["batch_size"]), _path(r.get("speedup")), seconds,
+        return cls(_agent(r), int(r["batch_size"]), _path(r), seconds,
                    _positive(fpu, "frames per update"), _optional_int(r.get("peak_device_bytes")),
+                   _optional_float(r.get("load")), _optional_int(r.get("cores")),
                    {k: v for k, v in r.items() if k not in _UPDATE_KEYS})
 
     def to_json(self) -> dict[str, Any]:
-        out = {"agent": self.agent, "batch_size": self.batch_size, "speedup": self.path,
+        out = {"agent": self.agent, "batch_size": self.batch_size, "path": self.path,
                "update_seconds": self.update_seconds, "frames_per_update": _num(self.frames_per_update),
-               "fps_estimate": round(self.fps, 3), **self.extra}
+               "fps_estimate": round(self.fps, 3), **_load_json(self), **self.extra}
         if self.peak_device_bytes:
             out["peak_device_bytes"] = self.peak_device_bytes
         return out
@@ -150,6 +194,8 @@ class E2EEntry:
     profile: str | None = None  # "tiny": the main job's profile, else the agent's own settings
     phases: dict[str, float] = field(default_factory=dict)
     peak_device_bytes: int | None = None
+    load: float | None = None  # as UpdateEntry's
+    cores: int | None = None
     extra: dict[str, Any] = field(default_factory=dict, compare=False)  # task, updates, cpu, gpu, ...
 
     @property
@@ -163,15 +209,16 @@ class E2EEntry:
 
     @classmethod
     def read(cls, r: Mapping[str, Any]) -> E2EEntry:
-        return cls(_agent(r), int(r["batch_size"]), _path(r.get("speedup")), _positive(r["frames"], "e2e frames"),
+        return cls(_agent(r), int(r["batch_size"]), _path(r), _positive(r["frames"], "e2e frames"),
                    _positive(r["seconds"], "e2e seconds"), bool(r.get("phase_sync", True)), r.get("profile"),
                    {str(k): float(v) for k, v in (r.get("phases") or {}).items()},
-                   _optional_int(r.get("peak_device_bytes")), {k: v for k, v in r.items() if k not in _E2E_KEYS})
+                   _optional_int(r.get("peak_device_bytes")), _optional_float(r.get("load")),
+                   _optional_int(r.get("cores")), {k: v for k, v in r.items() if k not in _E2E_KEYS})
 
     def to_json(self) -> dict[str, Any]:
-        out = {"agent": self.agent, "batch_size": self.batch_size, "profile": self.profile, "speedup": self.path,
+        out = {"agent": self.agent, "batch_size": self.batch_size, "profile": self.profile, "path": self.path,
                "phase_sync": self.phase_sync, "frames": _num(self.frames), "seconds": self.seconds,
-               "phases": self.phases, "fps": round(self.fps, 3), **self.extra}
+               "phases": self.phases, "fps": round(self.fps, 3), **_load_json(self), **self.extra}
         if self.peak_device_bytes:
             out["peak_device_bytes"] = self.peak_device_bytes
         return out
@@ -184,16 +231,24 @@ class OfflineEntry:
     agent: str
     batch_size: int
     update_seconds: float
+    load: float | None = None  # as UpdateEntry's
+    cores: int | None = None
     extra: dict[str, Any] = field(default_factory=dict, compare=False)  # learner, own_batch, over_drqv2, ...
+
+    @property
+    def key(self) -> tuple[str, int]:
+        """What a later measurement replaces: (agent, batch size)."""
+        return (self.agent, self.batch_size)
 
     @classmethod
     def read(cls, r: Mapping[str, Any]) -> OfflineEntry:
         return cls(_agent(r), int(r["batch_size"]), _positive(r["update_seconds"], "update_seconds"),
-                   {k: v for k, v in r.items() if k not in ("agent", "algo", "batch_size", "update_seconds")})
+                   _optional_float(r.get("load")), _optional_int(r.get("cores")),
+                   {k: v for k, v in r.items() if k not in _OFFLINE_KEYS})
 
     def to_json(self) -> dict[str, Any]:
         return {"agent": self.agent, "batch_size": self.batch_size, "update_seconds": self.update_seconds,
-                **self.extra}
+                **_load_json(self), **self.extra}
 
 
 DATA_KEYS = ("transitions", "batch_size", "load_seconds", "offline_batches_per_s", "online_batches_per_s")
@@ -261,11 +316,25 @@ class BenchFile:
             out.update(self.data.to_json())
         return out
 
-    def put_e2e(self, entries: Iterable[E2EEntry]) -> None:
-        """Add ``entries``, each replacing an entry of the same setting (:attr:`E2EEntry.key`)."""
-        new = list(entries)
-        keys = {e.key for e in new}
-        self.e2e = [e for e in self.e2e if e.key not in keys] + new
+    def merge(self, updates: Iterable[UpdateEntry] = (), e2e: Iterable[E2EEntry] = (),
+              offline: Iterable[OfflineEntry] = ()) -> None:
+        """Add the entries of a new bench, each replacing the entry of the same setting (its ``key``: agent, batch
+        size and path; an e2e entry also its profile and phase timing; the device is the file's), the others kept."""
+        self.updates = _merged(self.updates, updates)
+        self.e2e = _merged(self.e2e, e2e)
+        self.offline = _merged(self.offline, offline)
+
+    def under_load(self) -> list[UpdateEntry | E2EEntry | OfflineEntry]:
+        """The entries timed under load (:func:`under_load`)."""
+        entries: list[UpdateEntry | E2EEntry | OfflineEntry] = [*self.updates, *self.e2e, *self.offline]
+        return [e for e in entries if under_load(e)]
+
+
+def _merged(old: list[Any], new: Iterable[Any]) -> list[Any]:
+    """``old`` with ``new`` added, an old entry of the same ``key`` replaced in its place."""
+    fresh = {e.key: e for e in new}
+    kept = [fresh.pop(e.key) if e.key in fresh else e for e in old]
+    return kept + list(fresh.values())
 
 
 def _hardware(value: Any) -> str:
@@ -392,6 +461,8 @@ class Rate:
     fps: float
     source: str  # E2E or UPDATE_BOUND
     peak_device_bytes: int | None = None
+    load: float | None = None  # the load average and cores when the entry was timed (under_load)
+    cores: int | None = None
 
 
 def rate(bench: BenchFile, agent: str, batch_size: int, path: str = "plain",
@@ -401,13 +472,13 @@ def rate(bench: BenchFile, agent: str, batch_size: int, path: str = "plain",
     loops = [e for e in bench.e2e if (e.agent, e.batch_size, e.path) == (agent, batch_size, path)]
     if loops:
         e2e = sorted(loops, key=lambda e: e.phase_sync)[0]  # as it trains, where timed so
-        return Rate(e2e.fps, E2E, e2e.peak_device_bytes)
+        return Rate(e2e.fps, E2E, e2e.peak_device_bytes, e2e.load, e2e.cores)
     updates = [u for u in bench.updates if (u.agent, u.batch_size, u.path) == (agent, batch_size, path)]
     if not updates:
         return None
     upd = updates[-1]
     fpu = upd.frames_per_update if frames_per_update is None else frames_per_update
-    return Rate(fpu / upd.update_seconds, UPDATE_BOUND, upd.peak_device_bytes)
+    return Rate(fpu / upd.update_seconds, UPDATE_BOUND, upd.peak_device_bytes, upd.load, upd.cores)
 
 
 def settings(bench: BenchFile) -> list[tuple[str, int, str]]:
@@ -420,9 +491,15 @@ def settings(bench: BenchFile) -> list[tuple[str, int, str]]:
     return list(seen)
 
 
-def offline_seconds(bench: BenchFile | None, agent: str, batch_size: int) -> float | None:
-    """Seconds of one update of ``agent`` at ``batch_size`` in an offline bench file."""
+def offline_entry(bench: BenchFile | None, agent: str, batch_size: int) -> OfflineEntry | None:
+    """The entry of ``agent`` at ``batch_size`` in an offline bench file."""
     if bench is None:
         return None
-    found = [e.update_seconds for e in bench.offline if (e.agent, e.batch_size) == (agent, batch_size)]
+    found = [e for e in bench.offline if (e.agent, e.batch_size) == (agent, batch_size)]
     return found[-1] if found else None
+
+
+def offline_seconds(bench: BenchFile | None, agent: str, batch_size: int) -> float | None:
+    """Seconds of one update of ``agent`` at ``batch_size`` in an offline bench file."""
+    entry = offline_entry(bench, agent, batch_size)
+    return None if entry is None else entry.update_seconds

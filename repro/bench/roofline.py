@@ -17,8 +17,8 @@ from __future__ import annotations
 import statistics
 from typing import Any
 
-from repro.bench import SPEEDUP_FLAGS
 from repro.bench.clock import timed
+from repro.bench.results import PATH_FLAGS
 
 PEAK_SHAPE = (256, 32, 41, 41)  # (N, C, H, W) of the peak convolution: the encoder's second layer at batch 256
 TOP_KERNELS = 12  # kernels listed per path
@@ -101,10 +101,10 @@ def kernel_table(fn: Any, flops_by_op: dict[str, int], top: int = TOP_KERNELS) -
     return rows
 
 
-def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: str = "cpu", repeats: int = 2,
+def run_roofline(algo: str, batch_size: int, paths: tuple[str, ...], device: str = "cpu", repeats: int = 2,
                  warmup: int = 1, task: str = "cheetah_run", peak_shape: tuple[int, int, int, int] = PEAK_SHAPE,
                  echo: Any = print) -> dict[str, Any]:
-    """The roofline of one (algo, batch) update on the plain path and each of ``speedups``: FLOPs, seconds (the
+    """The roofline of one (algo, batch) update on the plain path and each of ``paths``: FLOPs, seconds (the
     paths alternated update by update, median), the achieved rate against the measured fp32 and bf16 peaks, and
     the kernel table per path."""
     import torch
@@ -112,8 +112,8 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     from repro.bench.online_update import alternated_times, build_agent, replay_batch
 
     agents = {}
-    for path in ("plain", *speedups):
-        agent, rc = build_agent(algo, batch_size, task, device, SPEEDUP_FLAGS[path])
+    for path in ("plain", *paths):
+        agent, rc = build_agent(algo, batch_size, task, device, PATH_FLAGS[path])
         agents[path] = agent
     batch = replay_batch(agents["plain"], rc, batch_size, device)
 
@@ -123,22 +123,22 @@ def run_roofline(algo: str, batch_size: int, speedups: tuple[str, ...], device: 
     times = alternated_times(agents, batch, warmup, repeats, device)  # background load hits every path alike
     peaks = {d: peak_conv(d, device, shape=peak_shape) for d in ("float32", "bfloat16")}
     flops, per_op = count_flops(update("plain"))  # the same ops on every path (FLOPs do not depend on dtype)
-    paths = {}
+    measured = {}
     for path in agents:
         seconds = statistics.median(times[path])
         dtype = "bfloat16" if _runs_bf16(agents[path]) else "float32"
         rate = flops / seconds / 1e9
-        paths[path] = {"seconds": round(seconds, 4), "gflops_per_s": round(rate, 2), "conv_dtype": dtype,
+        measured[path] = {"seconds": round(seconds, 4), "gflops_per_s": round(rate, 2), "conv_dtype": dtype,
                        "of_peak": round(rate / peaks[dtype]["gflops_per_s"], 4),
                        "kernels": kernel_table(update(path), per_op) if device == "cpu" else []}
         echo(f"{algo} B{batch_size} {path}: {seconds:.3f} s/update, {rate:.1f} GFLOP/s = "
-             f"{paths[path]['of_peak']:.1%} of this process's {dtype} convolution peak "
+             f"{measured[path]['of_peak']:.1%} of this process's {dtype} convolution peak "
              f"({peaks[dtype]['gflops_per_s']:.1f} GFLOP/s)")
     echo(f"{algo} B{batch_size}: {flops / 1e9:.1f} GFLOP per update ({flops / batch_size / 1e9:.3f} per sample), "
          "counted by torch's FLOP counter")
     return {"agent": algo, "batch_size": batch_size, "device": device, "threads": torch.get_num_threads(),
             "flops": flops, "flops_per_sample": flops // batch_size,
-            "flops_by_op": dict(sorted(per_op.items(), key=lambda kv: -kv[1])), "peaks": peaks, "paths": paths,
+            "flops_by_op": dict(sorted(per_op.items(), key=lambda kv: -kv[1])), "peaks": peaks, "paths": measured,
             "repeats": repeats, "warmup": warmup}
 
 

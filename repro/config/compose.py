@@ -112,13 +112,13 @@ def agent_learner(agent: str) -> str:
 
 
 def offline_agents() -> tuple[str, ...]:
-    """The agent files whose learner trains offline (`repro bench --offline`'s list), in the learners' registration
-    order, each learner's agents by name."""
+    """The agent files whose learner trains offline (`repro bench offline --agent`'s choices), in the learners'
+    registration order, each learner's agents by name."""
     return _agents_of(offline=True)
 
 
 def online_agents() -> tuple[str, ...]:
-    """The agent files whose learner trains in an environment (`repro bench --algo`'s choices), ordered as
+    """The agent files whose learner trains in an environment (`repro bench update --agent`'s choices), ordered as
     :func:`offline_agents`."""
     return _agents_of(offline=False)
 

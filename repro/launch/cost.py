@@ -1,6 +1,8 @@
 """What sweeps cost on the user's hardware (``repro plan SWEEP...``): runs, frames to train, each run's peak host and
-device memory, device-hours from the user's own ``repro bench`` files, and the wall-clock on N devices or on a SLURM
-array. The tables and their wording are the app's (repro_app/plan.py); docs/plan.md.
+device memory and how many runs share a device (:func:`packing`), device-hours from the user's own ``repro bench``
+files (the runs they do not time counted apart, with the `repro bench` commands that time them: :func:`bench_commands`),
+and the wall-clock on N devices or on a SLURM array. The tables and their wording are the app's (repro_app/plan.py);
+docs/plan.md.
 
 A run is expanded and composed as ``repro sweep`` does (the same :class:`repro.launch.spec.Selection`: ``--set``,
 ``--tasks``, ``--seeds``, ``--frames``), so what is planned is what is launched. Its speed is the one FPS of
@@ -13,14 +15,15 @@ from __future__ import annotations
 
 import heapq
 import math
+import os
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from repro.bench import results as bench_results
-from repro.bench.results import BenchFile, BenchFormatError, offline_seconds, path_of, rate
+from repro.bench.results import BenchFile, BenchFormatError, offline_entry, path_of, rate
 from repro.config.errors import UserError
 from repro.launch.spec.sharing import split_budget
 
@@ -86,8 +89,17 @@ class DeviceBench:
 
 
 def bench_command(device: str, results: Path) -> str:
-    """The command that writes the bench file ``repro plan`` needs."""
+    """The command that writes a bench file, where the runs to price are not known (`repro plan SWEEP` names the
+    one that prices its runs: :func:`bench_commands`)."""
     return f"repro bench update --device {device} --batch 256 --batch 1024 --results {results}"
+
+
+class NoBench(PlanError):
+    """No bench file to price with (its message names a command that writes one)."""
+
+    def __init__(self, message: str, folder: Path, device: str | None) -> None:
+        super().__init__(message)
+        self.folder, self.device = folder, device
 
 
 def _read(path: Path) -> BenchFile:
@@ -114,13 +126,13 @@ def find_bench(results: Path, device: str | None = None, explicit: Path | None =
         if device is None:
             device = bench_results.newest_device(folder)
             if device is None:
-                raise PlanError(f"no `repro bench` file under {folder}: run `{bench_command('cuda', results)}` "
-                                "(or --device cpu) first, or pass --bench FILE")
+                raise NoBench(f"no `repro bench` file under {folder}: run `{bench_command('cuda', results)}` "
+                              "(or --device cpu) first, or pass --bench FILE", folder, None)
             chosen = f"the device of the newest bench file under {folder}; --device picks another"
         found = bench_results.files(folder, bench_results.ONLINE, device)
         if not found:
-            raise PlanError(f"no `repro bench` file for device {device} under {folder}: run "
-                            f"`{bench_command(device, results)}` first (or pass --bench FILE)")
+            raise NoBench(f"no `repro bench` file for device {device} under {folder}: run "
+                          f"`{bench_command(device, results)}` first (or pass --bench FILE)", folder, device)
         online = _read(found[0])
     off = bench_results.files(folder, bench_results.OFFLINE, online.device)
     return DeviceBench(online, _read(off[0]) if off else None, chosen)
@@ -150,6 +162,23 @@ class RunCost:
     fps: float | None = None  # frames (online) or updates (offline) per second on the bench's device
     fps_source: str = ""
     missing: str = ""  # the bench command that would time this run, when the bench lacks it
+    load: float | None = None  # the load average and cores when the bench timed the entry that prices it
+    cores: int | None = None
+
+    @property
+    def budget(self) -> int:
+        """Its frames (online) or updates (offline) to train in all."""
+        return self.updates if self.offline else self.frames
+
+    @property
+    def setting(self) -> str:
+        """What the bench times for this run, in words: agent, batch size and (when not plain) path."""
+        return f"{self.algo} B{self.batch_size}" + ("" if self.path == "plain" else f" {self.path}")
+
+    @property
+    def under_load(self) -> bool:
+        """Priced from an entry timed with the machine's load average above its cores (its time too long)."""
+        return bench_results.loaded(self.load, self.cores)
 
     def hours(self, work: int | float) -> float | None:
         """Device-hours of ``work`` frames (online) or updates (offline)."""
@@ -207,18 +236,78 @@ def run_cost(sweep: str, planned: Any, bench: DeviceBench | None, params: ParamC
 
 def bench_for(cost: RunCost, device: str) -> str:
     """The ``repro bench`` command that would time ``cost``'s run on ``device``."""
-    if cost.offline:
-        return f"repro bench offline --device {device} --learner {cost.algo} --batch {cost.batch_size}"
-    flag = "" if cost.path == "plain" else f" --{cost.path}"
-    return f"repro bench update --device {device} --algo {cost.algo} --batch {cost.batch_size}{flag}"
+    return bench_commands([cost], device)[0]
+
+
+def bench_commands(costs: Iterable[RunCost], device: str, results: Path | None = None) -> list[str]:
+    """The `repro bench` commands that price every run of ``costs`` on ``device``: one `repro bench update` for the
+    online runs (each of their agents at each of their batch sizes, on the plain path and each other path they
+    train with) and one `repro bench offline` for the offline ones; ``results``: the results root it writes under."""
+    online: dict[str, None] = {}
+    offline: dict[str, None] = {}
+    batches: dict[bool, set[int]] = {False: set(), True: set()}
+    paths: set[str] = set()
+    for c in costs:
+        (offline if c.offline else online)[c.algo] = None
+        batches[c.offline].add(c.batch_size)
+        if not c.offline:
+            paths.add(c.path)
+    where = f" --results {results}" if results is not None else ""
+    out = []
+    for kind, agents, is_offline in (("update", online, False), ("offline", offline, True)):
+        if not agents:
+            continue
+        flags = "".join(f" --{p}" for p in bench_results.PATHS if p in paths and p != "plain" and not is_offline)
+        out.append(f"repro bench {kind} --device {device}" + "".join(f" --agent {a}" for a in agents)
+                   + "".join(f" --batch {b}" for b in sorted(batches[is_offline])) + flags + where)
+    return out
+
+
+def unpriced_runs(costs: Iterable[RunCost]) -> list[RunCost]:
+    """The runs of ``costs`` with frames (or updates) left to train that the bench does not price."""
+    return [c for c in costs if c.fps is None and c.trained < c.budget]
+
+
+def machine_memory() -> int | None:
+    """This machine's memory in bytes (None where the system does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+@dataclass(frozen=True)
+class Packing:
+    """How many runs fit on one device at once: the smaller of the device's memory over a run's device memory and
+    the host memory per device over a run's host memory (its replay), and which of the two bounds it."""
+
+    runs: int | None  # None: neither memory known
+    bound: str = ""  # "device memory" or "host memory"
+    upper: bool = False  # bound by a device estimate of the networks alone (no activations): at most this many
+
+
+def packing(device_bytes: int, host_bytes: int, device_memory: int | None, host_memory: int | None,
+            devices: int = 1, measured: bool = True) -> Packing:
+    """Runs per device = min(device memory / a run's device bytes, host memory / (a run's host bytes x the
+    ``devices`` that share the host)); ``measured`` False: the device bytes are the networks' alone."""
+    bounds = []
+    if device_memory and device_bytes:
+        bounds.append((device_memory // device_bytes, "device memory"))
+    if host_memory and host_bytes:
+        bounds.append((host_memory // (host_bytes * max(1, devices)), "host memory"))
+    if not bounds:
+        return Packing(None)
+    runs, bound = min(bounds)
+    return Packing(int(runs), bound, bound == "device memory" and not measured)
 
 
 def price(cost: RunCost, bench: DeviceBench) -> None:
     """Set the run's FPS (or updates per second) from the bench, or say which bench command would time it."""
     if cost.offline:
-        secs = offline_seconds(bench.offline, cost.algo, cost.batch_size)
-        if secs:
-            cost.fps, cost.fps_source = 1.0 / secs, "offline update"
+        entry = offline_entry(bench.offline, cost.algo, cost.batch_size)
+        if entry is not None:
+            cost.fps, cost.fps_source = 1.0 / entry.update_seconds, "offline update"
+            cost.load, cost.cores = entry.load, entry.cores
         else:
             cost.missing = bench_for(cost, bench.device)
         return
@@ -227,6 +316,7 @@ def price(cost: RunCost, bench: DeviceBench) -> None:
         cost.missing = bench_for(cost, bench.device)
         return
     cost.fps, cost.fps_source = found.fps, found.source
+    cost.load, cost.cores = found.load, found.cores
     if found.peak_device_bytes:
         cost.device_bytes = found.peak_device_bytes + cost.replay_on_device  # measured: networks, activations, batch
         cost.memory_note = "device: the bench's measured peak"
@@ -283,6 +373,12 @@ class Totals:
     local_hours: float | None
     slurm_hours: float | None
     requeues: int
+    unpriced_settings: dict[str, int] = field(default_factory=dict)  # setting (RunCost.setting) -> runs unpriced
+
+    @property
+    def priced(self) -> int:
+        """Runs to train that the bench prices."""
+        return self.to_train - self.unpriced
 
 
 def totals(name: str, costs: Sequence[RunCost], devices: int, slurm_slots: int,
@@ -296,6 +392,10 @@ def totals(name: str, costs: Sequence[RunCost], devices: int, slurm_slots: int,
     todo = {d: w for d, w in work.items() if w > 0}
     hours = {d: by_dir[d].hours(w) for d, w in todo.items()}
     priced = [h for h in hours.values() if h is not None]
+    unpriced: dict[str, int] = defaultdict(int)
+    for d, h in hours.items():
+        if h is None:
+            unpriced[by_dir[d].setting] += 1
     requeues = 0
     if slurm_minutes:
         requeues = sum(max(0, math.ceil(h * 60 / slurm_minutes) - 1) for h in priced)
@@ -304,7 +404,7 @@ def totals(name: str, costs: Sequence[RunCost], devices: int, slurm_slots: int,
                   sum(priced) if priced else (None if todo else 0.0), len(todo) - len(priced),
                   bool(costs) and all(c.memory_note.startswith("device: the bench") for c in costs),
                   makespan(priced, devices) if priced else None, makespan(priced, slurm_slots) if priced else None,
-                  requeues)
+                  requeues, dict(unpriced))
 
 
 @dataclass(frozen=True)
