@@ -186,10 +186,14 @@ def test_device_hours_on_a_synthetic_bench_equal_runs_times_frames_over_fps(tiny
 
 
 def test_plan_without_a_bench_file_is_one_line_and_exit_2(tmp_path):
-    res = CliRunner().invoke(app, ["plan", "tiny", "--results", str(tmp_path), "--out", str(tmp_path / "out")])
+    """The one line names the command that prices every run of the sweep (each of its agents and batch sizes)."""
+    res = CliRunner().invoke(app, ["plan", "tiny", "--tasks", "cheetah_run", "--seeds", "1", "--results",
+                                   str(tmp_path), "--out", str(tmp_path / "out")], terminal_width=400)
     assert res.exit_code == 2
     lines = res.output.strip().splitlines()
-    assert len(lines) == 1 and "repro bench update --device cuda" in lines[0] and "Traceback" not in res.output
+    assert len(lines) == 1 and "Traceback" not in res.output
+    assert (f"run `repro bench update --device cuda --agent taco --agent drqv2 --batch 8 --results {tmp_path}` first"
+            in lines[0]), lines
     for args in (["plan"], ["plan", "nosuchsweep"], ["plan", "tiny", "--devices", "0"]):
         bad = CliRunner().invoke(app, [*args, "--results", str(tmp_path)])
         assert bad.exit_code == 2 and len(bad.output.strip().splitlines()) == 1, (args, bad.output)
@@ -424,11 +428,11 @@ def test_a_kept_composition_equals_composing_and_is_a_fresh_copy(tmp_path: Path)
 
 # ---------------------------------------------------------------- every run counted, packing, one memory figure
 MIX = """name: mix
-description: two agents at two batch sizes on two paths
+description: DrQ-v2 at two batch sizes on two paths
 artifacts: []
 experiment: mix
 tasks: [cheetah_run]
-agents: [taco, drqv2]
+agents: [drqv2]
 seeds: 1
 frames: 400
 eval: {every_frames: 200, episodes: 1}
@@ -450,125 +454,91 @@ def _parse_bench(command: str) -> tuple[str, dict]:
     return words[2], sub.make_context(words[2], words[3:]).params
 
 
-def test_the_headline_counts_every_run_and_names_the_one_command_that_prices_the_rest(tmp_path, monkeypatch):
-    """Issue 50: the plan headlined the priced runs' hours as the sweep's cost, the unpriced ones in a table cell. Now
-    the headline counts every run: those priced with their hours, those not priced by setting, and the one `repro
-    bench` command that prices them all; parsed back by `repro bench`'s own command line it covers every unpriced
-    (agent, batch, path), and run (its timings stood in for) it leaves nothing unpriced. An entry timed under load is
-    flagged in the notes."""
+def _timed(params: dict) -> set[tuple[str, int, str]]:
+    """Every (agent, batch, path) a parsed `repro bench update` times: each agent at each batch on each path."""
+    paths = {"plain", *(p for p, key in (("amp", "amp"), ("compile", "compile_"), ("fast", "fast")) if params[key])}
+    return {(a, b, p) for a in params["agent"] for b in params["batch"] for p in paths}
+
+
+def test_the_headline_counts_every_run_and_the_packing_is_bound_by_host_memory(tmp_path, monkeypatch):
+    """Issue 50: the plan headlined the priced runs' hours as the sweep's cost (the unpriced ones in a table cell), and
+    gave '<= 569 runs per device' while each run needed 19.8 GiB of host memory. Now the headline counts every run:
+    those priced, with their hours, and those not priced by setting with the one `repro bench` command that prices
+    them all, which, parsed back by `repro bench`'s own command line, times every unpriced (agent, batch, path) and,
+    run (its timings stood in for), leaves none unpriced; an entry timed under load is flagged; runs per device is
+    min(device memory / device bytes, host memory / host bytes) and the advice names --runs-per-gpu."""
     from repro.bench import cli as bench_cli
     from repro.bench import results as br
     from repro.bench.results import FORMAT
-    from repro.launch.cost import unpriced_runs
+    from repro.launch.cost import GB, Packing, packing, price, unpriced_runs
+    from repro_app.plan import runs_per_device
     from test_bench import _fake_time_update
 
-    sweep = tmp_path / "mix.yaml"
+    assert packing(GB, 10 * GB, 80 * GB, 64 * GB) == Packing(6, "host memory")
+    assert packing(GB, 10 * GB, 80 * GB, 64 * GB, devices=2) == Packing(3, "host memory")  # two devices share it
+    assert packing(20 * GB, GB, 80 * GB, 512 * GB, measured=False) == Packing(4, "device memory", upper=True)
+    assert packing(20 * GB, GB, None, None) == Packing(None)
+    assert runs_per_device(Packing(4, "device memory", upper=True)) == "<= 4 (device memory: networks only)"
+    sweep, root = tmp_path / "mix.yaml", tmp_path / "runs"
     sweep.write_text(MIX)
-    bench = tmp_path / "runs" / "bench" / br.file_name(br.ONLINE, "cpu")
+    bench = root / "bench" / br.file_name(br.ONLINE, "cpu")
     bench.parent.mkdir(parents=True)
     bench.write_text(json.dumps({"kind": "online", "format": FORMAT, "hardware": "Test cpu", "device": "cpu",
-                                 "results": [{**_upd("taco", "plain", 0.5), "load": 9.0, "cores": 2}]}))
-    costs = plan_sweeps([str(sweep)], find_bench(tmp_path / "runs"), results_root=tmp_path / "runs", memory=False)
+                                 "results": [{**_upd("drqv2", "plain", 0.5), "load": 9.0, "cores": 2}]}))
+    costs = plan_sweeps([str(sweep)], find_bench(root), results_root=root, memory=False)
     total = totals("Total", costs, 1, 1)
-    assert (total.runs, total.to_train, total.priced, total.unpriced) == (4, 4, 1, 3)
-    assert total.unpriced_settings == {"drqv2 B8": 1, "taco B16 fast": 1, "drqv2 B16 fast": 1}
+    assert (total.runs, total.to_train, total.priced, total.unpriced) == (2, 2, 1, 1)
+    assert total.unpriced_settings == {"drqv2 B16 fast": 1}
+    gb = 3.5 * max(c.host_bytes for c in costs) / GB  # room for three runs' replays
     out = tmp_path / "out"
-    args = ["plan", str(sweep), "-r", str(tmp_path / "runs"), "-o", str(out)]
-    res = CliRunner().invoke(app, args, terminal_width=400)
+    res = CliRunner().invoke(app, ["plan", str(sweep), "-r", str(root), "-o", str(out), "--device-memory-gb", "80",
+                                   "--host-memory-gb", f"{gb:.9f}"], terminal_width=400)
     assert res.exit_code == 0, res.output
     caption = (out / "plan.md").read_text().splitlines()[0]
-    assert "Cost of mix: 4 runs, 4 to train; 1 priced, " in caption, caption
-    assert "3 not priced (drqv2 B8: 1, taco B16 fast: 1, drqv2 B16 fast: 1)" in caption, caption
+    assert "Cost of mix: 2 runs, 2 to train; 1 priced, " in caption and "1 not priced (drqv2 B16 fast: 1)" in caption
     (command,) = re.findall(r"`(repro bench [^`]+)`", caption)
-    assert command == (f"repro bench update --device cpu --agent drqv2 --agent taco --batch 8 --batch 16 --fast "
-                       f"--results {tmp_path / 'runs'}")
+    assert command == f"repro bench update --device cpu --agent drqv2 --batch 16 --fast --results {root}"
     sub, params = _parse_bench(command)
-    paths = {"plain", *(p for p in ("amp", "compile", "fast") if params[p if p != "compile" else "compile_"])}
-    timed = {(a, b, p) for a in params["agent"] for b in params["batch"] for p in paths}
-    assert sub == "update" and params["device"] == "cpu" and params["results_root"] == tmp_path / "runs"
-    assert {(c.algo, c.batch_size, c.path) for c in unpriced_runs(costs)} <= timed
+    assert sub == "update" and params["device"] == "cpu" and params["results_root"] == root
+    assert {(c.algo, c.batch_size, c.path) for c in unpriced_runs(costs)} <= _timed(params)
     notes = " ".join(res.output.split())
-    assert "Timed under load" in notes and "taco B8 (load 9.0 on 2 cores)" in notes
-    # run it (the timings stood in for): the next plan prices every run, and says nothing is left out
+    assert "Timed under load" in notes and "drqv2 B8 (load 9.0 on 2 cores)" in notes
+    table = pd.read_csv(out / "plan.csv")
+    assert list(table["runs_per_device"]) == ["3 (host memory)"] * 2 and list(table["runs_per_device_n"]) == [3, 3]
+    assert "bound by the host memory" in notes and "`repro sweep mix --gpus 0 --runs-per-gpu 3` packs them" in notes
+    # run the command (its timings stood in for): every run is priced now
     monkeypatch.setattr(bench_cli, "time_update", _fake_time_update(defaultdict(lambda: 0.25)))
     ran = CliRunner().invoke(bench_app(), ["bench", *command.split()[2:]])
     assert ran.exit_code == 0, ran.output
-    again = CliRunner().invoke(app, args, terminal_width=400)
-    assert again.exit_code == 0, again.output
-    caption = (out / "plan.md").read_text().splitlines()[0]
-    assert "not priced" not in caption and caption.startswith("**plan.** Cost of mix: 4 runs, 4 to train, ")
-    assert pd.read_csv(out / "plan.csv")["unpriced"].tolist() == [0, 0]
-
-
-def test_without_a_bench_file_the_one_line_names_the_command_for_every_run(tmp_path):
-    sweep = tmp_path / "mix.yaml"
-    sweep.write_text(MIX)
-    res = CliRunner().invoke(app, ["plan", str(sweep), "-r", str(tmp_path), "--device", "cpu"], terminal_width=400)
-    assert res.exit_code == 2 and len(res.output.strip().splitlines()) == 1, res.output
-    assert (f"run `repro bench update --device cpu --agent taco --agent drqv2 --batch 8 --batch 16 --fast --results "
-            f"{tmp_path}` first") in res.output
-
-
-def test_runs_per_device_is_the_smaller_of_the_device_and_the_host_bound(tmp_path):
-    """Runs per device = min(device memory / a run's device bytes, host memory / (a run's host bytes x devices)): an
-    80 GB GPU held '<= 569' runs while each needed 19.8 GiB of host memory. The advice names --runs-per-gpu."""
-    from repro.launch.cost import GB, Packing, packing
-
-    assert packing(GB, 10 * GB, 80 * GB, 64 * GB) == Packing(6, "host memory")
-    assert packing(GB, 10 * GB, 80 * GB, 64 * GB, devices=2) == Packing(3, "host memory")
-    assert packing(20 * GB, GB, 80 * GB, 512 * GB, measured=False) == Packing(4, "device memory", upper=True)
-    assert packing(20 * GB, GB, None, 512 * GB) == Packing(512, "host memory")
-    assert packing(20 * GB, GB, None, None) == Packing(None)
-    root = tmp_path / "runs"
-    _bench_file(root, "cuda", [_upd(a, "plain", 0.5) for a in ("taco", "drqv2")])
-    host = max(c.host_bytes for c in plan_sweeps(["tiny"], None, results_root=root, memory=False))
-    gb = 3.5 * host / GB  # room for three runs' replays
-    out = tmp_path / "out"
-    res = CliRunner().invoke(app, ["plan", "tiny", "-r", str(root), "-o", str(out), "--device-memory-gb", "80",
-                                   "--host-memory-gb", f"{gb:.9f}"], terminal_width=400)
-    assert res.exit_code == 0, res.output
-    table = pd.read_csv(out / "plan.csv")
-    assert list(table["runs_per_device"]) == ["3 (host memory)"] * 2 and list(table["runs_per_device_n"]) == [3, 3]
-    notes = " ".join(res.output.split())
-    assert "bound by the host memory" in notes and "`repro sweep tiny --gpus 0 --runs-per-gpu 3` packs them" in notes
-    small = CliRunner().invoke(app, ["plan", "tiny", "-r", str(root), "-o", str(out), "--device-memory-gb", "0.05",
-                                     "--host-memory-gb", "1000"], terminal_width=400)
-    assert small.exit_code == 0, small.output
-    (n,) = set(pd.read_csv(out / "plan.csv")["runs_per_device_n"])
-    assert set(pd.read_csv(out / "plan.csv")["runs_per_device"]) == {f"<= {n} (device memory: networks only)"}
-    bad = CliRunner().invoke(app, ["plan", "tiny", "-r", str(root), "--host-memory-gb", "0"])
+    again = find_bench(root)
+    for c in costs:
+        c.fps, c.missing = None, ""
+        price(c, again)
+    assert not unpriced_runs(costs) and totals("Total", costs, 1, 1).unpriced == 0
+    bad = CliRunner().invoke(app, ["plan", str(sweep), "-r", str(root), "--host-memory-gb", "0"])
     assert bad.exit_code == 2 and "--host-memory-gb > 0" in bad.output
 
 
-def test_one_host_memory_figure_in_the_plan_the_launcher_example_and_the_docs():
-    """A run's host memory is its replay at capacity (capacity x frame bytes and the rest of a transition): the figure
-    `repro plan main` prints (TACO's 1M transitions) is the one sweeps/launchers/example.yaml and docs/plan.md quote
-    (example.yaml said ~30 GB)."""
-    from repro.launch import spec as specs
-    from repro_app.plan import _gb
-
-    costs = plan_sweeps(["main"], None, specs.selection("quadruped_run,walker_run", 1), memory=False)
-    figure = _gb(max(c.host_bytes for c in costs))
-    assert figure == "19.8 GiB"
-    root = Path(__file__).resolve().parents[1]
-    for doc in ("sweeps/launchers/example.yaml", "docs/plan.md"):
-        text = (root / doc).read_text()
-        assert figure in text and "30 GB" not in text, doc
-
-
-def test_the_bench_command_of_docs_plan_prices_every_run_of_main():
+def test_docs_plan_names_the_command_that_prices_main_and_one_host_memory_figure():
     """docs/plan.md's `repro bench` command is the one `repro plan main` names: every agent, batch and path of main
-    (A-LIX, and DrQ-v2 and A-LIX at 512 on walker_run, included)."""
+    (A-LIX, and DrQ-v2 and A-LIX at 512 on walker_run, included). A run's host memory is its replay at capacity: the
+    figure the plan prints for main's 1M replay is the one sweeps/launchers/example.yaml (it said ~30 GB) and the docs
+    quote."""
     from repro.launch import spec as specs
     from repro.launch.cost import bench_commands
+    from repro_app.plan import _gb
 
     costs = plan_sweeps(["main"], None, specs.selection(seeds=1), memory=False)  # the seeds do not change a setting
     (command,) = bench_commands(costs, "cuda", Path("runs"))
     assert {(c.algo, c.batch_size) for c in costs} >= {("alix", 256), ("drqv2", 512), ("taco", 1024)}
-    assert command in " ".join((Path(__file__).resolve().parents[1] / "docs" / "plan.md").read_text().split())
-    _, params = _parse_bench(command)
-    assert {(c.algo, c.batch_size, c.path) for c in costs} <= {
-        (a, b, "plain") for a in params["agent"] for b in params["batch"]}
+    root = Path(__file__).resolve().parents[1]
+    assert command in " ".join((root / "docs" / "plan.md").read_text().split())
+    assert {(c.algo, c.batch_size, c.path) for c in costs} <= _timed(_parse_bench(command)[1])
+    figure = _gb(max(c.host_bytes for c in costs))
+    assert figure == "19.8 GiB"
+    for doc in ("sweeps/launchers/example.yaml", "docs/plan.md"):
+        text = (root / doc).read_text()
+        assert figure in text and "30 GB" not in text, doc
 
 
 def test_verify_dry_run_on_a_cpu_machine_never_suggests_cuda(tmp_path, monkeypatch):
