@@ -28,6 +28,7 @@ from analysis.stats import (
     seeded,
 )
 from analysis_fixtures import DMC9, FRAMES, write_run
+from repro.runs.console import Commands
 from repro_app.analysis_cli import register
 
 REPS = 200
@@ -602,7 +603,7 @@ def test_audit_finds_the_papers_real_mismatches():
 
 # ---------------------------------------------------------------- CLI
 def _app() -> typer.Typer:
-    app = typer.Typer()
+    app = typer.Typer(cls=Commands)  # as `repro` catches a UserError: one line, exit 2
     register(app)
     return app
 
