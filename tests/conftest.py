@@ -34,7 +34,7 @@ os.environ.update(WANDB_MODE="offline", WANDB_SILENT="true", WANDB_ERROR_REPORTI
 import pytest  # noqa: E402
 import torch  # noqa: E402
 
-from helpers import MAIN_JOB, RECORD, TINY, WATCH, watch_loop, watch_syncs  # noqa: E402
+from helpers import MAIN_JOB, RECORD, TINY, TINY_TACO, WATCH, watch_loop, watch_syncs  # noqa: E402
 
 torch.set_num_threads(1)
 
@@ -169,9 +169,9 @@ def main_job(tmp_path_factory: pytest.TempPathFactory, _main_job_started_early: 
 # `--dist loadgroup` hands out whole units in queue order; queued by these, longest first, no long unit is
 # left to start last. A unit missing here keeps its place after them; a stale number only costs time.
 UNIT_SECONDS = {
-    "tiny_taco": 230,
-    "figures": 150,
-    "slurm": 105,
+    "tiny_taco": 300,
+    "figures": 135,
+    "slurm": 175,
     "tests/test_sweeps.py::test_local_grid_killed_and_relaunched_twice_concurrently_runs_each_once": 90,
     "offline_train": 70,
     "budgets_online": 45,
@@ -181,8 +181,8 @@ UNIT_SECONDS = {
     "tests/test_speedups.py::test_compile_matches_plain_path": 48,
     "offline_analysis": 40,
     "tests/test_alix_train.py::test_a_tiny_alix_run_through_a_sweep_and_a_killed_and_resumed_train_give_the_same_logs":
-        55,
-    "tests/test_verify.py::test_verify_tiny_end_to_end": 40,
+        130,
+    "tests/test_verify.py::test_verify_tiny_end_to_end": 50,
     "tests/test_alix_dataset.py::test_a_medium_dataset_is_made_from_a_recorded_tiny_alix_run_with_the_cli": 25,
     "tests/test_cli.py::test_metaworld_tiny_run_logs_success": 36,
     "seam": 30,
@@ -224,6 +224,23 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         raise pytest.UsageError(message)
 
 
+# The session runs and the xdist_group a test that reads one must be in: outside it, another worker would train the
+# run again (a test that read tiny_taco without the mark made the suite train it twice, about 30 s).
+SESSION_RUN_GROUPS = {"tiny_taco": TINY_TACO, "tiny_taco_watched": TINY_TACO, "tiny_taco_loop_events": TINY_TACO,
+                      "main_job": MAIN_JOB}
+
+
+def outside_their_group(items: list[pytest.Item]) -> list[str]:
+    """The tests that read a session run (:data:`SESSION_RUN_GROUPS`) without being in that run's xdist_group."""
+    return [f"{item.nodeid} ({fixture})" for item in items
+            for fixture, group in SESSION_RUN_GROUPS.items()
+            if fixture in getattr(item, "fixturenames", ()) and _unit(item) != group]
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Longest work units first, the main job's last; otherwise collection order (a stable sort)."""
+    """Longest work units first, the main job's last; otherwise collection order (a stable sort). A test that
+    reads a session run outside its group is a usage error (it would train the run on a second worker)."""
+    stray = outside_their_group(items)
+    if stray:
+        raise pytest.UsageError(f"mark these @pytest.mark.xdist_group(...) of the session run they read: {stray}")
     items.sort(key=lambda item: (_unit(item) in LAST, -UNIT_SECONDS.get(_unit(item), 0)))

@@ -15,6 +15,7 @@ import pytest
 from analysis.context import Context
 from analysis.load import load_results
 from analysis.tsne import load_step_mlp, run_tsne, tsne_for_context
+from helpers import TINY_TACO
 from repro.runs import rundir
 from repro.runs.runformat import CHECKPOINT, DONE, TSNE
 from repro.train import action_tsne, api
@@ -55,6 +56,7 @@ def test_the_run_writes_its_final_encoders_embedding(distracted: Path) -> None:
     assert again.silhouette_latent_2d == res.silhouette_latent_2d and again.silhouette_raw == res.silhouette_raw
 
 
+@pytest.mark.xdist_group(TINY_TACO)  # the session run: trained once, on that group's worker
 def test_a_run_without_distracting_dims_writes_none(tiny_taco: Path) -> None:
     assert not (tiny_taco / TSNE).exists()
 
