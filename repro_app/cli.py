@@ -30,14 +30,13 @@ def train(ctx: typer.Context,
     """Train one run: `repro train agent=taco task=hopper_hop agent.K=3 seed=2` (Hydra overrides). Ctrl-C stops it
     in one line, exit 130; the same command resumes it."""
     from repro.config.compose import compose
-
-    cfg = compose(ctx.args)
-    if dry_run:
-        _dry_run(cfg)
-        return
     from repro.runs.fsutil import write_error_message
 
     try:
+        cfg = compose(ctx.args)  # Hydra and the plugins: a second or more, Ctrl-C included
+        if dry_run:
+            _dry_run(cfg)
+            return
         from repro.train.api import train_config  # torch: seconds to import, Ctrl-C included
 
         path = train_config(cfg, echo=typer.echo, progress=progress)
