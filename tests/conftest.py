@@ -34,7 +34,18 @@ os.environ.update(WANDB_MODE="offline", WANDB_SILENT="true", WANDB_ERROR_REPORTI
 import pytest  # noqa: E402
 import torch  # noqa: E402
 
-from helpers import MAIN_JOB, RECORD, TINY, TINY_TACO, WATCH, watch_loop, watch_syncs  # noqa: E402
+from helpers import (  # noqa: E402
+    MAIN_JOB,
+    RECORD,
+    TINY,
+    TINY_ALIX,
+    TINY_ALIX_REL,
+    TINY_ALIX_SETS,
+    TINY_TACO,
+    WATCH,
+    watch_loop,
+    watch_syncs,
+)
 
 torch.set_num_threads(1)
 
@@ -68,6 +79,27 @@ def tiny_taco_watched(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
     root = tmp_path_factory.mktemp("tiny_taco_watched")
     return api.train([*TINY, *RECORD, *WATCH, f"runtime.results_root={root}"], echo=_quiet)
+
+
+@pytest.fixture(scope="session")
+def tiny_alix(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny recorded A-LIX run through `repro sweep` (helpers.TINY_ALIX_SETS): its run directory. Made once for
+    test_alix_train (a killed and resumed `repro train` gives its logs) and test_alix_dataset (a dataset made from
+    it)."""
+    import yaml
+    from typer.testing import CliRunner
+
+    from helpers import launch_app
+
+    folder = tmp_path_factory.mktemp("tiny_alix")
+    sweep = folder / "alix_tiny.yaml"
+    sweep.write_text(yaml.safe_dump({
+        "name": "alix_tiny", "description": "a tiny A-LIX run", "artifacts": [], "experiment": "alix_tiny",
+        "tasks": ["cheetah_run"], "agents": ["alix"], "seeds": 1, "frames": None,
+        "eval": {"every_frames": None, "episodes": None}, "common": TINY_ALIX_SETS, "variants": {"base": []}}))
+    out = CliRunner().invoke(launch_app(), ["sweep", str(sweep), "--results-root", str(folder / "swept")])
+    assert out.exit_code == 0, out.output
+    return folder / "swept" / TINY_ALIX_REL
 
 
 @dataclass(frozen=True)
@@ -180,10 +212,8 @@ UNIT_SECONDS = {
     "tests/test_offline_sweep.py::test_tiny_offline_sweep_runs_every_learner_on_every_dataset_kind_then_t3": 50,
     "tests/test_speedups.py::test_compile_matches_plain_path": 48,
     "offline_analysis": 40,
-    "tests/test_alix_train.py::test_a_tiny_alix_run_through_a_sweep_and_a_killed_and_resumed_train_give_the_same_logs":
-        130,
+    "tiny_alix": 150,
     "tests/test_verify.py::test_verify_tiny_end_to_end": 50,
-    "tests/test_alix_dataset.py::test_a_medium_dataset_is_made_from_a_recorded_tiny_alix_run_with_the_cli": 25,
     "tests/test_cli.py::test_metaworld_tiny_run_logs_success": 36,
     "seam": 30,
     "tests/test_one_writer.py::test_a_write_error_is_one_line_naming_the_file_and_a_rerun_resumes": 26,
@@ -227,7 +257,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 # The session runs and the xdist_group a test that reads one must be in: outside it, another worker would train the
 # run again (a test that read tiny_taco without the mark made the suite train it twice, about 30 s).
 SESSION_RUN_GROUPS = {"tiny_taco": TINY_TACO, "tiny_taco_watched": TINY_TACO, "tiny_taco_loop_events": TINY_TACO,
-                      "main_job": MAIN_JOB}
+                      "tiny_alix": TINY_ALIX, "main_job": MAIN_JOB}
 
 
 def outside_their_group(items: list[pytest.Item]) -> list[str]:

@@ -41,6 +41,13 @@ RECORD = ["runtime.record=true"]
 # pytest-xdist groups: the tests that use one session run (conftest) run on one worker, so it is made once.
 TINY_TACO = "tiny_taco"
 MAIN_JOB = "main_job"
+TINY_ALIX = "tiny_alix"  # the tiny A-LIX run through a sweep (conftest), read by test_alix_train and test_alix_dataset
+# Its overrides: the tiny profile's 4 episodes of 100 frames (evaluations at 0, 200, 400); updates from frame 40 on,
+# so the first checkpoint (after episode 1) holds updated networks, a moved strength and the encoder optimizer's two
+# groups; recorded (snapshots and episodes, no frames) so that a dataset can be made from it.
+TINY_ALIX_SETS = ["profile=tiny", "runtime.threads=1", "train.seed_frames=40", "train.explore_steps=10",
+                  "train.save_frames=false", "runtime.record=true"]
+TINY_ALIX_REL = Path("alix_tiny/alix/base/cheetah_run/seed_1")  # its run directory under a results root
 
 
 def deterministic(csv: Path) -> pd.DataFrame:

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 
+from helpers import TINY_ALIX
 from repro.config.compose import compose, typed
 from repro.config.schema import RunConfig
 from repro.data.record import PolicySpec, Recorder, load_snapshot, snapshot_path
@@ -90,16 +91,13 @@ def _repro(*args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.slow
-def test_a_medium_dataset_is_made_from_a_recorded_tiny_alix_run_with_the_cli(tmp_path: Path):
-    root = tmp_path / "runs"
-    trained = _repro("train", "agent=alix", "profile=tiny", "task=cheetah_run", "runtime.record=true",
-                     "runtime.threads=1", "train.save_frames=false", "train.frames=200", "train.eval_every_frames=100",
-                     f"runtime.results_root={root}", "--no-progress")  # 2 snapshots: the medium one is the first
-    assert trained.returncode == 0, trained.stderr
-    run = root / "default" / "alix" / "base" / "cheetah_run" / "seed_1"
-    made = _repro("dataset", "make", "--source", str(run), "--kind", "medium", "--transitions", "60")
+@pytest.mark.xdist_group(TINY_ALIX)
+def test_a_medium_dataset_is_made_from_a_recorded_tiny_alix_run_with_the_cli(tiny_alix: Path, tmp_path: Path):
+    run = tiny_alix  # a recorded tiny A-LIX run through a sweep (conftest), also read by test_alix_train
+    dataset = tmp_path / "datasets" / "cheetah_run" / "medium"
+    made = _repro("dataset", "make", "--source", str(run), "--kind", "medium", "--transitions", "60", "--out",
+                  str(dataset))
     assert made.returncode == 0, made.stderr
-    dataset = root / "datasets" / "cheetah_run" / "medium"
     checked = _repro("dataset", "check", str(dataset))
     assert checked.returncode == 0 and checked.stdout.startswith("ok:"), checked.stdout + checked.stderr
     manifest = mk.manifest_json(dataset)
