@@ -273,9 +273,7 @@ def submit(planned: Sequence[PlannedRun], sweep: str, sdir: Path, cluster: Clust
     except Exception as exc:  # submitit raises several types for a failed sbatch or bad parameters
         for c in claims[submitted:]:
             lock.release(c.lock_path, c.info.token)  # type: ignore[union-attr]
-        lines = [ln for ln in str(exc).strip().splitlines() if ln.strip()]
-        detail = lines[-1] if lines else type(exc).__name__
-        detail += f" (each job asks for: {cluster.asks()})"
+        detail = f"{_last_line(str(exc)) or type(exc).__name__} (each job asks for: {cluster.asks()})"
         if report.job_ids:
             detail += f" (arrays submitted before the failure: {', '.join(report.job_ids)})"
         raise SweepError(f"submission failed: {detail}") from None

@@ -125,14 +125,13 @@ def writable_folder(path: str | os.PathLike, what: str) -> Path:
     parent = path
     while not os.path.lexists(parent) and parent != parent.parent:
         parent = parent.parent
+    where = "" if parent == path else f" cannot be made: {parent}"
     if not parent.is_dir():
         kind = "a file, not a folder" if parent.is_file() else "not a folder"
-        where = "" if parent == path else f" cannot be made: {parent}"
         raise OutputPathError(f"{what} {path}{where} is {kind}")
     if not os.access(parent, os.W_OK | os.X_OK):
         read_only = os.statvfs(parent).f_flag & os.ST_RDONLY
         why = "is on a read-only filesystem" if read_only else "is not writable by this user"
-        where = "" if parent == path else f" cannot be made: {parent}"
         raise OutputPathError(f"{what} {path}{where} {why}")
     return path
 
