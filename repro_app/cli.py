@@ -52,14 +52,14 @@ def _dry_run(cfg) -> None:
     from rich.table import Table
 
     from repro.config.compose import typed
-    from repro.train.build import build_agent, run_action_dim
+    from repro.train.build import build_run_learner, run_action_dim
 
     rc = typed(cfg)
     con = console(min_width=120)
     con.print(OmegaConf.to_yaml(cfg, resolve=True), markup=False, highlight=False)
     action_dim = run_action_dim(rc)
     obs_shape = (3 * rc.env.frame_stack, rc.env.image_size, rc.env.image_size)
-    agent = build_agent(rc, obs_shape, action_dim, "cpu")
+    agent = build_run_learner(rc, obs_shape, action_dim, "cpu")
     table = Table(title=f"trainable parameters ({rc.agent.name}, |A|={action_dim})")
     table.add_column("module")
     table.add_column("parameters", justify="right")

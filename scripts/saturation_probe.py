@@ -28,7 +28,7 @@ from repro.data.episodes import EpisodeStore
 from repro.data.replay import ReplayBuffer
 from repro.runs import rundir
 from repro.runs.checkpoint import load_checkpoint
-from repro.train.build import build_agent
+from repro.train.build import build_run_learner
 
 
 def stacked_replay(run: Path, state: dict, rc, action_dim: int, every: int) -> tuple[torch.Tensor, int]:
@@ -51,7 +51,7 @@ def probe(run: Path, checkpoint: Path, every: int) -> dict:
     action_dim = int(state["agent"]["actor"]["policy.4.weight"].shape[0])
     obs, stored = stacked_replay(run, state, rc, action_dim, every)
     with torch.random.fork_rng(devices=[]):
-        agent = build_agent(rc, tuple(obs.shape[1:]), action_dim, "cpu")
+        agent = build_run_learner(rc, tuple(obs.shape[1:]), action_dim, "cpu")
     agent.load_state_dict({"modules": state["agent"], "optimizers": state["optimizers"]})
     bb = agent.backbone  # type: ignore[attr-defined]
     with torch.no_grad():

@@ -15,7 +15,7 @@ from helpers import bench_app
 from repro.bench.cli import same_run_ratios
 from repro.bench.data import episode_lengths, synthetic_episode
 from repro.bench.offline_update import available, run_offline_bench
-from repro.bench.online_update import build_agent
+from repro.bench.online_update import compose_learner
 from repro.config.compose import offline_agents, online_agents
 
 
@@ -73,7 +73,7 @@ def test_every_online_agent_is_timed_on_a_batch_drawn_as_training_draws_it(tmp_p
     report = json.loads(next((tmp_path / "bench").glob("bench-*.json")).read_text())
     assert [r["agent"] for r in report["results"]] == list(agents)
     assert all(r["update_seconds"] > 0 and r["frames_per_update"] == 4 for r in report["results"])
-    agent, rc = build_agent("spr", 2, "cheetah_run", "cpu", ["profile=tiny"])
+    agent, rc = compose_learner("spr", 2, "cheetah_run", "cpu", ["profile=tiny"])
     batch = replay_batch(agent, rc, 2, "cpu")
     assert agent.sample_options == {"future_seq": True} and batch["future_obs_seq"].shape[:2] == (2, rc.agent.K)
 

@@ -338,7 +338,7 @@ def test_a_failure_before_the_first_checkpoint_leaves_no_run_directory(tmp_path,
     def broken(*args, **kwargs):
         raise RuntimeError("the optimizer refused a value")
 
-    monkeypatch.setattr(api, "build_agent", broken)
+    monkeypatch.setattr(api, "build_run_learner", broken)
     with pytest.raises(RuntimeError):
         _train(tmp_path, "train.frames=200")
     assert not list(tmp_path.rglob(rundir.CONFIG)) and not list(tmp_path.rglob("seed_1"))

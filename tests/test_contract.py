@@ -90,7 +90,7 @@ def test_f10_places_a_default_dim_run_at_the_dim_its_agent_used(tmp_path):
                      **{"train.frames": FRAMES})
     rc = typed(cfg)
     assert rc.agent.latent_action_dim is None and rc.agent.latent_action_rounding == "upstream"
-    agent = build.build_agent(rc, (9, 84, 84), get_task("quadruped_run").action_dim, "cpu")
+    agent = build.build_run_learner(rc, (9, 84, 84), get_task("quadruped_run").action_dim, "cpu")
     values = rundir.resolved_values(rc, agent)
     assert values["latent_action_dim"] == 16 == agent.action_encoder.latent_dim
     write_run(tmp_path, experiment="action_dim", algo="taco", task="quadruped_run", seed=0, final=420.0,

@@ -33,7 +33,7 @@ from torch.utils._pytree import tree_leaves
 
 from repro.agent import alix, fast, numerics
 from repro.agent.backbone import DrQV2Backbone
-from repro.bench.online_update import build_agent, replay_batch
+from repro.bench.online_update import compose_learner, replay_batch
 from repro.config.compose import online_agents
 
 TORCH = f"{Path(torch.__file__).parent}/"  # torch's own frames: not where an op was called from
@@ -156,7 +156,7 @@ class Bf16Ops(TorchDispatchMode):
 def one_watched_update(agent_name: str, flags: list[str]) -> Bf16Ops:
     """One update of online agent ``agent_name`` at the tiny size with ``flags``, on a batch drawn as training draws
     it, every op watched."""
-    learner, rc = build_agent(agent_name, BATCH, "cheetah_run", "cpu", [*TINY, *flags], image=IMAGE)
+    learner, rc = compose_learner(agent_name, BATCH, "cheetah_run", "cpu", [*TINY, *flags], image=IMAGE)
     batch = replay_batch(learner, rc, BATCH, "cpu", image=IMAGE)
     watch = Watch(learner)
     ops = Bf16Ops(watch)
@@ -252,7 +252,7 @@ def test_alix_mixing_as_it_was_is_caught_and_named(monkeypatch):
 
 
 def _alix_at_strength_0(mode: str) -> Any:
-    learner, _ = build_agent("alix", BATCH, "cheetah_run", "cpu", [*TINY, *MODES[mode]], image=IMAGE)
+    learner, _ = compose_learner("alix", BATCH, "cheetah_run", "cpu", [*TINY, *MODES[mode]], image=IMAGE)
     with torch.no_grad():
         learner.backbone.encoder.strength.zero_()
     return learner

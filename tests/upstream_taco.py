@@ -612,7 +612,7 @@ def build_project_agent(task: str, image: int, batch: int, overrides: Sequence[s
 
     rc = typed(compose(["agent=taco", f"task={task}", f"agent.batch_size={batch}", *overrides]))
     obs_shape = (3 * rc.env.frame_stack, image, image)
-    return build.build_agent(rc, obs_shape, run_action_dim(rc), "cpu"), rc, obs_shape
+    return build.build_run_learner(rc, obs_shape, run_action_dim(rc), "cpu"), rc, obs_shape
 
 
 def run_drift(task: str = "cartpole_balance", updates: int = 10, image: int = 32, batch: int = 32,

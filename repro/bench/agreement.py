@@ -27,10 +27,10 @@ def losses(flags: list[str], device: str, batch: int, updates: int, hidden: int 
     import torch
 
     from repro.bench.batches import batch_stream, synthetic_episodes
-    from repro.bench.online_update import build_agent
+    from repro.bench.online_update import compose_learner
 
     hidden_flag = [f"agent.hidden_dim={hidden}"] if hidden else []
-    agent, rc = build_agent(algo, batch, "cheetah_run", device, flags + hidden_flag, image)
+    agent, rc = compose_learner(algo, batch, "cheetah_run", device, flags + hidden_flag, image)
     episodes = synthetic_episodes(action_dim=agent.action_dim, frame_shape=(3, image, image))
     stream = batch_stream(agent, rc.agent, rc.env.frame_stack, episodes, device, batch)
     out = []

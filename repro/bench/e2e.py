@@ -136,7 +136,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, path: str = "plain",
     from repro.learners import OnlineLearner
     from repro.runs.logger import RunLogger
     from repro.runs.rundir import cpu_model
-    from repro.train.build import build_agent, build_env
+    from repro.train.build import build_env, build_run_learner
     from repro.train.online_loop import OnlineLoop
 
     overrides = [f"agent={algo}", f"task={task}", *PATH_FLAGS[path]]
@@ -156,7 +156,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, path: str = "plain",
     try:
         with tempfile.TemporaryDirectory(prefix="repro-bench-e2e-") as tmp:
             spec = env.spec
-            agent = build_agent(rc, spec.obs_shape, spec.action_dim, device)
+            agent = build_run_learner(rc, spec.obs_shape, spec.action_dim, device)
             assert isinstance(agent, OnlineLearner)
             buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
                                   rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device="cpu",

@@ -16,9 +16,9 @@ if TYPE_CHECKING:
     import torch
 
 
-def build_agent(algo: str, batch_size: int, task: str, device: str, flags: list[str], image: int = 84
-                ) -> tuple[Any, Any]:
-    """The online agent of agent file ``algo`` at ``batch_size`` for ``task`` with the overrides ``flags``, seeded
+def compose_learner(algo: str, batch_size: int, task: str, device: str, flags: list[str], image: int = 84
+                    ) -> tuple[Any, Any]:
+    """The online learner of agent file ``algo`` at ``batch_size`` for ``task`` with the overrides ``flags``, seeded
     0, for stacks of 3 RGB frames of ``image`` pixels square, and its typed run config."""
     import torch
 
@@ -69,7 +69,7 @@ def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: 
     paths = ("plain", *paths)
     agents = {}
     for path in paths:
-        agents[path], rc = build_agent(algo, batch_size, task, device, [*overrides, *PATH_FLAGS[path]])
+        agents[path], rc = compose_learner(algo, batch_size, task, device, [*overrides, *PATH_FLAGS[path]])
     batch = replay_batch(agents["plain"], rc, batch_size, device)
     times = alternated_times(agents, batch, warmup, repeats, device)
     rows = []

@@ -109,11 +109,11 @@ def run_roofline(algo: str, batch_size: int, paths: tuple[str, ...], device: str
     the kernel table per path."""
     import torch
 
-    from repro.bench.online_update import alternated_times, build_agent, replay_batch
+    from repro.bench.online_update import alternated_times, compose_learner, replay_batch
 
     agents = {}
     for path in ("plain", *paths):
-        agent, rc = build_agent(algo, batch_size, task, device, PATH_FLAGS[path])
+        agent, rc = compose_learner(algo, batch_size, task, device, PATH_FLAGS[path])
         agents[path] = agent
     batch = replay_batch(agents["plain"], rc, batch_size, device)
 

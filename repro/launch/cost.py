@@ -194,13 +194,13 @@ class ParamCounts:
     def count(self, cfg: Any, rc: Any) -> int:
         from omegaconf import OmegaConf
 
-        from repro.train.build import build_agent, run_action_dim
+        from repro.train.build import build_run_learner, run_action_dim
 
         action_dim = run_action_dim(rc)
         obs = (3 * rc.env.frame_stack, rc.env.image_size, rc.env.image_size)
         key = f"{OmegaConf.to_yaml(cfg.agent)}|{action_dim}|{obs}"
         if key not in self.cache:
-            self.cache[key] = sum(n for _, n in build_agent(rc, obs, action_dim, "cpu").parameter_counts())
+            self.cache[key] = sum(n for _, n in build_run_learner(rc, obs, action_dim, "cpu").parameter_counts())
         return self.cache[key]
 
 

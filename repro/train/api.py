@@ -33,8 +33,8 @@ from repro.runs.wblog import WandbRun
 from repro.train.action_tsne import save_final_tsne
 from repro.train.build import (
     batch_source,
-    build_agent,
     build_env,
+    build_run_learner,
     eval_videos,
     with_resolved,
 )
@@ -132,7 +132,7 @@ def _train_online(rc: RunConfig, path: Path, device: str, state: dict | None, ec
     eval_env = build_env(rc, rc.seed + 10_000)
     try:
         spec = env.spec
-        agent = cast(OnlineLearner, build_agent(rc, spec.obs_shape, spec.action_dim, device))  # not is_offline
+        agent = cast(OnlineLearner, build_run_learner(rc, spec.obs_shape, spec.action_dim, device))  # not is_offline
         values = rundir.resolved_values(rc, agent)
         rundir.write_resolved(path, values)
         replay_device = resolve_device(rc.replay.device)
@@ -187,7 +187,7 @@ def _train_offline(rc: RunConfig, path: Path, data: OfflineData, device: str, st
     eval_env = build_env(rc, rc.seed + 10_000)
     try:
         spec = eval_env.spec
-        learner = build_agent(rc, spec.obs_shape, spec.action_dim, device)
+        learner = build_run_learner(rc, spec.obs_shape, spec.action_dim, device)
         learner.set_dataset_returns([float(r) for r in data.manifest.returns])  # IQL's optional reward scaling
         values = rundir.resolved_values(rc, learner)
         values.update({"dataset_dir": str(data.directory), "dataset_kind": data.manifest.kind,

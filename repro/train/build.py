@@ -38,7 +38,7 @@ def build_env(rc: RunConfig, seed: int) -> Env:
                     max_episode_frames=e.max_episode_frames, camera=e.camera)
 
 
-def build_agent(rc: RunConfig, obs_shape: tuple[int, int, int], action_dim: int, device: str) -> Learner:
+def build_run_learner(rc: RunConfig, obs_shape: tuple[int, int, int], action_dim: int, device: str) -> Learner:
     """The learner named by ``agent.learner`` (the online Agent by default), seeded by the run's seed."""
     torch.manual_seed(rc.seed)
     return build_learner(rc.agent, obs_shape, action_dim, device, explore_steps=rc.train.explore_steps)
