@@ -10,10 +10,10 @@ from typing import Any
 from repro.config.schema import learner_specs, objective_specs
 
 # agent.name (normalised: lower case, alphanumerics only) -> the paper's label, for the algorithms no registration
-# names: the online learner without an objective, and the baselines whose published curves the paper compares to
+# names: the online learner without an objective (its registration, actor_critic, names the learner, not the agent
+# file drqv2), and the baselines the paper quotes without runs here (DrQ, DreamerV3, TD-MPC)
 UNREGISTERED_LABELS: dict[str, str] = {
     "drqv2": "DrQ-v2",
-    "alix": "A-LIX",
     "drq": "DrQ",
     "dreamerv3": "DreamerV3",
     "tdmpc": "TD-MPC",

@@ -1,8 +1,9 @@
 """`repro bench e2e`: a short real training run, timed per phase (docs/performance.md).
 
-The run is built as ``repro train`` builds one (repro/train/build.py: environment, agent, replay) and trained by the
-online loop itself, :class:`repro.train.online_loop.OnlineLoop`, without evaluation or checkpoints (its logs and
-episode files go to a temporary folder): no copy of the loop to drift from what training does. The loop is
+The run is built as ``repro train`` builds one (environment and learner by repro/train/build.py, the replay as
+repro/train/api.py makes it, its frames on the CPU: replay.device's default) and trained by the online loop itself,
+:class:`repro.train.online_loop.OnlineLoop`, without evaluation or checkpoints (its logs and episode files go to a
+temporary folder): no copy of the loop to drift from what training does. The loop is
 instrumented in place (:func:`instrument`, as tests/helpers.watch_loop watches one): the seed frames run untimed,
 then ``frames`` frames are timed phase by phase. The phases:
 

@@ -37,7 +37,6 @@ class DRIMLObjective(Objective):
 
     def first_action_code(self, aux: AuxBatch) -> torch.Tensor:
         """The action sequence encoder applied to [a_t, 0, .., 0]: (B, seq_dim), with gradient."""
-        # AuxBatch has no public hook for encoding another action tensor; its encoder is the agent's.
         return aux.memo("u_first", lambda: aux.encode_actions(first_action_only(aux.batch["action_seq"])))
 
     def forward(self, aux: AuxBatch) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
