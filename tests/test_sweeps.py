@@ -152,6 +152,15 @@ def test_unknown_names_are_one_line_with_close_matches(args, needle, tmp_path):
     assert needle in out and out.strip().count("\n") == 0 and "Traceback" not in out
 
 
+def test_a_wandb_sweep_that_cannot_mirror_is_one_line_before_anything_is_written(tmp_path, monkeypatch):
+    sweep = write_sweep(tmp_path, "wb", ["reacher_hard"], {"a": []}, 1)
+    root = tmp_path / "results"
+    monkeypatch.setenv("WANDB_MODE", "bogus")  # check_wandb's refusal: the WandbError reaches the app as it is
+    code, out = run_cli("sweep", str(sweep), "--set", f"runtime.results_root={root}", "--set", "runtime.wandb=true")
+    assert code == 2 and out.startswith("error: WANDB_MODE='bogus'") and out.strip().count("\n") == 0, out
+    assert not (root / ".sweeps").exists() and not (root / "wb").exists()
+
+
 def test_spec_validation(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text(yaml.safe_dump({"name": "bad", "description": "x", "artifacts": [], "tasks": ["hopper_hop"],

@@ -273,14 +273,11 @@ def _gpu_packing(gpus: Optional[str], runs_per_gpu: Optional[int], launcher: Lau
 
 
 def _check_wandb(planned: list[PlannedRun]) -> None:
-    """runtime.wandb=true without the wandb package: one line (SweepError) before any run starts."""
+    """runtime.wandb=true without the wandb package: one line (WandbError) before any run starts."""
     if any(p.cfg.runtime.wandb and p.state != "done" for p in planned):
-        from repro.runs.wblog import WandbError, check_wandb
+        from repro.runs.wblog import check_wandb
 
-        try:
-            check_wandb()
-        except WandbError as exc:
-            raise SweepError(str(exc)) from None
+        check_wandb()
 
 
 def _launch(spec: SweepSpec, planned: list[PlannedRun], root: Path, options: LaunchOptions,
@@ -367,12 +364,10 @@ def _launched_names(name: Optional[str], root: Path) -> list[str]:
 
 
 def default_results_root() -> Path:
-    from repro.config.compose import ConfigError, compose_base
+    """The packaged config's ``runtime.results_root`` (ConfigError, one line, when it does not compose)."""
+    from repro.config.compose import compose_base
 
-    try:
-        return Path(str(compose_base().runtime.results_root))
-    except ConfigError as exc:
-        raise SweepError(str(exc)) from None
+    return Path(str(compose_base().runtime.results_root))
 
 
 def status_hint(sweep: str, root: Path) -> str:

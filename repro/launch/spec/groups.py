@@ -8,7 +8,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 
-from repro.config.compose import ConfigError, check_option, config_groups
+from repro.config.compose import check_option, config_groups
 from repro.launch.spec.errors import SweepError
 from repro.launch.spec.overrides import override_key, override_value
 from repro.launch.spec.sweepfile import SweepSpec
@@ -41,23 +41,18 @@ def unavailable_reason(spec: SweepSpec) -> str | None:
 
 
 def check_tasks(tasks: Sequence[str]) -> None:
-    """SweepError naming the first task the packaged config does not have."""
-    try:
-        for task in tasks:
-            check_option("task", task)
-    except ConfigError as exc:
-        raise SweepError(str(exc)) from None
+    """ConfigError naming the first task the packaged config does not have."""
+    for task in tasks:
+        check_option("task", task)
 
 
 def check_sets(sets: Sequence[str]) -> None:
-    """SweepError for a ``--set`` that is not key=value or selects an unknown option of a config group."""
+    """SweepError for a ``--set`` that is not key=value, ConfigError for one that selects an unknown option of a
+    config group."""
     groups = config_groups()
     for ov in sets:
         if "=" not in ov:
             raise SweepError(f"--set '{ov}' is not key=value.")
         key = override_key(ov)
         if key in groups:
-            try:
-                check_option(key, override_value(ov), where=f" in --set {ov}")
-            except ConfigError as exc:
-                raise SweepError(str(exc)) from None
+            check_option(key, override_value(ov), where=f" in --set {ov}")
