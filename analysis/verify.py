@@ -211,13 +211,35 @@ def verify_cells(results: Results) -> pd.DataFrame:
     return runs[keep]
 
 
-def judge(results: Results, min_seeds: int = MIN_SEEDS, published: Results | None = None,
-          random_returns: dict[str, float] | None = None) -> list[VerdictRow]:
-    """One :class:`VerdictRow` per task, method and variant of the ``verify`` runs under ``results``.
+@dataclass(frozen=True, eq=False)
+class Judgement:
+    """`repro verify`'s section of a report: the verdicts and the runs they judged (one row per run of
+    :func:`verify_cells`), which the figure (paper_figures/verify_plot.py) draws without judging again."""
+
+    rows: tuple[VerdictRow, ...]
+    cells: pd.DataFrame
+
+
+def judgement(results: Results, min_seeds: int = MIN_SEEDS, published: Results | None = None,
+              random_returns: dict[str, float] | None = None) -> Judgement:
+    """The verify runs under ``results`` and one :class:`VerdictRow` per task, method and variant of them.
 
     ``random_returns`` (task -> return) replaces the simulated random-policy reference (tests)."""
+    cells = verify_cells(results)
+    return Judgement(tuple(_judge_cells(results, cells, min_seeds, published, random_returns)), cells)
+
+
+def judge(results: Results, min_seeds: int = MIN_SEEDS, published: Results | None = None,
+          random_returns: dict[str, float] | None = None) -> list[VerdictRow]:
+    """One :class:`VerdictRow` per task, method and variant of the ``verify`` runs under ``results``
+    (:func:`judgement`'s rows)."""
+    return list(judgement(results, min_seeds, published, random_returns).rows)
+
+
+def _judge_cells(results: Results, runs: pd.DataFrame, min_seeds: int, published: Results | None,
+                 random_returns: dict[str, float] | None) -> list[VerdictRow]:
+    """The verdicts of the verify runs ``runs`` (:func:`verify_cells` of ``results``)."""
     published = packaged_published() if published is None else published
-    runs = verify_cells(results)
     rows: list[VerdictRow] = []
     if runs.empty:
         return rows
@@ -577,12 +599,14 @@ def write_verdicts(out_dir: Path, rows: Sequence[VerdictRow]) -> tuple[TableOutp
 KEPT_FILES = (runformat.CONFIG, runformat.RESOLVED, runformat.META, runformat.EVAL, runformat.TRAIN, runformat.DONE)
 
 
-def keep_runs(results: Results, out_dir: Path) -> list[Path]:
+def keep_runs(results: Results, out_dir: Path, cells: pd.DataFrame | None = None) -> list[Path]:
     """Copy the small files of every verify run (config, resolved values, provenance, evaluations, training
     episodes, DONE; no checkpoint, no replay) to ``out_dir/runs/<run>/``: a run directory `repro verify
-    --judge-only --results out_dir/runs` judges again, kept beside the verdicts (docs/verification/)."""
+    --judge-only --results out_dir/runs` judges again, kept beside the verdicts (docs/verification/). ``cells``: the
+    runs judged (:attr:`Judgement.cells`; by default :func:`verify_cells` of ``results``)."""
+    cells = verify_cells(results) if cells is None else cells
     written = []
-    for run_id in verify_cells(results)["run_id"] if not results.runs.empty else []:
+    for run_id in cells["run_id"] if not cells.empty else []:
         for name in KEPT_FILES:
             src = Path(results.root) / str(run_id) / name
             if src.is_file():

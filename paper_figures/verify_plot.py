@@ -19,7 +19,7 @@ from analysis.calibration import SOURCE_TEXT, packaged_published, values_at  # n
 from analysis.identity import task_display  # noqa: E402
 from analysis.io import save_figure_files  # noqa: E402
 from analysis.load import Results  # noqa: E402
-from analysis.verify import BAND_SD, VerdictRow, band, published_frames, verify_cells  # noqa: E402
+from analysis.verify import BAND_SD, Judgement, VerdictRow, band, published_frames  # noqa: E402
 from paper_figures.common import palette, placeholder, setup_style  # noqa: E402
 
 PUBLISHED_COLOR = "#7f7f7f"
@@ -115,10 +115,11 @@ def draw_panel(ax: plt.Axes, results: Results, cell: pd.DataFrame, task: str, ro
     ax.legend(fontsize=7.5, loc="best")
 
 
-def plot_verify(results: Results, rows: Sequence[VerdictRow], out_dir: Path, name: str = "verify") -> list[Path]:
-    """Write ``{name}.png`` and ``{name}.pdf``; returns both paths."""
+def plot_verify(results: Results, judged: Judgement, out_dir: Path, name: str = "verify") -> list[Path]:
+    """Write ``{name}.png`` and ``{name}.pdf`` of the runs ``judged`` holds (their curves read from ``results``),
+    labelled with its verdicts; returns both paths."""
     setup_style()
-    runs = verify_cells(results)
+    runs, rows = judged.cells, judged.rows
     tasks = sorted(set(runs["task"])) if not runs.empty else []
     fig, axes = plt.subplots(1, max(len(tasks), 1), figsize=(6.0 * max(len(tasks), 1), 4.2), squeeze=False)
     if not tasks:

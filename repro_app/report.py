@@ -14,28 +14,27 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.audit import mismatches, published_frame, published_rows, published_summary, run_audit, write_audit
+from analysis.audit import mismatches, published_frame, published_rows, published_summary, write_audit
 from analysis.bootstrap import ESTIMATOR
-from analysis.calibration import CalibrationRow, calibrate, calibration_frames, calibration_notes, write_calibration
-from analysis.claims import claims_frame, evaluate_claims, verdict_counts, write_claims
+from analysis.calibration import CalibrationRow, calibration_frames, calibration_notes, write_calibration
+from analysis.claims import claims_frame, verdict_counts, write_claims
 from analysis.context import Context
 from analysis.io import atomic_write_text
-from analysis.power import REPORT_MAX_SEEDS, REPORT_SIMS, next_runs_paragraph, power_rows, write_power
+from analysis.power import REPORT_MAX_SEEDS, REPORT_SIMS, next_runs_paragraph, write_power
+from analysis.report_model import ReportModel, build_model
 from analysis.tables import TableOutput, to_markdown
 from analysis.verify import (
     ADVANTAGE_NOTE,
     VerdictRow,
     advantage_display,
-    judge,
     verdict_caption,
     verdict_display,
     verdict_notes,
     write_verdicts,
 )
 from paper_figures.catalog import resolve, sorted_ids
-from paper_figures.render import render_artifacts
+from paper_figures.report_figures import ReportFigures, draw_report
 from paper_figures.verify_plot import caption as verify_caption
-from paper_figures.verify_plot import plot_verify
 
 PACKAGES = ("numpy", "pandas", "scipy", "rliable", "arch", "scikit-learn", "matplotlib", "seaborn", "torch",
             "taco-repro")
@@ -269,23 +268,26 @@ def markdown_to_html(md: str, title: str = "TACO reproduction report", base: Pat
 
 
 def build_report(ctx: Context, progress: Callable[[str], None] | None = None) -> tuple[Path, Path]:
-    """Render every artifact, the claims and the audit into ``ctx.out_dir`` and write REPORT.md/.html."""
-    artifacts = render_artifacts(ctx, resolve(sorted_ids()), progress)
-    verdicts = evaluate_claims(ctx)
-    write_claims(ctx, verdicts)
-    findings = run_audit(ctx.paper)
-    write_audit(ctx.out_dir, findings)
-    rows, notes = calibrate(ctx.results, ctx.published, ctx.reps, ctx.seed)
-    write_calibration(ctx.out_dir, rows, notes, ctx.reps, ctx.seed)
-    verify_rows = judge(ctx.results) if not ctx.results.empty else []
-    if verify_rows:
-        write_verdicts(ctx.out_dir, verify_rows)
-        plot_verify(ctx.results, verify_rows, ctx.out_dir)
-    conditioned = not ctx.no_runs
-    prow = power_rows(ctx, REPORT_SIMS, REPORT_MAX_SEEDS, verdicts, conditioned, bootstrap_claims=False)
-    power_table, _ = write_power(ctx.out_dir, prow, REPORT_SIMS, ctx.seed, REPORT_MAX_SEEDS, conditioned=conditioned)
-    md = build_markdown(ctx, artifacts, verdicts, findings, (rows, notes),
-                        (power_table, next_runs_paragraph(prow, REPORT_MAX_SEEDS)), verify_rows)
+    """The report of ``ctx`` in ``ctx.out_dir``: its model built once (analysis/report_model.py), every artifact and
+    the verify figure drawn from it (paper_figures), then its sections' files and REPORT.md/.html written."""
+    model = build_model(ctx, REPORT_SIMS, REPORT_MAX_SEEDS)
+    figures = draw_report(ctx, model, resolve(sorted_ids()), progress)
+    return write_report(ctx, model, figures)
+
+
+def write_report(ctx: Context, model: ReportModel, figures: ReportFigures) -> tuple[Path, Path]:
+    """Write ``model``'s sections into ``ctx.out_dir`` (claims, audit, calibration, verify's tables, power) and
+    REPORT.md/.html with ``figures``; returns the two report paths."""
+    write_claims(ctx, model.verdicts)
+    write_audit(ctx.out_dir, list(model.findings))
+    write_calibration(ctx.out_dir, model.calibration, model.calibration_notes, ctx.reps, ctx.seed)
+    if model.verify.rows:
+        write_verdicts(ctx.out_dir, model.verify.rows)
+    power_table, _ = write_power(ctx.out_dir, model.power, model.sims, ctx.seed, model.max_seeds,
+                                 conditioned=model.conditioned)
+    md = build_markdown(ctx, figures.artifacts, model.verdicts, model.findings,
+                        (list(model.calibration), list(model.calibration_notes)),
+                        (power_table, next_runs_paragraph(model.power, model.max_seeds)), model.verify.rows)
     md_path = atomic_write_text(ctx.out_dir / "REPORT.md", md)
     html_path = atomic_write_text(ctx.out_dir / "REPORT.html", markdown_to_html(md, base=ctx.out_dir))
     return md_path, html_path

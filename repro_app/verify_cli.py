@@ -177,7 +177,7 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = Fals
         BELOW,
         NOT_LEARNED,
         advantage_lines,
-        judge,
+        judgement,
         keep_runs,
         verdict_lines,
         write_verdicts,
@@ -185,7 +185,8 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = Fals
     from paper_figures.verify_plot import plot_verify
 
     results = load_results(root)
-    rows = judge(results, min_seeds=min_seeds)
+    judged = judgement(results, min_seeds=min_seeds)
+    rows = judged.rows
     con = console()
     if not rows:
         con.print(f"no verify runs under {root}: run `repro verify`", highlight=False)
@@ -193,9 +194,10 @@ def judge_and_write(root: Path, out: Path, min_seeds: int = 1, keep: bool = Fals
     for line in verdict_lines(rows) + advantage_lines(rows):
         con.print(line, highlight=False, soft_wrap=True)
     tables = write_verdicts(out, rows)
-    figures = plot_verify(results, rows, out)
+    figures = plot_verify(results, judged, out)
     if keep:
-        con.print(f"kept {len(keep_runs(results, out))} run files under {out / 'runs'}", highlight=False)
+        con.print(f"kept {len(keep_runs(results, out, judged.cells))} run files under {out / 'runs'}",
+                  highlight=False)
     con.print("wrote " + ", ".join(str(p) for t in tables for p in t.files[:2]) + ", "
               + ", ".join(str(p) for p in figures), highlight=False, soft_wrap=True)
     return 1 if any(r.verdict in (BELOW, ABOVE, NOT_LEARNED) for r in rows) else 0

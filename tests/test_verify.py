@@ -177,13 +177,14 @@ def test_write_verdicts_and_figure(tmp_path):
     _runs(tmp_path, "drqv2", [[350, 300, 800, 980]])
     _runs(tmp_path, "taco", [[350, 300, 500]])
     results = load_results(tmp_path)
-    rows = V.judge(results, random_returns=RANDOM)
+    judged = V.judgement(results, random_returns=RANDOM)
+    rows = judged.rows
     verdicts, frames = V.write_verdicts(tmp_path / "out", rows)
     table = pd.read_csv(tmp_path / "out" / "verify.csv")
     assert list(table["verdict"]) == [V.LEARNS, V.NOT_LEARNED]
     assert len(pd.read_csv(tmp_path / "out" / "verify_frames.csv")) == 5
     assert "False alarm" in (tmp_path / "out" / "verify.md").read_text()
-    paths = plot_verify(results, rows, tmp_path / "out")
+    paths = plot_verify(results, judged, tmp_path / "out")
     assert [p.suffix for p in paths] == [".png", ".pdf"] and all(p.stat().st_size > 5000 for p in paths)
 
 
