@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU checks of issue 26, in one script for one GPU (sized for an H200: about 8 minutes). Writes under $OUT:
-#   bench.json          `repro bench` plain, amp and fast at B256 and B1024 (TACO, DrQ-v2), with the --e2e entries of
+#   bench.json          `repro bench update` plain, amp and fast at B256 and B1024 (TACO, DrQ-v2), and the e2e entries of
 #                       a 10K-frame TACO B1024 run (4000 seed frames, 6000 timed), plain and fast (agent.fast), each
 #                       timed phase by phase and as it trains (--overlap: the env step overlapping the queued update)
 #   graphs.xml          tests/test_graphs.py on the GPU (JUnit): the CUDA-graph update (agent.fast) against eager
