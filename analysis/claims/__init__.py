@@ -1,0 +1,155 @@
+"""A verdict for every claim of ``claims.csv`` from the user's runs: supported / refuted / not enough data.
+
+Rules (also in docs/analysis.md): each claim is judged at its own budget with its own minimum number of
+seeds (``analysis/claim_budgets.csv``: 1M frames for most, 1.5M, 2M, 30M, or an offline run's own
+configured ``offline.updates``), never at the budget the runs happen to reach. Verdicts compare point
+estimates (means over the seeds that reached the claim's budget) with the tolerances written in each
+rule; 95% CIs are reported beside them. A cell with fewer seeds than the claim's minimum counts as
+missing. A claim about every task ("on each of the nine tasks") is refuted by one counterexample among
+the cells that exist, even if others are missing. When the runs fall short, the verdict is "not enough
+data" with the reason; on request (``Context.indicative``) an indicative reading at the frames the runs
+reach is added, labelled as such and never counted as supported or refuted.
+
+Each claim is defined once, in :data:`SPECS` (:class:`ClaimSpec`: its check and rule, its cells from the runs and
+from the paper for the power simulation, or why it is not simulated); `repro claims`, `repro plan --claims`
+(analysis/power.py) and the report list the claims through :func:`claim_specs`. The claims are split by family:
+analysis/claims/online.py, offline.py and ablations.py; what they share is analysis/claims/core.py.
+"""
+
+from analysis.claims.ablations import (
+    _FIGURE_ONLY,
+    ACTION_REPEATS,
+    COMPARABLE_WITHIN,
+    REPEAT_HORIZONS,
+    REPR_TASKS,
+    SPEED_TOLERANCE,
+    _action_repeat,
+    _action_repr_gain,
+    _no_repr_vs_drqv2,
+    action_repr_printed,
+    best_k_printed,
+    paper_slowdown,
+    speed_printed,
+    vs_repr_pairs,
+    vs_repr_rule,
+)
+from analysis.claims.core import (
+    GAIN_TOLERANCE,
+    NO_DATA,
+    REFUTED,
+    SUPPORTED,
+    BatchJudge,
+    Check,
+    ClaimSpec,
+    NotEnoughData,
+    Simulation,
+    Verdict,
+    _claim_context,
+    apart,
+    budget_words,
+    frames_apart,
+    gain_bar,
+    means,
+    paper_gain,
+    pct,
+    universal,
+    vs_text,
+)
+from analysis.claims.offline import CI_REPS, CI_SIMS, OFFLINE_AVERAGED, offline_average_rule, offline_printed
+from analysis.claims.online import (
+    LESS_SPREAD_TASKS,
+    MODEL_BASED,
+    MODEL_BASED_WINS,
+    PUBLISHED_GAIN_ID,
+    REACHER_DRQ_FACTOR,
+    REACHER_TACO_WITHIN,
+    SOLVED_FRACTION,
+    _gain_batch,
+    _reacher_speed,
+    avg_gain_rule,
+    beats_drqv2_rule,
+    beats_model_based_rule,
+    manipulator_rule,
+    published_gain_rule,
+    reacher_printed,
+    seed_robustness_rule,
+)
+from analysis.claims.verdicts import (
+    SPEC_OF,
+    SPECS,
+    claim_specs,
+    claims_frame,
+    evaluate_claims,
+    verdict_counts,
+    write_claims,
+)
+from analysis.paper import DMC9
+from repro.config.schema import DatasetKind
+
+__all__ = [
+    "ACTION_REPEATS",
+    "BatchJudge",
+    "CI_REPS",
+    "CI_SIMS",
+    "COMPARABLE_WITHIN",
+    "Check",
+    "ClaimSpec",
+    "DMC9",
+    "DatasetKind",
+    "GAIN_TOLERANCE",
+    "LESS_SPREAD_TASKS",
+    "MODEL_BASED",
+    "MODEL_BASED_WINS",
+    "NO_DATA",
+    "NotEnoughData",
+    "OFFLINE_AVERAGED",
+    "PUBLISHED_GAIN_ID",
+    "REACHER_DRQ_FACTOR",
+    "REACHER_TACO_WITHIN",
+    "REFUTED",
+    "REPEAT_HORIZONS",
+    "REPR_TASKS",
+    "SOLVED_FRACTION",
+    "SPECS",
+    "SPEC_OF",
+    "SPEED_TOLERANCE",
+    "SUPPORTED",
+    "Simulation",
+    "Verdict",
+    "_FIGURE_ONLY",
+    "_action_repeat",
+    "_action_repr_gain",
+    "_claim_context",
+    "_gain_batch",
+    "_no_repr_vs_drqv2",
+    "_reacher_speed",
+    "action_repr_printed",
+    "apart",
+    "avg_gain_rule",
+    "beats_drqv2_rule",
+    "beats_model_based_rule",
+    "best_k_printed",
+    "budget_words",
+    "claim_specs",
+    "claims_frame",
+    "evaluate_claims",
+    "frames_apart",
+    "gain_bar",
+    "manipulator_rule",
+    "means",
+    "offline_average_rule",
+    "offline_printed",
+    "paper_gain",
+    "paper_slowdown",
+    "pct",
+    "published_gain_rule",
+    "reacher_printed",
+    "seed_robustness_rule",
+    "speed_printed",
+    "universal",
+    "verdict_counts",
+    "vs_repr_pairs",
+    "vs_repr_rule",
+    "vs_text",
+    "write_claims",
+]
