@@ -179,8 +179,8 @@ def resolved_from_config(cfg: dict[str, Any]) -> dict[str, Any]:
     return values
 
 
-def resolved_columns(values: dict[str, Any], algo: Any) -> dict[str, Any]:
-    """The identity columns of a run's resolved values (runformat.RESOLVED_FIELDS)."""
+def resolved_columns(values: dict[str, Any], agent: Any) -> dict[str, Any]:
+    """The identity columns of a run's resolved values (runformat.RESOLVED_FIELDS); ``agent``: its agent.name."""
     objectives = enabled_objectives(values.get("objectives") or {})
     encoder = values.get("action_encoder")
     return {
@@ -191,19 +191,19 @@ def resolved_columns(values: dict[str, Any], algo: Any) -> dict[str, Any]:
         "latent_action_dim": _int_or_none(values.get("latent_action_dim")),
         "action_encoder": None if encoder is None else bool(encoder),
         "objectives": "+".join(objectives),
-        "method": _method(values, algo, objectives),
+        "method": _method(values, agent, objectives),
         "action_repeat": _int_or_none(values.get("action_repeat")),
         "dataset": normalize_dataset(values.get("dataset")),
         "cql_alpha": _float_or_none(values.get("cql_alpha")),
     }
 
 
-def _method(values: dict[str, Any], algo: Any, objectives: tuple[str, ...]) -> str | None:
+def _method(values: dict[str, Any], agent: Any, objectives: tuple[str, ...]) -> str | None:
     """The paper's label, from what the run trained: its learner and its enabled objectives (``td3bc_taco`` trains
     learner td3bc with TACO's objectives: ``TD3+BC+TACO``; ``taco`` the online learner with them: ``TACO``)."""
     if values.get("learner"):
         return method_label(values["learner"], objectives)
-    return method_label("actor_critic", objectives) if algo is not None else None
+    return method_label("actor_critic", objectives) if agent is not None else None
 
 
 def _int_or_none(value: Any) -> int | None:
@@ -434,7 +434,7 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, dict[str
     if not isinstance(cfg, dict):
         return None, None, [Problem(str(cfg_path), "config is not a mapping; run skipped")]
     ident = identity_from_config(cfg)
-    missing = [k for k in ("algo", "task", "seed") if ident[k] is None]
+    missing = [IDENTITY_KEYS[k] for k in ("algo", "task", "seed") if ident[k] is None]  # the config's keys
     if missing:
         return None, None, [Problem(str(cfg_path), f"config lacks {', '.join(missing)}; run skipped")]
     values, source, problem = _resolved(run_dir, cfg)
@@ -568,8 +568,8 @@ def load_results(root: Path | str) -> Results:
     else:
         dup = runs.duplicated(["experiment", "algo", "variant", "task", "dataset", "seed"], keep=False)
         for run_id in runs.loc[dup, "run_id"]:
-            problems.append(Problem(str(root / run_id), "same experiment/algo/variant/task/dataset/seed as another run",
-                                    "warning"))
+            problems.append(Problem(str(root / run_id),
+                                    "same experiment/agent/variant/task/dataset/seed as another run", "warning"))
     if evals and not runs.empty:
         eval_all = _concat_columns(evals).merge(runs[list(IDENTITY)], on="run_id", how="left")
     else:

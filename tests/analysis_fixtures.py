@@ -47,22 +47,22 @@ def _composed(agent: str, task: str) -> DictConfig:
 
 
 @functools.cache
-def _validated(algo: str, task: str, overrides: tuple[tuple[str, Any], ...]) -> DictConfig:
-    """The composed config of ``algo`` on ``task`` with dotted ``overrides`` applied in struct mode (a key the
-    schema lacks raises) and validated like any training config."""
-    agent = algo if algo in group_options("agent") else "drqv2"  # online variants (alix, ...) on drqv2
-    cfg = copy.deepcopy(_composed(agent, task))
-    for key, value in (("agent.name", algo), *overrides):
+def _validated(agent: str, task: str, overrides: tuple[tuple[str, Any], ...]) -> DictConfig:
+    """The composed config of agent ``agent`` (its agent.name) on ``task`` with dotted ``overrides`` applied in
+    struct mode (a key the schema lacks raises) and validated like any training config."""
+    agent_file = agent if agent in group_options("agent") else "drqv2"  # an agent without its own file on drqv2
+    cfg = copy.deepcopy(_composed(agent_file, task))
+    for key, value in (("agent.name", agent), *overrides):
         OmegaConf.update(cfg, key, json.loads(value) if key in _DICT_KEYS else value, merge=False)
     return validate(cfg)
 
 
-def run_config(algo: str, task: str, seed: int, results_root: Path, **overrides: Any) -> DictConfig:
+def run_config(agent: str, task: str, seed: int, results_root: Path, **overrides: Any) -> DictConfig:
     """A training config built like ``repro train agent=... task=... key=value ...`` (dotted ``overrides``;
     values None are left at the config's own value)."""
     items = tuple(sorted((k, json.dumps(v) if k in _DICT_KEYS else v) for k, v in overrides.items()
                          if v is not None))
-    cfg = copy.deepcopy(_validated(algo, task, items))
+    cfg = copy.deepcopy(_validated(agent, task, items))
     OmegaConf.update(cfg, "seed", seed, merge=False)
     OmegaConf.update(cfg, "runtime.results_root", str(results_root), merge=False)
     return cfg
@@ -86,7 +86,7 @@ def write_run(
     root: Path,
     *,
     experiment: str,
-    algo: str,
+    agent: str | None = None,
     task: str,
     seed: int,
     final: float,
@@ -116,6 +116,7 @@ def write_run(
     train_rows: int = 3,
     save_frames: bool = False,
     config: dict[str, Any] | None = None,
+    algo: str | None = None,
 ) -> Path:
     """Write one run directory and return it. Arguments left None keep the composed config's value; the
     config goes through the training schema, and resolved.json through the code training uses
@@ -132,9 +133,12 @@ def write_run(
     ``save_frames``: a done online run also writes its final evaluation episode's frames (frames.npz, by the writer
     training uses) where its config's train.save_frames says so (on by default), as a trained run does; synthetic
     frames of the run's image size, one per action-repeated step of a 500-step episode. ``config``: other dotted
-    config values (e.g. ``{"env.max_episode_frames": 100}``)."""
+    config values (e.g. ``{"env.max_episode_frames": 100}``). ``agent``: the run's agent.name (required; ``algo``, its
+    old name, until the tests of the claims, report, figures, verify and words switch to ``agent``)."""
+    if (agent is None) == (algo is None):
+        raise TypeError("write_run: give agent= (the run's agent.name), once")
     cfg = run_config(
-        algo, task, seed, root, experiment=experiment, variant=variant, **{
+        agent or str(algo), task, seed, root, experiment=experiment, variant=variant, **{
             "agent.K": K, "agent.batch_size": batch_size, "agent.latent_action_dim": latent_action_dim,
             "agent.action_encoder": action_encoder, "agent.objectives": objectives,
             "env.action_repeat": action_repeat, "env.distracting_dims": distracting_dims, "train.frames": frames,
@@ -267,61 +271,62 @@ def full_coverage_root(root: Path, seeds: int = 2, **scale: Any) -> Path:
     for i, task in enumerate(DMC9):
         base = 300 + 40 * i
         k = 1 if task in ("quadruped_run", "walker_run") else 3
-        _seeds(root, seeds, experiment="main", algo="taco", task=task, final=base * main["TACO"], K=k)
-        _seeds(root, seeds, experiment="main", algo="drqv2", task=task, final=base)
-        _seeds(root, seeds, experiment="main", algo="alix", task=task, final=base * main["A-LIX"])
+        _seeds(root, seeds, experiment="main", agent="taco", task=task, final=base * main["TACO"], K=k)
+        _seeds(root, seeds, experiment="main", agent="drqv2", task=task, final=base)
+        _seeds(root, seeds, experiment="main", agent="alix", task=task, final=base * main["A-LIX"])
         k3_better = task in ("hopper_hop", "quadruped_walk", "acrobot_swingup", "reacher_hard")
-        _seeds(root, seeds, experiment="horizon", algo="taco", task=task, K=1, variant="K1",
+        _seeds(root, seeds, experiment="horizon", agent="taco", task=task, K=1, variant="K1",
                final=base * (1.2 if k3_better else 1.4))
-        _seeds(root, seeds, experiment="horizon", algo="taco", task=task, K=3, variant="K3",
+        _seeds(root, seeds, experiment="horizon", agent="taco", task=task, K=3, variant="K3",
                final=base * (1.4 if k3_better else 1.2))
     for task in ["quadruped_run", "walker_run", "hopper_hop", "reacher_hard", "acrobot_swingup"]:
-        for algo, f in (("spr", 0.5), ("atc", 0.45), ("driml", 0.55)):
-            _seeds(root, seeds, experiment="repr_objectives", algo=algo, task=task, final=300 * f + 100)
+        for agent, f in (("spr", 0.5), ("atc", 0.45), ("driml", 0.55)):
+            _seeds(root, seeds, experiment="repr_objectives", agent=agent, task=task, final=300 * f + 100)
     for task in ["quadruped_run", "reacher_hard", "hopper_hop", "walker_run"]:
-        _seeds(root, seeds, experiment="action_repr", algo="taco", task=task, action_encoder=False,
+        _seeds(root, seeds, experiment="action_repr", agent="taco", task=task, action_encoder=False,
                variant="no_action_repr", final=300 + 40 * DMC9.index(task) + 30)
     best = {1: 5, 2: 3, 4: 1}
     for ar in (1, 2, 4):
         for k in (1, 3, 5):
-            _seeds(root, seeds, experiment="action_repeat", algo="taco", task="hopper_hop", K=k, action_repeat=ar,
+            _seeds(root, seeds, experiment="action_repeat", agent="taco", task="hopper_hop", K=k, action_repeat=ar,
                    variant=f"ar{ar}_K{k}", final=400 if best[ar] == k else 300)
     for b, (ft, fd) in {256: (400, 300), 512: (450, 305), 1024: (500, 300)}.items():
-        for algo, final in (("taco", ft), ("drqv2", fd)):
-            _seeds(root, seeds, experiment="batch_size", algo=algo, task="quadruped_run", batch_size=b,
+        for agent, final in (("taco", ft), ("drqv2", fd)):
+            _seeds(root, seeds, experiment="batch_size", agent=agent, task="quadruped_run", batch_size=b,
                    variant=f"bs{b}", final=final)
     for name, f in (("no_taco", 300), ("no_curl", 400), ("no_reward", 410)):
         obj = {"taco": 1.0, "curl": 1.0, "reward": 1.0}
         obj[name[3:]] = 0.0
-        _seeds(root, seeds, experiment="objective_removal", algo="taco", task="quadruped_run", objectives=obj,
+        _seeds(root, seeds, experiment="objective_removal", agent="taco", task="quadruped_run", objectives=obj,
                variant=name, final=f)
     for dim, f in ((6, 300), (12, 410), (None, 420), (18, 415), (24, 310)):
-        _seeds(root, seeds, experiment="action_dim", algo="taco", task="quadruped_run", latent_action_dim=dim,
+        _seeds(root, seeds, experiment="action_dim", agent="taco", task="quadruped_run", latent_action_dim=dim,
                variant=f"dim{dim or 'default'}", final=f)
     for task in METAWORLD6:
-        for algo, f in (("taco", 0.8), ("drqv2", 0.5), ("alix", 0.4)):
-            _seeds(root, seeds, spread=0.005, experiment="metaworld", algo=algo, task=task, final=f, success=True)
+        for agent, f in (("taco", 0.8), ("drqv2", 0.5), ("alix", 0.4)):
+            _seeds(root, seeds, spread=0.005, experiment="metaworld", agent=agent, task=task, final=f, success=True)
     for s in range(3):
-        write_run(root, experiment="manipulator", algo="taco", task="manipulator_bring_ball", seed=s,
+        write_run(root, experiment="manipulator", agent="taco", task="manipulator_bring_ball", seed=s,
                   final=700 if s == 0 else 200)
-        write_run(root, experiment="manipulator", algo="drqv2", task="manipulator_bring_ball", seed=s, final=100)
+        write_run(root, experiment="manipulator", agent="drqv2", task="manipulator_bring_ball", seed=s, final=100)
     offline = {"td3bc": 0.6, "td3bc_taco": 0.65, "cql": 0.62, "cql_taco": 0.67, "iql": 0.3, "bc": 0.5, "dt": 0.45}
     for task in ["hopper_hop", "cheetah_run", "walker_run", "quadruped_run"]:
         for ds in ("medium", "medium-replay", "full-replay"):
-            for algo, f in offline.items():
-                if algo in group_options("agent"):  # dt once conf/agent/dt.yaml exists
-                    _seeds(root, seeds, spread=0.1, experiment="offline", algo=algo, task=task, dataset=ds,
+            for agent, f in offline.items():
+                if agent in group_options("agent"):  # dt once conf/agent/dt.yaml exists
+                    _seeds(root, seeds, spread=0.1, experiment="offline", agent=agent, task=task, dataset=ds,
                            final=f * PAPER_TACO_RETURN[task])
-    tsne = write_run(root, experiment="tsne", algo="taco", task="cheetah_run", seed=0, distracting_dims=20, final=500,
+    tsne = write_run(root, experiment="tsne", agent="taco", task="cheetah_run", seed=0, distracting_dims=20, final=500,
                      latent_action_dim=8)
     write_encoder_checkpoint(tsne)
     if scale.get("save_tsne"):
         write_run_tsne(tsne)
-    for algo, b, fps in (("taco", 1024, 10.0), ("taco", 512, 18.0), ("taco", 256, 26.0), ("drqv2", 256, 36.0)):
-        write_run(root, experiment="speed", algo=algo, task="quadruped_run", seed=0, batch_size=b, fps=fps,
+    for agent, b, fps in (("taco", 1024, 10.0), ("taco", 512, 18.0), ("taco", 256, 26.0), ("drqv2", 256, 36.0)):
+        write_run(root, experiment="speed", agent=agent, task="quadruped_run", seed=0, batch_size=b, fps=fps,
                   variant=f"bs{b}", final=100)
     bench = root / "bench"
     bench.mkdir(exist_ok=True)
+    # a bench file of format 1 (no kind or format, the agent under "algo"), as early versions wrote: still read
     (bench / "cpu.json").write_text(json.dumps({"hardware": "CPU: Bench CPU", "results": [
         {"algo": "taco", "batch_size": 1024, "update_seconds": 0.5, "fps_estimate": 8.0},
         {"algo": "drqv2", "batch_size": 256, "update_seconds": 0.1, "fps_estimate": 30.0}]}))

@@ -258,14 +258,14 @@ def test_table_1_figures_1_4_5_and_the_metaworld_claim_show_reproduced_alix(tmp_
 
     runs = tmp_path / "runs"
     for task in DMC9:
-        for algo, final in (("taco", 700.0), ("drqv2", 600.0), ("alix", 500.0)):
+        for agent, final in (("taco", 700.0), ("drqv2", 600.0), ("alix", 500.0)):
             for s in range(3):
-                write_run(runs, experiment="main", algo=algo, task=task, seed=s, final=final + 10 * (s - 1),
+                write_run(runs, experiment="main", agent=agent, task=task, seed=s, final=final + 10 * (s - 1),
                           frames=1_000_000, eval_every=500_000)
     for task in METAWORLD6:
-        for algo, final in (("taco", 0.8), ("drqv2", 0.5), ("alix", 0.4)):
+        for agent, final in (("taco", 0.8), ("drqv2", 0.5), ("alix", 0.4)):
             for s in range(3):
-                write_run(runs, experiment="metaworld", algo=algo, task=task, seed=s, final=final, success=True,
+                write_run(runs, experiment="metaworld", agent=agent, task=task, seed=s, final=final, success=True,
                           frames=1_000_000, eval_every=500_000)
     ctx = Context(results=load_results(runs), out_dir=tmp_path / "out", reps=50, curve_reps=20, render_envs=False)
     t1_online.render(ctx)

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import typer
+import yaml
 from rliable import library as rly
 from rliable import metrics
 from typer.testing import CliRunner
@@ -44,7 +45,7 @@ def _ctx(root: Path, **kw) -> Context:
 
 # ---------------------------------------------------------------- loading
 def test_identity_comes_from_config_not_path(tmp_path):
-    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=3, final=100.0, K=1,
+    write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=3, final=100.0, K=1,
               path=tmp_path / "somewhere" / "else")
     res = load_results(tmp_path)
     row = res.runs.iloc[0]
@@ -56,20 +57,24 @@ def test_identity_comes_from_config_not_path(tmp_path):
 
 
 def test_malformed_files_are_reported_with_path_and_skipped(tmp_path):
-    good = write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=100.0)
-    extra_field = write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=1, final=100.0)
+    good = write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=0, final=100.0)
+    extra_field = write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=1, final=100.0)
     with open(extra_field / "eval.csv", "a") as fh:
         fh.write("120000,60000,7,1.0,0.0,500,,10,7,EXTRA\n")
-    truncated = write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=2, final=100.0)
+    truncated = write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=2, final=100.0)
     text = (truncated / "eval.csv").read_text()
     (truncated / "eval.csv").write_text(text[:-9])  # cut inside the last row
-    bad_train = write_run(tmp_path, experiment="main", algo="drqv2", task="hopper_hop", seed=0, final=50.0)
+    bad_train = write_run(tmp_path, experiment="main", agent="drqv2", task="hopper_hop", seed=0, final=50.0)
     (bad_train / "train.csv").write_text("frame,step\n1,2\n")
     no_config = tmp_path / "orphan"
     no_config.mkdir()
     (no_config / "eval.csv").write_text((good / "eval.csv").read_text())
-    bad_yaml = write_run(tmp_path, experiment="main", algo="taco", task="walker_run", seed=0, final=1.0)
+    bad_yaml = write_run(tmp_path, experiment="main", agent="taco", task="walker_run", seed=0, final=1.0)
     (bad_yaml / "config.yaml").write_text("experiment: [unclosed\n")
+    nameless = write_run(tmp_path, experiment="main", agent="taco", task="walker_run", seed=1, final=1.0)
+    cfg = yaml.safe_load((nameless / "config.yaml").read_text())
+    del cfg["agent"]["name"]
+    (nameless / "config.yaml").write_text(yaml.safe_dump(cfg))
 
     res = load_results(tmp_path)
     paths = {p.path: p.message for p in res.problems}
@@ -78,6 +83,7 @@ def test_malformed_files_are_reported_with_path_and_skipped(tmp_path):
     assert str(bad_train / "train.csv") in paths
     assert str(no_config / "eval.csv") in paths
     assert str(bad_yaml / "config.yaml") in paths
+    assert paths[str(nameless / "config.yaml")] == "config lacks agent.name; run skipped"  # the config's key
     # the good run keeps its rows; the malformed eval files contribute none
     assert set(res.eval["run_id"]) == {str(good.relative_to(tmp_path)), str(bad_train.relative_to(tmp_path))}
     assert math.isnan(res.runs.set_index("run_id").loc[str(bad_train.relative_to(tmp_path)), "fps"])
@@ -92,8 +98,8 @@ def test_missing_root_raises_clear_error(tmp_path):
 
 # ---------------------------------------------------------------- scores
 def test_score_at_budget_takes_largest_frame_not_past_budget(tmp_path):
-    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=500.0)
-    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=1, final=500.0, frames=60_000,
+    write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=0, final=500.0)
+    write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=1, final=500.0, frames=60_000,
               done=False)
     res = load_results(tmp_path)
     s = final_scores(res, 100_000).set_index("seed")
@@ -106,8 +112,8 @@ def test_score_at_budget_takes_largest_frame_not_past_budget(tmp_path):
 
 
 def test_learning_curves_interpolate_and_do_not_extrapolate(tmp_path):
-    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=100.0)
-    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=1, final=100.0, frames=40_000)
+    write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=0, final=100.0)
+    write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=1, final=100.0, frames=40_000)
     res = load_results(tmp_path)
     curves = learning_curves(res, grid=np.array([0.0, 10_000.0, 50_000.0]))
     by_seed = {s: dict(zip(g["frame"], g["value"])) for s, g in curves.groupby("seed")}
@@ -139,10 +145,10 @@ def _curves_run_by_run(results, grid):
 def test_learning_curves_equal_the_run_by_run_curves(tmp_path):
     """Every run at once gives each run's curve and each identity column's type as one frame per run did: DMC and
     Meta-world runs, a run with no score, an offline run (no curve), identity columns of Python objects."""
-    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=100.0)
-    write_run(tmp_path, experiment="main", algo="drqv2", task="hopper_hop", seed=1, final=70.0, frames=40_000)
-    write_run(tmp_path, experiment="metaworld", algo="taco", task="hammer", seed=0, final=0.8, success=True)
-    write_run(tmp_path, experiment="offline", algo="cql_taco", task="hopper_hop", seed=0, final=100.0,
+    write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=0, final=100.0)
+    write_run(tmp_path, experiment="main", agent="drqv2", task="hopper_hop", seed=1, final=70.0, frames=40_000)
+    write_run(tmp_path, experiment="metaworld", agent="taco", task="hammer", seed=0, final=0.8, success=True)
+    write_run(tmp_path, experiment="offline", agent="cql_taco", task="hopper_hop", seed=0, final=100.0,
               dataset="medium_replay", reference=250.0)
     res = load_results(tmp_path)
     grid = np.arange(0.0, 110_000.0, 7_000.0)
@@ -159,14 +165,14 @@ def test_learning_curves_equal_the_run_by_run_curves(tmp_path):
 
 
 def test_metaworld_score_is_success_percent(tmp_path):
-    write_run(tmp_path, experiment="metaworld", algo="taco", task="hammer", seed=0, final=0.8, success=True)
+    write_run(tmp_path, experiment="metaworld", agent="taco", task="hammer", seed=0, final=0.8, success=True)
     s = final_scores(load_results(tmp_path), FRAMES)
     assert s.iloc[0]["metric"] == "success" and s.iloc[0]["score"] == pytest.approx(80.0)
 
 
 def test_offline_score_is_the_normalised_score_the_run_recorded(tmp_path):
-    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=400.0)
-    write_run(tmp_path, experiment="offline", algo="cql_taco", task="hopper_hop", seed=0, final=100.0,
+    write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=0, final=400.0)
+    write_run(tmp_path, experiment="offline", agent="cql_taco", task="hopper_hop", seed=0, final=100.0,
               dataset="medium_replay", reference=250.0)
     off = final_scores(load_results(tmp_path), FRAMES).dropna(subset=["dataset"])
     row = off.iloc[0]
@@ -227,9 +233,9 @@ def test_seeded_restores_global_numpy_state():
 def test_t1_cells_exact(tmp_path):
     # at the paper's budget (1M frames): a run that reached it is compared with the paper (Δ, Paper in CI)
     for s, v in enumerate((530.0, 540.0, 550.0)):
-        write_run(tmp_path, experiment="main", algo="taco", task="quadruped_run", seed=s, final=v, frames=PAPER,
+        write_run(tmp_path, experiment="main", agent="taco", task="quadruped_run", seed=s, final=v, frames=PAPER,
                   eval_every=PAPER // 4)
-    write_run(tmp_path, experiment="main", algo="drqv2", task="quadruped_run", seed=0, final=400.0, frames=60_000,
+    write_run(tmp_path, experiment="main", agent="drqv2", task="quadruped_run", seed=0, final=400.0, frames=60_000,
               done=False)
     from paper_figures.t1_online import render
 
@@ -255,7 +261,7 @@ def test_t1_cells_exact(tmp_path):
 
 
 def test_experiment_map_reads_other_experiment_names(tmp_path):
-    write_run(tmp_path, experiment="tiny", algo="taco", task="hopper_hop", seed=0, final=10.0)
+    write_run(tmp_path, experiment="tiny", agent="taco", task="hopper_hop", seed=0, final=10.0)
     ctx = _ctx(tmp_path)
     assert select.online_main(ctx.scores).empty
     mapped = select.online_main(ctx.scores, {"main": ["tiny"]})
@@ -295,9 +301,9 @@ def test_a_run_reaches_a_budget_only_by_an_evaluation_there(tmp_path):
                                                             if int(ln.split(",")[frame]) <= last)]) + "\n")
 
     for s in range(3):
-        cut(write_run(tmp_path, experiment="main", algo="taco", task="quadruped_run", seed=s, final=400.0 + s,
+        cut(write_run(tmp_path, experiment="main", agent="taco", task="quadruped_run", seed=s, final=400.0 + s,
                       frames=PAPER, eval_every=PAPER // 2), PAPER // 2)
-        cut(write_run(tmp_path, experiment="verify", algo="drqv2", task="cartpole_balance", seed=s + 1, final=0.0,
+        cut(write_run(tmp_path, experiment="verify", agent="drqv2", task="cartpole_balance", seed=s + 1, final=0.0,
                       frames=60_000, eval_every=20_000, curve=[350, 300, 800, 980], batch_size=256), 40_000)
     ctx = _ctx(tmp_path, budget=PAPER)
     main = ctx.scores[ctx.scores["experiment"] == "main"]
@@ -314,8 +320,8 @@ def test_a_run_reaches_a_budget_only_by_an_evaluation_there(tmp_path):
 def test_a_short_run_is_shown_as_not_comparable_without_delta_or_in_ci(tmp_path):
     # `make repro`'s situation: 400-frame runs of 100-frame episodes under experiment tiny, read as main at 400
     for s in (1, 2):
-        for algo, final in (("taco", 1.0), ("drqv2", 2.0)):
-            write_run(tmp_path, experiment="tiny", algo=algo, task="cheetah_run", seed=s, final=final + s,
+        for agent, final in (("taco", 1.0), ("drqv2", 2.0)):
+            write_run(tmp_path, experiment="tiny", agent=agent, task="cheetah_run", seed=s, final=final + s,
                       frames=400, eval_every=200, config={"env.max_episode_frames": 100})
     from paper_figures.t1_online import render
 
@@ -356,9 +362,9 @@ def test_runs_of_another_environment_are_labelled():
 
 
 def test_an_offline_run_below_the_papers_updates_is_not_compared(tmp_path):
-    for algo in ("td3bc", "td3bc_taco"):
+    for agent in ("td3bc", "td3bc_taco"):
         for s in (1, 2):
-            write_run(tmp_path, experiment="offline", algo=algo, task="cheetah_run", seed=s, final=10.0 + s,
+            write_run(tmp_path, experiment="offline", agent=agent, task="cheetah_run", seed=s, final=10.0 + s,
                       dataset="medium", updates=20, eval_every_updates=10)
     from paper_figures.t3_offline import render
 
@@ -375,9 +381,9 @@ def test_claims_without_runs_name_the_experiments_that_have_them_and_the_x_optio
     from analysis.claim_budget import unread_hints
 
     for s in (1, 2):
-        write_run(tmp_path, experiment="tiny", algo="taco", task="cheetah_run", seed=s, final=1.0, frames=400,
+        write_run(tmp_path, experiment="tiny", agent="taco", task="cheetah_run", seed=s, final=1.0, frames=400,
                   eval_every=200)
-        write_run(tmp_path, experiment="tiny_offline", algo="td3bc", task="cheetah_run", seed=s, final=1.0,
+        write_run(tmp_path, experiment="tiny_offline", agent="td3bc", task="cheetah_run", seed=s, final=1.0,
                   dataset="medium", updates=20, eval_every_updates=10)
     ctx = _ctx(tmp_path)
     v = _verdicts(ctx)
@@ -397,7 +403,7 @@ def test_claims_without_runs_name_the_experiments_that_have_them_and_the_x_optio
 
 
 def test_speed_from_runs_and_bench(tmp_path):
-    write_run(tmp_path, experiment="speed", algo="taco", task="hopper_hop", seed=0, final=1.0, fps=12.0,
+    write_run(tmp_path, experiment="speed", agent="taco", task="hopper_hop", seed=0, final=1.0, fps=12.0,
               device="cuda:NVIDIA A100")
     (tmp_path / "bench").mkdir()
     (tmp_path / "bench" / "b.json").write_text('{"hardware": "CPU: X", "results": [{"algo": "drqv2", '
@@ -419,10 +425,10 @@ def _main_grid(root: Path, taco: dict[str, float], seeds: int = 3, frames: int =
                experiment: str = "main") -> None:
     for task in DMC9:
         for s in range(seeds):
-            write_run(root, experiment=experiment, algo="drqv2", task=task, seed=s, final=400.0 + s, frames=frames,
+            write_run(root, experiment=experiment, agent="drqv2", task=task, seed=s, final=400.0 + s, frames=frames,
                       eval_every=frames // 4)
             if task in taco:
-                write_run(root, experiment=experiment, algo="taco", task=task, seed=s, final=taco[task] + s,
+                write_run(root, experiment=experiment, agent="taco", task=task, seed=s, final=taco[task] + s,
                           frames=frames, eval_every=frames // 4)
 
 
@@ -511,10 +517,10 @@ def test_offline_claims_use_each_runs_own_budget(tmp_path):
     def grid(root: Path, done: bool) -> None:
         for task in OFFLINE_TASKS:
             for ds in ("medium", "medium_replay", "full_replay"):
-                for algo in ("td3bc", "cql"):
+                for agent in ("td3bc", "cql"):
                     for s in range(3):
                         for taco, final in ((False, 300.0), (True, 330.0)):
-                            write_run(root, experiment="offline", algo=f"{algo}_taco" if taco else algo, task=task,
+                            write_run(root, experiment="offline", agent=f"{agent}_taco" if taco else agent, task=task,
                                       dataset=ds, seed=s, final=final + s, updates=1000, eval_every_updates=500,
                                       done=done)
 
@@ -565,7 +571,7 @@ def test_action_repeat_claim_refuted_when_best_k_differs(tmp_path):
     for ar in (1, 2, 4):
         for k in (1, 3, 5):
             for s in range(3):
-                write_run(tmp_path, experiment="action_repeat", algo="taco", task="hopper_hop", K=k, action_repeat=ar,
+                write_run(tmp_path, experiment="action_repeat", agent="taco", task="hopper_hop", K=k, action_repeat=ar,
                           variant=f"ar{ar}_K{k}", seed=s, final=100.0 * k + s, frames=CLAIM_FRAMES,
                           eval_every=CLAIM_FRAMES // 2)  # K=5 always best
     v = _verdicts(_ctx(tmp_path))["action_repeat"]

@@ -131,8 +131,8 @@ def test_a_run_is_labelled_with_the_path_it_trained_with(tmp_path):
     from analysis.speed import speed_measurements
     from analysis_fixtures import write_run
 
-    plain = write_run(tmp_path, experiment="speed", algo="taco", task="cheetah_run", seed=1, final=1.0, fps=10.0)
-    fast = write_run(tmp_path, experiment="speed", algo="taco", task="cheetah_run", seed=2, final=1.0, fps=30.0)
+    plain = write_run(tmp_path, experiment="speed", agent="taco", task="cheetah_run", seed=1, final=1.0, fps=10.0)
+    fast = write_run(tmp_path, experiment="speed", agent="taco", task="cheetah_run", seed=2, final=1.0, fps=30.0)
     cfg = yaml.safe_load((fast / "config.yaml").read_text())
     cfg["agent"]["fast"] = True
     (fast / "config.yaml").write_text(yaml.safe_dump(cfg))

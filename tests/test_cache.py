@@ -21,8 +21,8 @@ from repro_app.cli import app
 
 
 def _tree(root: Path) -> list[Path]:
-    return [write_run(root, experiment="main", algo=algo, task="cheetah_run", seed=s, final=100.0 * (s + 1))
-            for algo in ("taco", "drqv2") for s in range(2)]
+    return [write_run(root, experiment="main", agent=agent, task="cheetah_run", seed=s, final=100.0 * (s + 1))
+            for agent in ("taco", "drqv2") for s in range(2)]
 
 
 def test_unchanged_runs_are_reused_and_a_changed_run_is_read_again(tmp_path: Path):
@@ -228,7 +228,7 @@ def test_an_unchanged_tsne_checkpoint_is_neither_loaded_nor_embedded_again(tmp_p
     from analysis.context import Context
     from analysis_fixtures import write_encoder_checkpoint
 
-    run = write_run(tmp_path / "runs", experiment="tsne", algo="taco", task="cheetah_run", seed=0,
+    run = write_run(tmp_path / "runs", experiment="tsne", agent="taco", task="cheetah_run", seed=0,
                     distracting_dims=20, final=500, latent_action_dim=8)
     write_encoder_checkpoint(run)
     loads: list[Path] = []
@@ -272,7 +272,7 @@ def test_f13_shows_the_frames_a_trained_run_saved_and_renders_nothing(tmp_path: 
     from paper_figures import f13_frames
 
     monkeypatch.setattr(f13_frames, "random_action_frames", lambda *a, **k: pytest.fail("rendered"))
-    run = write_run(tmp_path / "runs", experiment="main", algo="taco", task="hammer", seed=0, final=0.5,
+    run = write_run(tmp_path / "runs", experiment="main", agent="taco", task="hammer", seed=0, final=0.5,
                     success=True, save_frames=True)
     ctx = Context(results=load_results(tmp_path / "runs"), render_envs=False)
     frames, source = f13_frames.all_frames(ctx)["hammer"]

@@ -57,7 +57,7 @@ def write_published(folder: Path, task: str, slope: float = 0.01, end: int = 100
 
 def _drq_runs(root: Path, experiment: str, finals: list[float], frames: int = 50_000, task: str = "cheetah_run"):
     for seed, final in enumerate(finals):
-        write_run(root, experiment=experiment, algo="drqv2", task=task, seed=seed, final=final, frames=frames,
+        write_run(root, experiment=experiment, agent="drqv2", task=task, seed=seed, final=final, frames=frames,
                   eval_every=10_000)
 
 
@@ -139,7 +139,7 @@ def test_calibration_of_runs_with_shorter_episodes_is_not_comparable(tmp_path):
 
     pub = load_published(write_published(tmp_path / "pub", "cheetah_run").parent)
     for seed, final in enumerate([30.0, 31.0, 32.0]):
-        write_run(tmp_path / "runs", experiment="tiny", algo="drqv2", task="cheetah_run", seed=seed, final=final,
+        write_run(tmp_path / "runs", experiment="tiny", agent="drqv2", task="cheetah_run", seed=seed, final=final,
                   frames=50_000, eval_every=10_000, config={"env.max_episode_frames": 100})
     (row,), _ = calibrate(load_results(tmp_path / "runs"), pub, reps=REPS)
     assert row.reading == OTHER_ENV and np.isnan(row.diff) and np.isnan(row.diff_ci_low)
@@ -232,13 +232,13 @@ def test_audit_rows_from_packaged_data_match_a_hand_computation():
 
 
 # ---------------------------------------------------------------- online_avg_gain against the published curves
-def _taco_grid(root: Path, factor: float, frames: int, pub: Results, algo: str = "taco") -> None:
+def _taco_grid(root: Path, factor: float, frames: int, pub: Results, agent: str = "taco") -> None:
     from analysis.calibration import published_values
 
     for task in DMC9:
         base = float(np.mean(published_values(pub, task, frames)))
         for seed in range(3):
-            write_run(root, experiment="main", algo=algo, task=task, seed=seed, final=factor * base + seed,
+            write_run(root, experiment="main", agent=agent, task=task, seed=seed, final=factor * base + seed,
                       frames=frames, eval_every=frames // 2)
 
 
@@ -253,7 +253,7 @@ def test_online_avg_gain_read_against_the_published_curves(tmp_path):
     r = float(re.search(r"= ([\d.]+) \(95% CI", published.evidence).group(1))
     assert r == pytest.approx(1.5 + 1.0 / np.mean([np.mean(_hand_1m(t)) for t in DMC9]), abs=2e-3)
     # with DrQ-v2 runs of one's own, both readings
-    _taco_grid(tmp_path / "taco", 1.0, 1_000_000, pub, algo="drqv2")
+    _taco_grid(tmp_path / "taco", 1.0, 1_000_000, pub, agent="drqv2")
     ctx = Context(results=load_results(tmp_path / "taco"), out_dir=tmp_path / "out", reps=REPS)
     verdicts = {v.id: v for v in evaluate_claims(ctx)}
     assert verdicts["online_avg_gain"].verdict == SUPPORTED and verdicts[PUBLISHED_GAIN_ID].verdict == SUPPORTED
@@ -278,7 +278,7 @@ def test_f4_draws_the_published_band_and_a_switch_hides_it(tmp_path):
 
     root = tmp_path / "runs"
     for seed in range(2):
-        write_run(root, experiment="main", algo="taco", task="quadruped_run", seed=seed, final=400.0 + seed,
+        write_run(root, experiment="main", agent="taco", task="quadruped_run", seed=seed, final=400.0 + seed,
                   frames=100_000, eval_every=20_000)
     results = load_results(root)
     shown = render(Context(results=results, out_dir=tmp_path / "with", curve_reps=50))
@@ -292,7 +292,7 @@ def test_f4_draws_the_published_band_and_a_switch_hides_it(tmp_path):
 def test_repro_plot_draws_the_published_band_and_no_published_hides_it(tmp_path):
     root = tmp_path / "runs"
     for seed in range(2):
-        write_run(root, experiment="main", algo="drqv2", task="cheetah_run", seed=seed, final=300.0 + seed,
+        write_run(root, experiment="main", agent="drqv2", task="cheetah_run", seed=seed, final=300.0 + seed,
                   frames=100_000, eval_every=20_000)
     app = typer.Typer()
     from repro_app import watch_cli

@@ -93,9 +93,9 @@ def test_f10_places_a_default_dim_run_at_the_dim_its_agent_used(tmp_path):
     agent = build.build_run_learner(rc, (9, 84, 84), get_task("quadruped_run").action_dim, "cpu")
     values = rundir.resolved_values(rc, agent)
     assert values["latent_action_dim"] == 16 == agent.action_encoder.latent_dim
-    write_run(tmp_path, experiment="action_dim", algo="taco", task="quadruped_run", seed=0, final=420.0,
+    write_run(tmp_path, experiment="action_dim", agent="taco", task="quadruped_run", seed=0, final=420.0,
               variant="dimdefault", resolved_values=values)
-    write_run(tmp_path, experiment="action_dim", algo="taco", task="quadruped_run", seed=0, final=300.0,
+    write_run(tmp_path, experiment="action_dim", agent="taco", task="quadruped_run", seed=0, final=300.0,
               variant="dim6", latent_action_dim=6)
     ctx = Context(results=load_results(tmp_path), out_dir=tmp_path / "out", budget=FRAMES, reps=50)
     dims = select.action_dim_runs(ctx.scores).set_index("variant")["dim"]
@@ -107,9 +107,9 @@ def test_f10_places_a_default_dim_run_at_the_dim_its_agent_used(tmp_path):
 
 
 def test_run_without_resolved_values_falls_back_to_its_config_marked(tmp_path):
-    old = write_run(tmp_path, experiment="action_dim", algo="taco", task="quadruped_run", seed=0, final=1.0,
+    old = write_run(tmp_path, experiment="action_dim", agent="taco", task="quadruped_run", seed=0, final=1.0,
                     K=2, resolved=False)
-    write_run(tmp_path, experiment="action_dim", algo="taco", task="quadruped_run", seed=1, final=1.0,
+    write_run(tmp_path, experiment="action_dim", agent="taco", task="quadruped_run", seed=1, final=1.0,
               latent_action_dim=12, resolved=False)
     res = load_results(tmp_path)
     warnings = [p for p in res.problems if p.path == str(old / runformat.RESOLVED)]
@@ -124,7 +124,7 @@ def test_run_without_resolved_values_falls_back_to_its_config_marked(tmp_path):
 
 
 def test_malformed_resolved_values_are_a_warning_and_fall_back(tmp_path):
-    run = write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=1.0)
+    run = write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=0, final=1.0)
     data = json.loads((run / runformat.RESOLVED).read_text())
     data["action_encoder"] = False  # with a latent dim: contradictory
     (run / runformat.RESOLVED).write_text(json.dumps(data))
@@ -152,7 +152,7 @@ def test_resolved_values_are_checked_before_writing(tmp_path):
 def test_fixture_configs_go_through_the_training_schema(tmp_path):
     with pytest.raises(ConfigAttributeError):  # the key the old fixtures wrote; the schema has agent.cql.alpha
         run_config("cql", "hopper_hop", 0, tmp_path, **{"agent.cql_alpha": 0.5})
-    run = write_run(tmp_path, experiment="offline", algo="cql", task="hopper_hop", seed=0, final=1.0,
+    run = write_run(tmp_path, experiment="offline", agent="cql", task="hopper_hop", seed=0, final=1.0,
                     dataset="medium", cql_alpha=0.5)
     cfg = compose(["agent=drqv2", "task=hopper_hop"])
     saved = rundir.saved_identity(run)

@@ -32,19 +32,19 @@ REPS = 200
 BASE = {"td3bc": "TD3+BC", "cql": "CQL"}
 
 
-def _final(algo: str, task: str, ds: str, seed: int, taco_gain: float) -> float:
+def _final(agent: str, task: str, ds: str, seed: int, taco_gain: float) -> float:
     """A distinct return per cell and seed; +TACO runs add ``taco_gain`` to their base's seed."""
-    base = 100.0 + 10 * OFFLINE_TASKS.index(task) + 3 * DATASETS.index(ds) + 7 * seed + (5 if algo == "cql" else 0)
-    return base + taco_gain if algo.endswith("_taco") else base
+    base = 100.0 + 10 * OFFLINE_TASKS.index(task) + 3 * DATASETS.index(ds) + 7 * seed + (5 if agent == "cql" else 0)
+    return base + taco_gain if agent.endswith("_taco") else base
 
 
 def _grid(root: Path, seeds: int = 3, taco_gain: float = 20.0, done: bool = True) -> Path:
     for task in OFFLINE_TASKS:
         for ds in DATASETS:
-            for algo in ("td3bc", "td3bc_taco", "cql", "cql_taco"):
+            for agent in ("td3bc", "td3bc_taco", "cql", "cql_taco"):
                 for s in range(seeds):
-                    write_run(root, experiment="offline", algo=algo, task=task, dataset=ds, seed=s,
-                              final=_final(algo, task, ds, s, taco_gain), updates=UPDATES, eval_every_updates=500,
+                    write_run(root, experiment="offline", agent=agent, task=task, dataset=ds, seed=s,
+                              final=_final(agent, task, ds, s, taco_gain), updates=UPDATES, eval_every_updates=500,
                               reference=REF, done=done)
     return root
 
@@ -63,7 +63,7 @@ def grid(tmp_path_factory) -> Path:
     """3 finished seeds of TD3+BC, CQL and their +TACO on every pair, +TACO 20 above each seed of its base,
     and one more seed of TD3+BC on hopper_hop/medium that did not finish its budget (far above the others)."""
     root = _grid(tmp_path_factory.mktemp("offline"))
-    write_run(root, experiment="offline", algo="td3bc", task="hopper_hop", dataset="medium", seed=9, final=900.0,
+    write_run(root, experiment="offline", agent="td3bc", task="hopper_hop", dataset="medium", seed=9, final=900.0,
               updates=UPDATES, eval_every_updates=500, reference=REF, done=False)
     return root
 
@@ -87,7 +87,7 @@ def _copy(root: Path, to: Path, drop: str | None = None, undone: str | None = No
 
 # ---------------------------------------------------------------- loading
 def test_offline_run_loads_identity_budget_and_recorded_score(tmp_path):
-    run = write_run(tmp_path, experiment="offline", algo="cql_taco", task="walker_run", dataset="medium-replay",
+    run = write_run(tmp_path, experiment="offline", agent="cql_taco", task="walker_run", dataset="medium-replay",
                     seed=4, final=150.0, updates=UPDATES, eval_every_updates=400, reference=REF)
     # a learner's extra eval column (DT logs its target return) is tolerated
     ev = pd.read_csv(run / "eval.csv").assign(target_return=1.0)
@@ -104,7 +104,7 @@ def test_offline_run_loads_identity_budget_and_recorded_score(tmp_path):
 
 
 def test_offline_eval_with_reordered_updates_is_reported(tmp_path):
-    run = write_run(tmp_path, experiment="offline", algo="bc", task="hopper_hop", dataset="medium", seed=0,
+    run = write_run(tmp_path, experiment="offline", agent="bc", task="hopper_hop", dataset="medium", seed=0,
                     final=10.0, updates=UPDATES, eval_every_updates=500)
     lines = (run / "eval.csv").read_text().splitlines(keepends=True)
     (run / "eval.csv").write_text("".join([lines[0], lines[2], lines[1], *lines[3:]]))
@@ -118,8 +118,8 @@ def test_t3_cells_and_average_row_from_the_runs(grid, tmp_path):
     t3 = _render(_ctx(grid, tmp_path), "T3").set_index(["task", "dataset", "method"])
     for task in OFFLINE_TASKS:
         for ds in DATASETS:
-            for algo, method in (("td3bc", "TD3+BC"), ("cql_taco", "CQL+TACO")):
-                values = [_final(algo, task, ds, s, 20.0) / REF * 100 for s in range(3)]
+            for agent, method in (("td3bc", "TD3+BC"), ("cql_taco", "CQL+TACO")):
+                values = [_final(agent, task, ds, s, 20.0) / REF * 100 for s in range(3)]
                 cell = t3.loc[(task, ds, method)]
                 assert cell["n"] == 3
                 assert cell["repro_mean"] == pytest.approx(np.mean(values))
@@ -132,8 +132,8 @@ def test_t3_cells_and_average_row_from_the_runs(grid, tmp_path):
     # 1000 updates: below the 100K from which a run is compared with the paper's (analysis.comparable), so no Δ
     assert pd.isna(cell["paper_in_ci"]) and math.isnan(cell["diff"]) and str(cell["comparable"]) == "False"
     # the average row: the mean over the 12 pairs of the runs' normalised scores, the printed average beside it
-    for algo, method, printed in (("td3bc", "TD3+BC", 68.2), ("cql_taco", "CQL+TACO", 72.1)):
-        hand = np.mean([_final(algo, t, d, s, 20.0) / REF * 100 for t in OFFLINE_TASKS for d in DATASETS
+    for agent, method, printed in (("td3bc", "TD3+BC", 68.2), ("cql_taco", "CQL+TACO", 72.1)):
+        hand = np.mean([_final(agent, t, d, s, 20.0) / REF * 100 for t in OFFLINE_TASKS for d in DATASETS
                         for s in range(3)])
         avg = t3.loc[("Average", "all 12", method)]
         assert avg["repro_mean"] == pytest.approx(hand) and avg["n"] == 3 and avg["paper_mean"] == printed
@@ -148,7 +148,7 @@ def test_t3_cells_and_average_row_from_the_runs(grid, tmp_path):
 
 def test_t3_compares_runs_that_finished_the_papers_updates(tmp_path):
     for s in range(3):
-        write_run(tmp_path, experiment="offline", algo="td3bc", task="hopper_hop", dataset="medium", seed=s,
+        write_run(tmp_path, experiment="offline", agent="td3bc", task="hopper_hop", dataset="medium", seed=s,
                   final=130.0 + s, updates=100_000, eval_every_updates=50_000, reference=REF)
     cell = _render(_ctx(tmp_path), "T3").set_index(["task", "dataset", "method"]).loc[("hopper_hop", "medium",
                                                                                         "TD3+BC")]
@@ -177,9 +177,9 @@ def test_t3_average_needs_every_pair(grid, tmp_path):
 def test_t6_shows_the_alpha_each_run_used(tmp_path):
     table6 = table6_alpha("hopper_hop", "medium")
     assert table6 != 3.0
-    write_run(tmp_path, experiment="offline", algo="cql", task="hopper_hop", dataset="medium", seed=0, final=1.0,
+    write_run(tmp_path, experiment="offline", agent="cql", task="hopper_hop", dataset="medium", seed=0, final=1.0,
               cql_alpha=3.0, updates=UPDATES)
-    write_run(tmp_path, experiment="offline", algo="cql_taco", task="cheetah_run", dataset="full-replay", seed=0,
+    write_run(tmp_path, experiment="offline", agent="cql_taco", task="cheetah_run", dataset="full-replay", seed=0,
               final=1.0, updates=UPDATES)  # alpha left to the config: Table 6's
     t6 = _render(_ctx(tmp_path), "T6").set_index(["task", "dataset"])
     assert float(t6.loc[("hopper_hop", "medium"), "runs_alpha"]) == 3.0

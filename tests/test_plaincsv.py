@@ -175,9 +175,9 @@ def test_read_csv_strict_is_the_same_on_both_paths(tmp_path, name):
 def test_a_runs_logs_load_the_same_on_both_paths(tmp_path):
     """Runs as the fixture writes them (online with and without updates yet, Meta-world's success, offline):
     the runs and eval tables equal to the last bit with the plain reader and with pandas only."""
-    write_run(tmp_path, experiment="main", algo="taco", task="hopper_hop", seed=0, final=123.456789, fps=61.3)
-    write_run(tmp_path, experiment="metaworld", algo="drqv2", task="hammer", seed=1, final=0.7, success=True)
-    write_run(tmp_path, experiment="offline", algo="cql_taco", task="hopper_hop", seed=0, final=100.0,
+    write_run(tmp_path, experiment="main", agent="taco", task="hopper_hop", seed=0, final=123.456789, fps=61.3)
+    write_run(tmp_path, experiment="metaworld", agent="drqv2", task="hammer", seed=1, final=0.7, success=True)
+    write_run(tmp_path, experiment="offline", agent="cql_taco", task="hopper_hop", seed=0, final=100.0,
               dataset="medium_replay", reference=250.0)
     train = next(tmp_path.rglob("train.csv"))
     plain_train, pandas_train = _both_paths(train, TRAIN_REQUIRED, only=("critic_loss",))

@@ -258,9 +258,9 @@ def test_power_given_the_runs_done_keeps_their_values(tmp_path):
 
     for task in DMC9:  # 2 seeds of each method: below the claim's minimum of 3
         for s in range(2):
-            write_run(tmp_path, experiment="main", algo="drqv2", task=task, seed=s, final=100.0, frames=1_000_000,
+            write_run(tmp_path, experiment="main", agent="drqv2", task=task, seed=s, final=100.0, frames=1_000_000,
                       eval_every=250_000)
-            write_run(tmp_path, experiment="main", algo="taco", task=task, seed=s, final=900.0, frames=1_000_000,
+            write_run(tmp_path, experiment="main", agent="taco", task=task, seed=s, final=900.0, frames=1_000_000,
                       eval_every=250_000)
     ctx = Context(results=load_results(tmp_path), reps=50)
     claim = next(c for c in power.simulated_claims(ctx) if c.id == "online_beats_drqv2_all")
@@ -342,7 +342,7 @@ def test_a_plugin_online_agent_is_priced(tmp_path):
                      "common: [profile=tiny]\nvariants: {base: []}\n")
     _bench_file(tmp_path, "cpu", [_upd("toy_utd", "plain", 0.25)])
     (cost,) = plan_sweeps([str(sweep)], find_bench(tmp_path, "cpu"), results_root=tmp_path, memory=False)
-    assert cost.algo == "toy_utd" and not cost.missing
+    assert cost.agent == "toy_utd" and not cost.missing
     assert cost.fps == pytest.approx(cost.frames_per_update / 0.25)
 
 
@@ -364,15 +364,15 @@ def test_t4_and_plan_read_one_fps_from_one_bench_file(tmp_path):
     for sets in ((), ("agent.fast=true",)):
         for c in plan_sweeps(["tiny"], bench, specs_selection(sets), results_root=tmp_path, memory=False):
             assert c.frames_per_update == 4  # the tiny runs' own frames per update, as the bench's config
-            assert c.fps == pytest.approx(table[({"taco": "TACO", "drqv2": "DrQ-v2"}[c.algo], c.path)])
+            assert c.fps == pytest.approx(table[({"taco": "TACO", "drqv2": "DrQ-v2"}[c.agent], c.path)])
 
 
 def test_plan_claims_reuses_the_analysis_cache_of_its_out_folder(tmp_path: Path):
     from analysis_fixtures import write_run
 
-    for algo in ("taco", "drqv2"):
+    for agent in ("taco", "drqv2"):
         for s in range(2):
-            write_run(tmp_path / "runs", experiment="main", algo=algo, task="cheetah_run", seed=s, final=100.0 + s)
+            write_run(tmp_path / "runs", experiment="main", agent=agent, task="cheetah_run", seed=s, final=100.0 + s)
     args = ["plan", "--claims", "--results", str(tmp_path / "runs"), "--sims", "20", "--max-seeds", "3",
             "--reps", "50"]
     first = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
@@ -395,7 +395,7 @@ def test_plan_claims_with_a_bench_file_it_cannot_read_is_one_line_and_exit_2(tmp
     frames only, exit 0); with no --bench and no bench file found, the plan prices in frames and says so."""
     from analysis_fixtures import write_run
 
-    write_run(tmp_path / "runs", experiment="main", algo="taco", task="cheetah_run", seed=0, final=100.0)
+    write_run(tmp_path / "runs", experiment="main", agent="taco", task="cheetah_run", seed=0, final=100.0)
     (tmp_path / "bad.json").write_text("{bad")
     args = ["plan", "--claims", "--results", str(tmp_path / "runs"), "--sims", "20", "--max-seeds", "3", "--reps", "50"]
     for bench, why in ((tmp_path / "bad.json", "cannot read bench file"), (tmp_path / "none.json", "does not exist")):
@@ -500,7 +500,7 @@ def test_the_headline_counts_every_run_and_the_packing_is_bound_by_host_memory(t
     assert command == f"repro bench update --device cpu --agent drqv2 --batch 16 --fast --results {root}"
     sub, params = _parse_bench(command)
     assert sub == "update" and params["device"] == "cpu" and params["results_root"] == root
-    assert {(c.algo, c.batch_size, c.path) for c in unpriced_runs(costs)} <= _timed(params)
+    assert {(c.agent, c.batch_size, c.path) for c in unpriced_runs(costs)} <= _timed(params)
     notes = " ".join(res.output.split())
     assert "Timed under load" in notes and "drqv2 B8 (load 9.0 on 2 cores)" in notes
     table = pd.read_csv(out / "plan.csv")
@@ -530,10 +530,10 @@ def test_docs_plan_names_the_command_that_prices_main_and_one_host_memory_figure
 
     costs = plan_sweeps(["main"], None, specs.selection(seeds=1), memory=False)  # the seeds do not change a setting
     (command,) = bench_commands(costs, "cuda", Path("runs"))
-    assert {(c.algo, c.batch_size) for c in costs} >= {("alix", 256), ("drqv2", 512), ("taco", 1024)}
+    assert {(c.agent, c.batch_size) for c in costs} >= {("alix", 256), ("drqv2", 512), ("taco", 1024)}
     root = Path(__file__).resolve().parents[1]
     assert command in " ".join((root / "docs" / "plan.md").read_text().split())
-    assert {(c.algo, c.batch_size, c.path) for c in costs} <= _timed(_parse_bench(command)[1])
+    assert {(c.agent, c.batch_size, c.path) for c in costs} <= _timed(_parse_bench(command)[1])
     figure = _gb(max(c.host_bytes for c in costs))
     assert figure == "19.8 GiB"
     for doc in ("sweeps/launchers/example.yaml", "docs/plan.md"):

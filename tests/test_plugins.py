@@ -105,7 +105,7 @@ def test_runs_of_two_methods_never_share_a_table_cell(tmp_path):
 
     for variant, objectives, final in (("plain", {}, 100.0), ("spr", {"spr": 1.0, "curl": 1.0, "reward": 1.0}, 200.0),
                                        ("taco", {"taco": 1.0, "curl": 1.0, "reward": 1.0}, 300.0)):
-        write_run(tmp_path, experiment="offline", algo="cql", variant=variant, task="hopper_hop", dataset="medium",
+        write_run(tmp_path, experiment="offline", agent="cql", variant=variant, task="hopper_hop", dataset="medium",
                   seed=1, final=final, objectives=objectives, action_encoder=bool(objectives))
     cells = final_scores(load_results(tmp_path)).groupby(["task", "dataset", "method"])["score"].agg(["count", "mean"])
     assert sorted(cells.index.get_level_values("method")) == ["CQL", "CQL+SPR", "CQL+TACO"]

@@ -339,9 +339,9 @@ def test_tensorboard_command_names_the_root(tmp_path: Path):
 def plot_root(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("plot")
     for task in ("cheetah_run", "hopper_hop"):
-        for algo, final in (("taco", 600.0), ("drqv2", 300.0)):
+        for agent, final in (("taco", 600.0), ("drqv2", 300.0)):
             for seed, offset in enumerate((-30.0, 0.0, 30.0)):
-                write_run(root, experiment="main", algo=algo, task=task, seed=seed, final=final + offset)
+                write_run(root, experiment="main", agent=agent, task=task, seed=seed, final=final + offset)
     return root
 
 
@@ -389,7 +389,7 @@ def test_plot_without_runs_is_one_line(tmp_path: Path):
 
 # ----------------------------------------------------------------------------- repro status --watch
 def _launched(root: Path, done: bool) -> Path:
-    run = write_run(root, experiment="w", algo="taco", task="cheetah_run", seed=1, final=1.0, done=done)
+    run = write_run(root, experiment="w", agent="taco", task="cheetah_run", seed=1, final=1.0, done=done)
     record_launch(state_dir(root, "w"), "w", root / "w.yaml", "local",
                   {"w/taco/base/cheetah_run/s1": {"run_dir": str(run), "overrides": []}})
     return run

@@ -54,21 +54,21 @@ def hardware(device: str) -> str:
 
 
 def same_run_ratios(plain_seconds: dict[tuple[str, int], float]) -> dict[str, float]:
-    """Ratios of update times measured in one run, keyed ``{algo}_b{batch}_over_{algo}_b{batch}``: each
-    algorithm's batch sizes against its smallest one, TACO against DrQ-v2 at each shared batch size, and
+    """Ratios of update times measured in one run, keyed ``{agent}_b{batch}_over_{agent}_b{batch}``: each
+    agent's batch sizes against its smallest one, TACO against DrQ-v2 at each shared batch size, and
     TACO B1024 over DrQ-v2 B256 (the paper's own batch sizes)."""
     ratios: dict[str, float] = {}
 
     def put(a: tuple[str, int], b: tuple[str, int]) -> None:
         ratios[f"{a[0]}_b{a[1]}_over_{b[0]}_b{b[1]}"] = round(plain_seconds[a] / plain_seconds[b], 3)
 
-    algos = sorted({a for a, _ in plain_seconds}, reverse=True)  # taco before drqv2: ratios above 1
-    sizes = {a: sorted(b for x, b in plain_seconds if x == a) for a in algos}
-    for a in algos:
+    agents = sorted({a for a, _ in plain_seconds}, reverse=True)  # taco before drqv2: ratios above 1
+    sizes = {a: sorted(b for x, b in plain_seconds if x == a) for a in agents}
+    for a in agents:
         for b in sizes[a][1:]:
             put((a, b), (a, sizes[a][0]))
-    for i, a in enumerate(algos):
-        for other in algos[i + 1:]:
+    for i, a in enumerate(agents):
+        for other in agents[i + 1:]:
             for b in sorted(set(sizes[a]) & set(sizes[other])):
                 put((a, b), (other, b))
     if ("taco", 1024) in plain_seconds and ("drqv2", 256) in plain_seconds:

@@ -117,11 +117,11 @@ def instrument(loop: Any, timer: PhaseTimer) -> list[int]:
     return updates
 
 
-def run_e2e(algo: str, batch_size: int | None, device: str, path: str = "plain", frames: int = 100,
+def run_e2e(agent: str, batch_size: int | None, device: str, path: str = "plain", frames: int = 100,
             task: str = "cheetah_run", warmup: int = 1, seed_frames: int | None = None,
             phase_sync: bool = True) -> dict[str, Any]:
-    """Build a run of ``algo`` on ``task`` (the tiny profile when ``batch_size`` is None, else the agent's own
-    settings at that batch) as ``repro train`` builds it, and train it with the online loop itself
+    """Build a run of agent file ``agent`` on ``task`` (the tiny profile when ``batch_size`` is None, else the agent
+    file's own settings at that batch) as ``repro train`` builds it, and train it with the online loop itself
     (:class:`repro.train.online_loop.OnlineLoop`, instrumented by :func:`instrument`; no evaluation, no checkpoint):
     its seed frames untimed, ``warmup`` untimed updates, then ``frames`` frames timed (``phase_sync``: see the module
     docstring). Returns the e2e entry (docs/plan.md, "The bench files `repro plan` reads")."""
@@ -140,7 +140,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, path: str = "plain",
     from repro.train.build import build_env, build_run_learner
     from repro.train.online_loop import OnlineLoop
 
-    overrides = [f"agent={algo}", f"task={task}", *PATH_FLAGS[path]]
+    overrides = [f"agent={agent}", f"task={task}", *PATH_FLAGS[path]]
     overrides += [f"profile={TINY}"] if batch_size is None else [f"agent.batch_size={batch_size}"]
     rc = typed(compose(overrides))
     repeat = rc.env.action_repeat
@@ -157,12 +157,12 @@ def run_e2e(algo: str, batch_size: int | None, device: str, path: str = "plain",
     try:
         with tempfile.TemporaryDirectory(prefix="repro-bench-e2e-") as tmp:
             spec = env.spec
-            agent = build_run_learner(rc, spec.obs_shape, spec.action_dim, device)
-            assert isinstance(agent, OnlineLearner)
+            learner = build_run_learner(rc, spec.obs_shape, spec.action_dim, device)
+            assert isinstance(learner, OnlineLearner)
             buffer = ReplayBuffer(rc.replay.capacity, (3, *spec.obs_shape[1:]), spec.action_dim, rc.env.frame_stack,
                                   rc.agent.nstep, rc.agent.K, rc.agent.discount, seed=rc.seed, device="cpu",
                                   sample_device=device)
-            logger = RunLogger(Path(tmp), agent.metric_names(), echo=lambda line: None)
+            logger = RunLogger(Path(tmp), learner.metric_names(), echo=lambda line: None)
             started: list[float] = []
 
             def start_timing(frame: int, last_eval: float | None) -> None:
@@ -170,12 +170,12 @@ def run_e2e(algo: str, batch_size: int | None, device: str, path: str = "plain",
                 if started or loop.counters.step < seed_steps:
                     return
                 for _ in range(warmup):  # untimed: the first update allocates optimizer state (and compiles)
-                    loop.agent.update(loop.buffer.sample(loop.batch_size, **agent.sample_options), loop.counters.step)
+                    loop.agent.update(loop.buffer.sample(loop.batch_size, **learner.sample_options), loop.counters.step)
                 renders.clear()
                 timer.on = True
                 started.append(now(device))
 
-            loop = OnlineLoop(rc.train, rc.seed, repeat, env, env, agent, buffer, logger,
+            loop = OnlineLoop(rc.train, rc.seed, repeat, env, env, learner, buffer, logger,
                               EpisodeStore(Path(tmp) / "replay"), lambda state: None, progress=start_timing)
             renders = _time_render(env, timer)
             updates = instrument(loop, timer)
@@ -190,7 +190,7 @@ def run_e2e(algo: str, batch_size: int | None, device: str, path: str = "plain",
     seconds["env_step"] -= seconds["render"]  # the renders ran inside env.step / env.reset
     timed_frames = timed_steps * repeat
     entry: dict[str, Any] = {
-        "agent": algo, "batch_size": rc.agent.batch_size, "profile": TINY if batch_size is None else None,
+        "agent": agent, "batch_size": rc.agent.batch_size, "profile": TINY if batch_size is None else None,
         "path": path, "phase_sync": phase_sync, "device": device, "task": task, "frames": timed_frames,
         "seed_frames": seed_steps * repeat,
         "updates": updates[0], "warmup": warmup, "seconds": round(wall, 4),

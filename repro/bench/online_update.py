@@ -1,6 +1,6 @@
-"""One update of the online agent, timed (``repro bench``), and the pieces every update benchmark shares
-(``--roofline``, repro/bench/agreement.py): an agent built from its agent file and timed updates of several paths
-alternated; their batches come from repro/bench/batches.py, drawn from a replay as training draws them."""
+"""One update of the online agent, timed (``repro bench update``), and the pieces every update benchmark shares
+(``repro bench roofline``, repro/bench/agreement.py): a learner built from its agent file and timed updates of several
+paths alternated; their batches come from repro/bench/batches.py, drawn from a replay as training draws them."""
 
 from __future__ import annotations
 
@@ -16,9 +16,9 @@ if TYPE_CHECKING:
     import torch
 
 
-def compose_learner(algo: str, batch_size: int, task: str, device: str, flags: list[str], image: int = 84
+def compose_learner(agent: str, batch_size: int, task: str, device: str, flags: list[str], image: int = 84
                     ) -> tuple[Any, Any]:
-    """The online learner of agent file ``algo`` at ``batch_size`` for ``task`` with the overrides ``flags``, seeded
+    """The online learner of agent file ``agent`` at ``batch_size`` for ``task`` with the overrides ``flags``, seeded
     0, for stacks of 3 RGB frames of ``image`` pixels square, and its typed run config."""
     import torch
 
@@ -26,12 +26,12 @@ def compose_learner(algo: str, batch_size: int, task: str, device: str, flags: l
     from repro.envs import get_task
     from repro.learners import OnlineLearner, build_learner
 
-    rc = typed(compose([f"agent={algo}", f"task={task}", f"agent.batch_size={batch_size}", *flags]))
+    rc = typed(compose([f"agent={agent}", f"task={task}", f"agent.batch_size={batch_size}", *flags]))
     torch.manual_seed(0)
-    agent = build_learner(rc.agent, (9, image, image), get_task(task).action_dim, device)
-    if not isinstance(agent, OnlineLearner):
-        raise ValueError(f"agent {algo} does not train online")
-    return agent, rc
+    learner = build_learner(rc.agent, (9, image, image), get_task(task).action_dim, device)
+    if not isinstance(learner, OnlineLearner):
+        raise ValueError(f"agent {agent} does not train online")
+    return learner, rc
 
 
 def alternated_times(agents: dict[str, Any], batch: dict[str, torch.Tensor], warmup: int, repeats: int,
@@ -58,7 +58,7 @@ def replay_batch(agent: Any, rc: Any, batch_size: int, device: str, image: int =
     return training_batch(agent, rc.agent, rc.env.frame_stack, episodes, device, batch_size)[0]
 
 
-def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
+def time_update(agent: str, batch_size: int, task: str = "cheetah_run", repeats: int = 2,
                 device: str = "cpu", paths: tuple[str, ...] = (), warmup: int = 1,
                 overrides: Sequence[str] = ()) -> list[dict]:
     """Median wall-clock seconds of one full agent update on the plain path and on each of ``paths``, over
@@ -69,7 +69,7 @@ def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: 
     paths = ("plain", *paths)
     agents = {}
     for path in paths:
-        agents[path], rc = compose_learner(algo, batch_size, task, device, [*overrides, *PATH_FLAGS[path]])
+        agents[path], rc = compose_learner(agent, batch_size, task, device, [*overrides, *PATH_FLAGS[path]])
     batch = replay_batch(agents["plain"], rc, batch_size, device)
     times = alternated_times(agents, batch, warmup, repeats, device)
     rows = []
@@ -78,7 +78,7 @@ def time_update(algo: str, batch_size: int, task: str = "cheetah_run", repeats: 
         # one update every 2 agent steps at action repeat 2 = 4 frames per update (update-bound estimate)
         per_update = rc.train.update_every_steps * rc.env.action_repeat
         fps = per_update / seconds
-        rows.append({"agent": algo, "batch_size": batch_size, "path": path, "update_seconds": round(seconds, 4),
+        rows.append({"agent": agent, "batch_size": batch_size, "path": path, "update_seconds": round(seconds, 4),
                      "frames_per_update": per_update, "fps_estimate": round(fps, 3), "repeats": repeats,
                      "warmup": warmup, "alternated": True,
                      "seconds_each": [round(t, 4) for t in times[path]]})

@@ -101,10 +101,10 @@ def kernel_table(fn: Any, flops_by_op: dict[str, int], top: int = TOP_KERNELS) -
     return rows
 
 
-def run_roofline(algo: str, batch_size: int, paths: tuple[str, ...], device: str = "cpu", repeats: int = 2,
+def run_roofline(agent: str, batch_size: int, paths: tuple[str, ...], device: str = "cpu", repeats: int = 2,
                  warmup: int = 1, task: str = "cheetah_run", peak_shape: tuple[int, int, int, int] = PEAK_SHAPE,
                  echo: Any = print) -> dict[str, Any]:
-    """The roofline of one (algo, batch) update on the plain path and each of ``paths``: FLOPs, seconds (the
+    """The roofline of one (agent, batch) update on the plain path and each of ``paths``: FLOPs, seconds (the
     paths alternated update by update, median), the achieved rate against the measured fp32 and bf16 peaks, and
     the kernel table per path."""
     import torch
@@ -113,8 +113,7 @@ def run_roofline(algo: str, batch_size: int, paths: tuple[str, ...], device: str
 
     agents = {}
     for path in ("plain", *paths):
-        agent, rc = compose_learner(algo, batch_size, task, device, PATH_FLAGS[path])
-        agents[path] = agent
+        agents[path], rc = compose_learner(agent, batch_size, task, device, PATH_FLAGS[path])
     batch = replay_batch(agents["plain"], rc, batch_size, device)
 
     def update(path: str) -> Any:
@@ -131,12 +130,12 @@ def run_roofline(algo: str, batch_size: int, paths: tuple[str, ...], device: str
         measured[path] = {"seconds": round(seconds, 4), "gflops_per_s": round(rate, 2), "conv_dtype": dtype,
                        "of_peak": round(rate / peaks[dtype]["gflops_per_s"], 4),
                        "kernels": kernel_table(update(path), per_op) if device == "cpu" else []}
-        echo(f"{algo} B{batch_size} {path}: {seconds:.3f} s/update, {rate:.1f} GFLOP/s = "
+        echo(f"{agent} B{batch_size} {path}: {seconds:.3f} s/update, {rate:.1f} GFLOP/s = "
              f"{measured[path]['of_peak']:.1%} of this process's {dtype} convolution peak "
              f"({peaks[dtype]['gflops_per_s']:.1f} GFLOP/s)")
-    echo(f"{algo} B{batch_size}: {flops / 1e9:.1f} GFLOP per update ({flops / batch_size / 1e9:.3f} per sample), "
+    echo(f"{agent} B{batch_size}: {flops / 1e9:.1f} GFLOP per update ({flops / batch_size / 1e9:.3f} per sample), "
          "counted by torch's FLOP counter")
-    return {"agent": algo, "batch_size": batch_size, "device": device, "threads": torch.get_num_threads(),
+    return {"agent": agent, "batch_size": batch_size, "device": device, "threads": torch.get_num_threads(),
             "flops": flops, "flops_per_sample": flops // batch_size,
             "flops_by_op": dict(sorted(per_op.items(), key=lambda kv: -kv[1])), "peaks": peaks, "paths": measured,
             "repeats": repeats, "warmup": warmup}

@@ -146,7 +146,7 @@ class RunCost:
     sweep: str
     run_dir: Path
     task: str
-    algo: str
+    agent: str  # agent.name
     batch_size: int
     path: str  # the speed-up path it trains with (repro/bench/results.py path_of)
     offline: bool
@@ -166,6 +166,11 @@ class RunCost:
     cores: int | None = None
 
     @property
+    def algo(self) -> str:
+        """The old name of :attr:`agent`, until repro_app/verify_cli.py reads ``agent``."""
+        return self.agent
+
+    @property
     def budget(self) -> int:
         """Its frames (online) or updates (offline) to train in all."""
         return self.updates if self.offline else self.frames
@@ -173,7 +178,7 @@ class RunCost:
     @property
     def setting(self) -> str:
         """What the bench times for this run, in words: agent, batch size and (when not plain) path."""
-        return f"{self.algo} B{self.batch_size}" + ("" if self.path == "plain" else f" {self.path}")
+        return f"{self.agent} B{self.batch_size}" + ("" if self.path == "plain" else f" {self.path}")
 
     @property
     def under_load(self) -> bool:
@@ -248,7 +253,7 @@ def bench_commands(costs: Iterable[RunCost], device: str, results: Path | None =
     batches: dict[bool, set[int]] = {False: set(), True: set()}
     paths: set[str] = set()
     for c in costs:
-        (offline if c.offline else online)[c.algo] = None
+        (offline if c.offline else online)[c.agent] = None
         batches[c.offline].add(c.batch_size)
         if not c.offline:
             paths.add(c.path)
@@ -304,14 +309,14 @@ def packing(device_bytes: int, host_bytes: int, device_memory: int | None, host_
 def price(cost: RunCost, bench: DeviceBench) -> None:
     """Set the run's FPS (or updates per second) from the bench, or say which bench command would time it."""
     if cost.offline:
-        entry = offline_entry(bench.offline, cost.algo, cost.batch_size)
+        entry = offline_entry(bench.offline, cost.agent, cost.batch_size)
         if entry is not None:
             cost.fps, cost.fps_source = 1.0 / entry.update_seconds, "offline update"
             cost.load, cost.cores = entry.load, entry.cores
         else:
             cost.missing = bench_for(cost, bench.device)
         return
-    found = rate(bench.online, cost.algo, cost.batch_size, cost.path, cost.frames_per_update)
+    found = rate(bench.online, cost.agent, cost.batch_size, cost.path, cost.frames_per_update)
     if found is None:
         cost.missing = bench_for(cost, bench.device)
         return

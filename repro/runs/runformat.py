@@ -130,11 +130,11 @@ def run_state(path: str | Path, budget: int | None = None) -> str:
 # The run directory is {runtime.results_root}/{experiment}/{agent.name}/{variant}/{task.name}/seed_{seed}.
 
 
-def run_path(results_root: str | Path, experiment: str, algo: str, variant: str, task: str, seed: int,
+def run_path(results_root: str | Path, experiment: str, agent: str, variant: str, task: str, seed: int,
              dataset: str | None = None) -> Path:
     """The run directory of these identity values (no timestamps: the same command finds the same folder).
     Offline runs (a ``dataset``) have one more component, ``{task}/{dataset_tag}/seed_{seed}``."""
-    task_dir = Path(results_root) / str(experiment) / str(algo) / str(variant) / str(task)
+    task_dir = Path(results_root) / str(experiment) / str(agent) / str(variant) / str(task)
     if dataset is not None:
         task_dir = task_dir / dataset_tag(dataset)
     return task_dir / f"seed_{seed}"
