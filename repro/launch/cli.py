@@ -210,8 +210,9 @@ class LaunchOptions:
 def launch_sweep(name: str, sel: Selection, options: LaunchOptions, dry_run: bool = False,
                  agents: Sequence[str] | None = None, variants: Sequence[str] | None = None) -> LaunchReport | None:
     """Expand sweep ``name`` with ``sel`` (only the runs of ``agents`` and ``variants``, when given), then print the
-    plan (``dry_run``: returns None) or launch it and print the launch's report. Bad input (a SweepError, a results
-    root it cannot write): one line, exit 2, before anything is written."""
+    plan (``dry_run``: returns None) or launch it and print the launch's report. Bad input (a UserError: the sweep, a
+    task, a --set, a results root it cannot write, a W&B mirror that cannot start): one line, exit 2, before anything is
+    written."""
     if options.warm_start and options.launcher == Launcher.slurm:
         fail("--warm-start is for the local launcher (a SLURM job starts its run on its node)")
     packing = _gpu_packing(options.gpus, options.runs_per_gpu, options.launcher, options.max_parallel,
