@@ -38,6 +38,7 @@ CI_SIZE = 0.95
 CHUNK_ELEMENTS = 4_000_000  # resampled values per chunk (~32 MB of float64, plus the same of indices)
 # 32-bit words per chunk of the several-bounds stream: its walk keeps about 15 bytes per word and bound
 MIXED_WORDS = 1_000_000
+DRAW_ELEMENTS = 250_000  # resampled values per group of draws in draw_intervals (about 2 MB: cached, faster)
 ESTIMATOR = ("analysis/bootstrap.py: rliable's stratified bootstrap and percentile interval as whole-array "
              "operations, equal to rliable's get_interval_estimates for the same random state")
 
@@ -331,29 +332,35 @@ def percentile_cis(values: np.ndarray, size: float = CI_SIZE) -> np.ndarray:
     return np.percentile(values, [100 * alpha, 100 * (1.0 - alpha)], axis=0)
 
 
-def mean_intervals_many(mats: np.ndarray, reps: int, seed: int, size: float = CI_SIZE) -> np.ndarray:
-    """The percentile CI of :data:`MEAN` of each of several (runs, tasks) matrices ``mats`` (sets, runs, tasks) with
-    the bootstrap indices :func:`interval_estimates` draws for one of them (they depend only on the shapes and the
-    random state, so they are drawn once), as one product: repetition r's mean is
-    sum_k,t counts[r, k, t] * x[k, t] / (runs * tasks), where counts[r, k, t] is how often run k was drawn for task t.
-    The sums run in another order than rliable's, so each bound may differ from :func:`interval_estimates` in its
-    last bits (at most the largest rounding of one repetition's mean: a percentile bound moves no more than the
-    values it interpolates): for a verdict that compares a bound with a number, a caller judges the sets where they
-    lie within a tie of each other by the exact interval. Returns (2, sets)."""
-    mats = np.ascontiguousarray(mats, dtype=float)
-    sets, runs, tasks = mats.shape
-    values = np.empty((sets, reps))
-    flat = mats.reshape(sets, runs * tasks).T  # (runs * tasks, sets)
+def draw_intervals(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, seed: int,
+                   size: float = CI_SIZE) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`interval_estimates` of every draw: ``arrays`` with a leading draws axis, each (draws, runs, tasks);
+    returns the points (draws, k) and the CIs (2, draws, k). One draw is :func:`interval_estimates` itself (its
+    cache); several resample every draw with the same indices (they depend only on the shapes and the random state,
+    so they are drawn once, :func:`index_chunks`) and compute the statistic over (draws x repetitions) at once, each
+    draw's values reduced as its own call reduces them: each draw's interval equals :func:`interval_estimates` of its
+    data bit for bit (tests/test_bootstrap.py)."""
+    mats = [np.ascontiguousarray(a, dtype=float) for a in arrays]
+    if any(a.ndim != 3 for a in mats):
+        raise ValueError("draw_intervals takes (draws x runs x tasks) arrays")
+    draws = mats[0].shape[0]
+    if draws == 1:
+        point, cis = interval_estimates(stat, [a[0] for a in mats], reps, seed, size)
+        return point[None], cis[:, None]
+    points = stat.vector(*mats)
+    values = np.empty((draws, reps, points.shape[1]))
+    flats = [a.reshape(draws, -1) for a in mats]
     done = 0
-    for (cell,) in index_chunks(MEAN, [mats[0]], reps, seed):  # (b, runs, tasks): each drawn value's place
-        b = cell.shape[0]
-        # counts[r, k * tasks + t]: how often run k was drawn for task t in repetition r
-        counts = np.zeros((b, runs * tasks))
-        np.add.at(counts, (np.arange(b)[:, None], cell.reshape(b, -1)), 1.0)
-        values[:, done:done + b] = (counts @ flat).T / (runs * tasks)
+    for cells in index_chunks(stat, [a[0] for a in mats], reps, seed):
+        b = cells[0].shape[0]
+        per_draw = b * sum(c[0].size for c in cells)
+        group = max(1, DRAW_ELEMENTS // max(1, per_draw))  # draws resampled at once (their values stay in cache)
+        for d in range(0, draws, group):
+            part = [f[d:d + group][:, c].reshape(-1, *c.shape[1:]) for f, c in zip(flats, cells)]
+            values[d:d + group, done:done + b] = stat.vector(*part).reshape(-1, b, points.shape[1])
         done += b
     alpha = (1.0 - size) / 2
-    return np.percentile(values, [100 * alpha, 100 * (1.0 - alpha)], axis=1)
+    return points, np.percentile(values, [100 * alpha, 100 * (1.0 - alpha)], axis=1)
 
 
 def _pairs(arrays: Sequence[np.ndarray]) -> int:

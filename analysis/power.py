@@ -6,12 +6,12 @@
   kind of cell is drawn). A baseline the claim reads from the paper itself (DreamerV3 and TD-MPC in Table 1, the
   published DrQ-v2 curves against which ``online_avg_gain_vs_published`` is read) is fixed, not drawn.
 
-* **Rule.** Each draw builds what the claim's check builds from runs (a ``means`` table of (seeds, mean) per
-  cell, score matrices, per-cell spreads, solved counts) and calls the claim's rule in analysis.claims (the
-  same function ``repro claims`` calls, with the same seed minimum and ``require``), so a cell with fewer
-  seeds than the claim's minimum is "not enough data". Rules whose verdict reads a point estimate run with
-  ``reps`` 0 (the point alone, the CI is only evidence); offline_average, whose verdict reads a bootstrap CI,
-  runs rliable's bootstrap in every draw (``Simulation.reps`` repetitions, fewer draws).
+* **Rule.** The claim's rule in analysis.claims (the function ``repro claims`` calls on the runs as one draw, with
+  the same seed minimum) judges every draw at once: it takes the cells with a leading draws axis, (draws, seeds)
+  per cell, and gives the verdict of each draw; a cell with fewer seeds than the claim's minimum is "not enough
+  data". Rules whose verdict reads a point estimate run with ``reps`` 0 (the point alone, the CI is only
+  evidence); offline_average, whose verdict reads a bootstrap CI, runs rliable's bootstrap in every draw
+  (``Simulation.reps`` repetitions, fewer draws; analysis.bootstrap.draw_intervals).
 
 * **Monte-Carlo error.** The power p over S draws has standard error sqrt(p (1 - p) / S); every draw comes
   from one NumPy Generator seeded from (seed, claim, seeds per cell), so a fixed ``seed`` gives the same table.
@@ -41,6 +41,7 @@ import pandas as pd
 from analysis import claims as cl
 from analysis.cells import Cells, CellSource, Key
 from analysis.claim_budget import ClaimBudget, load_budgets
+from analysis.claims import Draws, Judge
 from analysis.context import Context
 from analysis.load import Results
 from analysis.paper import PaperData
@@ -55,20 +56,19 @@ REPORT_SIMS, REPORT_MAX_SEEDS = 500, 20  # the report's section: fewer draws, a 
 # ---------------------------------------------------------------- simulated claims
 @dataclass
 class SimClaim:
-    """One claim as the simulation runs it: its cells, a ``judge(ctx, cells) -> (verdict, evidence)`` that
-    builds the check's input from one draw and calls the claim's rule, and the user's values per cell
-    (``observed(ctx)``, from the runs that reached the claim's budget)."""
+    """One claim as the simulation runs it: its cells, its rule ``judge(ctx, draws) -> Judgement`` (every draw's
+    verdict at once: analysis.claims.Judge), and the user's values per cell (``observed(ctx)``, from the runs that
+    reached the claim's budget)."""
 
     id: str
     spec: ClaimBudget
     cells: list[CellSource]
-    judge: Callable[[Context, Cells], tuple[str, str]]
+    judge: Judge
     observed: Callable[[Context], Cells] | None = None
     tasks: tuple[str, ...] = ()  # the tasks of its runs (what its seeds cost)
     sims: int | None = None  # draws (default: the caller's)
     reps: int = 0  # bootstrap repetitions the rule runs in each draw
     notes: list[str] = field(default_factory=list)
-    batch: cl.BatchJudge | None = None  # the verdicts of all draws at once (see analysis.claims.BatchJudge)
     # simulate()'s results by its arguments: the table asks for the same power more than once (at the claim's
     # minimum, and first in the search for 80%)
     memo: dict[Hashable, Power] = field(default_factory=dict, repr=False, compare=False)
@@ -89,7 +89,7 @@ def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = N
             notes.append(f"its verdict reads a bootstrap CI: rliable's bootstrap runs in every draw ({sim.reps} "
                          f"repetitions instead of {ctx.reps:,}; {sim.sims} draws)")
         out.append(SimClaim(spec.id, budget, sim.sources(ctx, float(budget.budget or 0)), sim.judge, sim.observed,
-                            sim.tasks, sim.sims, sim.reps, notes, sim.batch))
+                            sim.tasks, sim.sims, sim.reps, notes))
     return out
 
 
@@ -166,27 +166,20 @@ def _simulate(ctx: Context, claim: SimClaim, seeds: int, sims: int, seed: int, o
         new = cell.draw(rng, sims, max(0, seeds - len(have)) if cell.kind != "fixed" else 0)
         arrays[cell.key] = np.concatenate([np.broadcast_to(have, (sims, len(have))), new], axis=1) \
             if cell.kind != "fixed" else new
-    counts = {cl.SUPPORTED: 0, cl.REFUTED: 0, cl.NO_DATA: 0}
-    if arrays and all(a.shape[0] == sims and (a == a[:1]).all() for a in arrays.values()):
-        # every draw is the same data (no seed left to draw: the seeds done, or fixed cells): one verdict for all
-        counts[judge_draw(sctx, claim, {k: a[0] for k, a in arrays.items()})] = sims
-        return Power(seeds, counts[cl.SUPPORTED] / sims, counts[cl.REFUTED] / sims, sims)
-    batch = claim.batch(sctx, arrays) if claim.batch is not None and arrays else None
-    for i in range(sims):
-        verdict = batch[i] if batch is not None else ""
-        if not verdict:
-            verdict = judge_draw(sctx, claim, {k: a[i] for k, a in arrays.items()})
-        counts[verdict] += 1
-    return Power(seeds, counts[cl.SUPPORTED] / sims, counts[cl.REFUTED] / sims, sims)
+    if not arrays or all(a.shape[0] == sims and (a == a[:1]).all() for a in arrays.values()):
+        # every draw is the same data (no seed left to draw: the seeds done, or fixed cells): one draw judges all
+        verdicts = np.repeat(draw_verdicts(sctx, claim, {k: a[:1] for k, a in arrays.items()}), sims)
+    else:
+        verdicts = draw_verdicts(sctx, claim, arrays)
+    return Power(seeds, float(np.mean(verdicts == cl.SUPPORTED)), float(np.mean(verdicts == cl.REFUTED)), sims)
 
 
-def judge_draw(sctx: Context, claim: SimClaim, cells: Cells) -> str:
-    """The claim's verdict on one draw, by its rule."""
+def draw_verdicts(sctx: Context, claim: SimClaim, draws: Draws) -> np.ndarray:
+    """The claim's verdict in every draw, by its rule (not enough data in all of them where it raises so)."""
     try:
-        verdict, _ = claim.judge(sctx, cells)
+        return claim.judge(sctx, draws).verdicts
     except cl.NotEnoughData:
-        verdict = cl.NO_DATA
-    return verdict
+        return np.full(next(iter(draws.values())).shape[0] if draws else 1, cl.NO_DATA, dtype=object)
 
 
 def seeds_for(ctx: Context, claim: SimClaim, target: float = TARGET, sims: int = DEFAULT_SIMS, seed: int = 0,
@@ -312,7 +305,7 @@ def audit_limit(paper: PaperData, checks: Sequence[str]) -> str:
 
 def condition_row(ctx: Context, claim: SimClaim, row: PowerRow, sims: int, max_seeds: int) -> None:
     """Fill the conditioned columns of ``row`` from the user's runs at the claim's budget."""
-    cctx = cl._claim_context(ctx, claim.spec, claim.spec.budget, below=False)
+    cctx = cl.claim_context(ctx, claim.spec, claim.spec.budget, below=False)
     observed = {k: v for k, v in claim.observed(cctx).items() if k in {c.key for c in claim.cells}} \
         if claim.observed is not None else {}
     drawn = [c.key for c in claim.cells if c.kind != "fixed"]

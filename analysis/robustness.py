@@ -20,13 +20,26 @@ def seed_spread(df: pd.DataFrame, keys: tuple[str, ...] = ("task", "label")) -> 
 
 
 def cell_spread(values: np.ndarray) -> dict[str, float]:
-    """One cell's seeds: n, mean, std (ddof=1; NaN for one seed), min, max and broken seeds (below
-    :data:`BROKEN_FRACTION` of the cell's median)."""
+    """One cell's seeds: n, mean, std (ddof=1; NaN for one seed), min, max and broken seeds
+    (:func:`broken_seeds`)."""
     s = np.asarray(values, dtype=float)
-    med = float(np.median(s))
-    return {"n": len(s), "mean": float(s.mean()), "std": float(s.std(ddof=1)) if len(s) > 1 else float("nan"),
-            "min": float(s.min()), "max": float(s.max()),
-            "broken": int((s < BROKEN_FRACTION * med).sum()) if med > 0 else 0}
+    return {"n": len(s), "mean": float(s.mean()), "std": float(seed_std(s)), "min": float(s.min()),
+            "max": float(s.max()), "broken": int(broken_seeds(s))}
+
+
+def seed_std(values: np.ndarray) -> np.ndarray:
+    """The std over the seeds (the last axis; ddof=1) of each cell, NaN for one seed: ``values`` (..., seeds), e.g. a
+    claim's cell in every draw of the power simulation (draws, seeds), gives (...)."""
+    s = np.asarray(values, dtype=float)
+    return s.std(ddof=1, axis=-1) if s.shape[-1] > 1 else np.full(s.shape[:-1], np.nan)
+
+
+def broken_seeds(values: np.ndarray) -> np.ndarray:
+    """The broken seeds of each cell: those below :data:`BROKEN_FRACTION` of the median of its seeds (the last axis
+    of ``values``, (..., seeds)), none where that median is not positive; (...) counts."""
+    s = np.asarray(values, dtype=float)
+    med = np.median(s, axis=-1)
+    return np.where(med > 0, (s < BROKEN_FRACTION * med[..., None]).sum(axis=-1), 0)
 
 
 def solved_counts(curves_or_eval: pd.DataFrame, max_frame: float, threshold: float = SOLVED_RETURN,

@@ -226,6 +226,18 @@ def grand_mean_ci(matrix: np.ndarray, reps: int = DEFAULT_REPS, seed: int = DEFA
     return _interval(matrix, bs.MEAN, reps, seed)
 
 
+def grand_mean_cis(matrices: np.ndarray, reps: int = DEFAULT_REPS,
+                   seed: int = DEFAULT_SEED) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`grand_mean_ci` of every draw: ``matrices`` (draws, runs, tasks) gives the means, CI lows and CI highs,
+    each (draws,), each draw's equal to :func:`grand_mean_ci` of its matrix (``reps`` 0: the means, NaN CIs)."""
+    m = np.asarray(matrices, dtype=float)
+    if reps == 0:
+        means = bs.MEAN.vector(m)[:, 0]
+        return means, np.full(len(means), math.nan), np.full(len(means), math.nan)
+    points, cis = bs.draw_intervals(bs.MEAN, [m], reps, seed)
+    return points[:, 0], cis[0, :, 0], cis[1, :, 0]
+
+
 def difference_of_means(
     x: Sequence[float] | np.ndarray, y: Sequence[float] | np.ndarray, reps: int = DEFAULT_REPS,
     seed: int = DEFAULT_SEED,

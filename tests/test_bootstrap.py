@@ -108,19 +108,23 @@ def test_stats_api_equal_rliable(data):
     assert np.isnan(cis[2]).all()
 
 
-def test_mean_intervals_of_many_data_sets_are_rliables_within_rounding():
-    """The power simulation's offline_average CIs as one product: the same bootstrap indices as interval_estimates of
-    each data set (rliable's bit for bit), each bound within rounding (the claim's batch judge leaves a draw within
-    analysis.claims.TIE of its threshold to the rule)."""
+def test_intervals_of_every_draw_are_each_draws_own_bit_for_bit():
+    """The power simulation's CIs of every draw at once (bootstrap.draw_intervals: a rule's statistic with a leading
+    draws axis) are interval_estimates of each draw's data, bit for bit: the same indices, the same reductions, so a
+    claim's rule judges one draw (the runs) as it judges that draw among many; one task, several, a statistic of two
+    arrays, and one draw (interval_estimates itself)."""
     rng = np.random.default_rng(5)
-    for runs, tasks, sets, reps in ((1, 4, 3, 50), (6, 12, 40, 300), (13, 5, 7, 1001)):
-        mats = rng.normal(40.0, 30.0, size=(sets, runs, tasks))
-        fast = bs.mean_intervals_many(mats, reps, 11)
-        for i, m in enumerate(mats):
-            exact = bs.interval_estimates(bs.MEAN, [m], reps, 11)[1]
-            np.testing.assert_allclose(fast[:, i], exact[:, 0], rtol=1e-12, atol=1e-12)
-        if runs > 1:  # one run: nothing to draw
-            assert not np.allclose(bs.mean_intervals_many(mats, reps, 12), fast)  # the random state is used
+    cases = [(bs.MEAN, [(6, 12)]), (bs.MEAN, [(13, 5)]), (bs.MEAN, [(20, 1)]), (bs.MEAN, [(1, 4)]),
+             (bs.RATIO_OF_MEANS, [(6, 9), (4, 9)])]
+    for stat, shapes in cases:
+        for draws in (1, 7):
+            arrays = [rng.normal(40.0, 30.0, size=(draws, *shape)) for shape in shapes]
+            points, cis = bs.draw_intervals(stat, arrays, 301, 11)
+            for d in range(draws):
+                point, ci = bs.interval_estimates(stat, [a[d] for a in arrays], 301, 11)
+                assert np.array_equal(points[d], point) and np.array_equal(cis[:, d], ci), (stat.name, shapes, d)
+    means, lows, highs = stats.grand_mean_cis(rng.normal(size=(3, 6, 12)), 0, 1)  # no repetitions: the means alone
+    assert np.isfinite(means).all() and np.isnan(lows).all() and np.isnan(highs).all()
 
 
 def test_indices_are_drawn_once_per_shapes_and_reused_equal(monkeypatch: pytest.MonkeyPatch) -> None:

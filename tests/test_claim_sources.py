@@ -18,9 +18,10 @@ from analysis import audit, power
 from analysis import cells as cells_module
 from analysis import claims as cl
 from analysis.claim_budget import BUDGETS_CSV
+from analysis.claims import ablations, online
 from analysis.context import Context
 from analysis.load import Results
-from analysis.paper import PaperData
+from analysis.paper import DMC9, OFFLINE_TASKS, PaperData
 from analysis.paper_tex import header
 
 
@@ -28,24 +29,34 @@ def _ctx(paper: PaperData) -> Context:
     return Context(results=Results(Path("."), pd.DataFrame(), pd.DataFrame()), paper=paper, reps=200)
 
 
+def _draws(values: dict[tuple, np.ndarray]) -> cl.Draws:
+    """The runs' cells as the one draw a rule reads."""
+    return cl.one_draw(values)
+
+
 def test_offline_average_reads_table_3s_printed_averages_from_the_paper_data(tmp_path):
     packaged = PaperData()
     avg = packaged.offline_average
-    assert cl.offline_printed(_ctx(packaged)) == {
+    assert cl.offline_printed(packaged) == {
         m: float(avg.loc[avg["method"] == m, "average_normalized"].iloc[0]) for m in cl.OFFLINE_AVERAGED}
     # another copy of the paper data with other printed averages: the rule reads those
     root = tmp_path / "paper"
     shutil.copytree(packaged.root, root)
     edited = avg.assign(average_normalized=np.where(avg["method"] == "CQL", 10.0, avg["average_normalized"]))
     edited.to_csv(root / "offline_average.csv", index=False)
-    ctx = _ctx(PaperData(root))
-    assert cl.offline_printed(ctx)["CQL"] == 10.0
+    edited_paper = PaperData(root)
+    assert cl.offline_printed(edited_paper)["CQL"] == 10.0
     # every method's runs at its printed average: inside the CI; CQL's printed value moved to 10: outside
-    matrices = {m: np.full((3, 12), p) + np.linspace(-1, 1, 3)[:, None]
-                for m, p in cl.offline_printed(_ctx(packaged)).items()}
-    verdict, evidence = cl.offline_average_rule(ctx, matrices)
+    pairs = [(t, d) for t in OFFLINE_TASKS for d in ("medium", "medium-replay", "full-replay")]
+    cells = _draws({(t, d, m): np.full(3, p) + np.linspace(-1, 1, 3)
+                    for m, p in cl.offline_printed(packaged).items() for t, d in pairs})
+
+    def judge(paper: PaperData) -> cl.Judgement:
+        return cl.offline_average_rule(cells, cl.offline_printed(paper), min_seeds=3, budget="x", reps=200, seed=0)
+
+    verdict, evidence = judge(edited_paper).first
     assert verdict == cl.REFUTED and "vs 10.0 (outside)" in evidence
-    assert cl.offline_average_rule(_ctx(packaged), matrices)[0] == cl.SUPPORTED
+    assert judge(packaged).first[0] == cl.SUPPORTED
 
 
 def test_the_objectives_taco_is_compared_with_are_table_2s(tmp_path):
@@ -59,13 +70,15 @@ def test_the_objectives_taco_is_compared_with_are_table_2s(tmp_path):
     without_atc = PaperData(root)
     assert "ATC" not in without_atc.repr_others and "SPR" in without_atc.repr_others
     # TACO ahead of every objective but ATC on every task: refuted by Table 2 as packaged, supported without ATC
-    table = {}
+    cells = {}
     for t in cl.REPR_TASKS:
-        table[(t, "TACO")] = (3, 500.0)
+        cells[(t, "TACO")] = np.full(3, 500.0)
         for m in packaged.repr_others:
-            table[(t, m)] = (3, 600.0 if m == "ATC" else 400.0)
-    assert cl.vs_repr_rule(_ctx(packaged), table)[0] == cl.REFUTED
-    assert cl.vs_repr_rule(_ctx(without_atc), table)[0] == cl.SUPPORTED
+            cells[(t, m)] = np.full(3, 600.0 if m == "ATC" else 400.0)
+    spec = cl.SPEC_OF["vs_repr_objectives"].simulation
+    assert spec is not None
+    assert spec.judge(_ctx(packaged), _draws(cells)).first[0] == cl.REFUTED
+    assert spec.judge(_ctx(without_atc), _draws(cells)).first[0] == cl.SUPPORTED
     # T2's caption names the objectives of the table it reads
     from paper_figures.t2_repr_objectives import render
 
@@ -113,7 +126,8 @@ def test_every_claim_has_exactly_one_spec_that_is_simulated_or_says_why_not():
     paper = PaperData()
     ids = list(paper.claims["id"])
     judged = [s.claim_id for s in cl.SPECS if not s.reading_of]
-    assert judged == ids  # each claim of claims.csv once, in its order
+    assert sorted(judged) == sorted(ids) and len(set(judged)) == len(judged)  # each claim of claims.csv once
+    assert [s.id for s in cl.claim_specs(paper) if not s.reading_of] == ids  # listed in claims.csv's order
     assert len({s.id for s in cl.SPECS}) == len(cl.SPECS)
     assert all(s.reading_of in ids and s.note for s in cl.SPECS if s.reading_of)
     for s in cl.SPECS:
@@ -166,13 +180,18 @@ def test_the_printed_numbers_the_evidence_quotes_are_the_paper_datas(tmp_path):
     assert cl.speed_printed(PaperData(root)) == ("(paper 3.6, from its table 130/26 = 5.00)",
                                                  "(paper B256 94, B512 65, B1024 26)")
     # Table 1's ratio of 9-task means: 1.397 as packaged; TACO's means doubled in a copy, 2.794
-    x, y = np.full((3, 9), 500.0), np.full((3, 9), 400.0)
-    assert "Table 1 gives 1.397)" in cl.avg_gain_rule(_ctx(paper), x, y)[1]
+    cells = _gain_cells(500.0, 400.0)
+    assert "Table 1 gives 1.397)" in online._judge_gain(_ctx(paper), cells).evidence
     doubled = PaperData()
-    online = doubled.online
-    doubled.__dict__["online"] = online.assign(mean=np.where(online["method"] == "TACO", 2 * online["mean"],
-                                                             online["mean"]))
-    assert "Table 1 gives 2.794)" in cl.avg_gain_rule(_ctx(doubled), x, y)[1]
+    table1 = doubled.online
+    doubled.__dict__["online"] = table1.assign(mean=np.where(table1["method"] == "TACO", 2 * table1["mean"],
+                                                             table1["mean"]))
+    assert "Table 1 gives 2.794)" in online._judge_gain(_ctx(doubled), cells).evidence
+
+
+def _gain_cells(taco: float, drq: float, draws: int = 1) -> cl.Draws:
+    """online_avg_gain's cells, every seed of a method at one value, in ``draws`` draws."""
+    return {(t, m): np.full((draws, 3), v) for t in DMC9 for m, v in (("TACO", taco), ("DrQ-v2", drq))}
 
 
 # ---------------------------------------------------------------- the numbers of the paper's prose
@@ -213,13 +232,12 @@ def test_the_rules_and_cells_read_the_numbers_of_the_prose_from_the_paper_data(t
     assert cl.SPEC_OF["online_avg_gain"].rule_text(edited).startswith(
         "mean over the 9 tasks of TACO / DrQ-v2 >= 1.4 (about 1.5x, tolerance 0.1)")
     assert ">= 1.4; CI" in cl.SPEC_OF[cl.PUBLISHED_GAIN_ID].rule_text(edited)
-    x, y = np.full((3, 9), 540.0), np.full((3, 9), 400.0)
-    verdict, evidence = cl.avg_gain_rule(_ctx(edited), x, y)
+    verdict, evidence = online._judge_gain(_ctx(edited), _gain_cells(540.0, 400.0)).first
     assert verdict == cl.REFUTED and "paper: 1.5x" in evidence
-    assert cl.avg_gain_rule(_ctx(packaged), x, y)[0] == cl.SUPPORTED
-    draws = {(t, m): np.full((2, 3), v) for t in cl.DMC9 for m, v in (("TACO", 540.0), ("DrQ-v2", 400.0))}
-    assert list(cl._gain_batch(_ctx(edited), draws)) == [cl.REFUTED] * 2
-    assert list(cl._gain_batch(_ctx(packaged), draws)) == [cl.SUPPORTED] * 2
+    assert online._judge_gain(_ctx(packaged), _gain_cells(540.0, 400.0)).first[0] == cl.SUPPORTED
+    draws = _gain_cells(540.0, 400.0, draws=2)  # the power simulation's draws: the same rule, every draw at once
+    assert list(online._judge_gain(_ctx(edited), draws).verdicts) == [cl.REFUTED] * 2
+    assert list(online._judge_gain(_ctx(packaged), draws).verdicts) == [cl.SUPPORTED] * 2
     # speed: the ratio the rule and its evidence quote
     assert "within ±25% of 5," in cl.SPEC_OF["speed"].rule_text(edited)
     assert cl.speed_printed(edited)[0] == "(paper 5, from its table 130/35 = 3.71)"
@@ -300,18 +318,18 @@ def test_the_claims_evidence_reads_reacher_speeds_steps_and_the_action_represent
                                       ("no_action_repr_vs_drqv2", "reacher_hard_percent"): 40.0})
     papers = (PaperData(), edited)
     # each claim's check at its budget, as evaluate_claims runs it
-    speed = [cl._reacher_speed(Context(results=results, paper=p, reps=50, budget=frames)) for p in papers]
+    speed = [online._reacher_speed(Context(results=results, paper=p, reps=50, budget=frames)) for p in papers]
     assert speed == [(cl.SUPPORTED, "target 902: TACO at 1.00M, DrQ-v2 1.50M (paper: 0.75M vs 1.5M)"),
                      (cl.SUPPORTED, "target 902: TACO at 1.00M, DrQ-v2 1.50M (paper: 0.5M vs 2M)")]
     assert cl.SPEC_OF["reacher_speed"].rule_text(edited) == (
         "on reacher_hard, with curves cut at the budget (1.5M) and target = 95% of TACO's best mean-curve value: TACO "
         "reaches it within 2/3 of the budget (1.0M frames) and DrQ-v2 needs >= 1.5x as many frames (or never does)")
     at_1m = [Context(results=results, paper=p, reps=50, budget=1_000_000) for p in papers]
-    gain = [cl._action_repr_gain(c) for c in at_1m]
+    gain = [ablations._action_repr_gain(c) for c in at_1m]
     assert [v for v, _ in gain] == [cl.SUPPORTED, cl.SUPPORTED]
     assert "(paper: +12.2% quadruped_run ... +70.4% hopper_hop)" in gain[0][1]
     assert "(paper: +12.2% quadruped_run ... +80% hopper_hop)" in gain[1][1]
-    no_repr = [cl._no_repr_vs_drqv2(c) for c in at_1m]
+    no_repr = [ablations._no_repr_vs_drqv2(c) for c in at_1m]
     assert no_repr[0][1].endswith("(paper: +18% quadruped_run, +51% reacher_hard)")
     assert no_repr[1][1].endswith("(paper: +18% quadruped_run, +40% reacher_hard)")
 
@@ -335,7 +353,7 @@ def test_the_action_repeat_claim_reads_the_best_k_of_appendix_b(tmp_path):
                           variant=f"ar{ar}_K{k}", seed=seed, final=100.0 * k + seed, frames=1_000_000,
                           eval_every=500_000)  # K=5 best at every action repeat
     results = load_results(runs)
-    packaged_v, edited_v = (cl._action_repeat(Context(results=results, paper=p, reps=50, budget=1_000_000))
+    packaged_v, edited_v = (ablations._action_repeat(Context(results=results, paper=p, reps=50, budget=1_000_000))
                             for p in (packaged, edited))
     assert packaged_v == (cl.REFUTED, "best K: AR1: K=5, AR2: K=5, AR4: K=5 (paper: AR1 K=5, AR2 K=3, AR4 K=1)")
     assert edited_v == (cl.SUPPORTED, "best K: AR1: K=5, AR2: K=5, AR4: K=5 (paper: AR1 K=5, AR2 K=5, AR4 K=5)")

@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 import repro.launch.slurm  # noqa: F401, I001
 from analysis import claims as cl
 from analysis import power
-from analysis.cells import CellSource, means_table
+from analysis.cells import CellSource
 from analysis.claim_budget import ClaimBudget
 from analysis.context import Context
 from analysis.load import Results
@@ -42,7 +42,7 @@ def _pairs_claim(effects: list[tuple[float, float, float, float]]) -> power.SimC
         cells += [CellSource((f"t{i}", "A"), "normal", ma, sa),
                   CellSource((f"t{i}", "B"), "normal", mb, sb)]
     pairs = [((f"t{i}", "A"), (f"t{i}", "B"), f"t{i}") for i in range(len(effects))]
-    return power.SimClaim("toy", SPEC, cells, lambda c, cells: cl.universal(c, means_table(cells), pairs))
+    return power.SimClaim("toy", SPEC, cells, lambda c, draws: cl.universal(draws, pairs, c.min_seeds, c.budget_text()))
 
 
 def _analytic(ma: float, sa: float, mb: float, sb: float, n: int) -> float:
@@ -215,15 +215,24 @@ def test_replay_bytes_without_building_the_buffer_equal_the_buffers_own():
     assert ReplayBuffer.bytes_for(500, (3, 84, 84), 6) == buf.nbytes()
 
 
-def test_each_claims_verdicts_of_all_draws_at_once_are_its_rules_draw_by_draw(ctx):
-    """analysis.power judges every draw at once (SimClaim.batch); each verdict it gives is the one the claim's own
-    rule gives that draw, below, at and above the claim's seed minimum, with the cells shifted so that verdicts
-    differ, with a cell's seeds kept from runs, and a tie is left to the rule."""
+def _verdicts(sctx: Context, claim: power.SimClaim, draws: dict) -> tuple[list[str], str]:
+    """The claim's rule on ``draws``: every draw's verdict and the evidence (of draw 0), or not enough data in all."""
+    try:
+        judged = claim.judge(sctx, draws)
+    except cl.NotEnoughData as exc:
+        return [cl.NO_DATA] * len(next(iter(draws.values()))), str(exc)
+    return list(judged.verdicts), judged.evidence
+
+
+def test_each_claims_rule_judges_one_draw_as_it_judges_that_draw_among_many(ctx):
+    """A simulated claim's rule is written once, over a leading draws axis: `repro claims` calls it on the runs as one
+    draw, the power simulation on all its draws at once. Each draw's verdict among many is the verdict of that draw
+    alone, and the evidence of many draws is that of draw 0 alone, below, at and above the claim's seed minimum, with
+    the cells shifted so that verdicts differ, with a cell's seeds kept from runs, and on a tie."""
     rng = np.random.default_rng(0)
     seen: set[str] = set()
     for claim in power.simulated_claims(ctx):
-        assert claim.batch is not None, claim.id
-        sims = 12 if claim.reps else 80
+        sims = 6 if claim.reps else 40
         for seeds in (1, 3, 6):
             sctx = power.sim_context(ctx, claim)
             draws = {c.key: c.draw(rng, sims, 0 if c.kind == "fixed" else seeds) for c in claim.cells}
@@ -233,22 +242,24 @@ def test_each_claims_verdicts_of_all_draws_at_once_are_its_rules_draw_by_draw(ct
             first = next(iter(shifted))
             kept = {**shifted, first: np.concatenate([np.broadcast_to(shifted[first][:1, :1], (sims, 1)),
                                                       shifted[first][:, 1:]], axis=1)}
-            for cells in (draws, shifted, kept):
-                batch = claim.batch(sctx, cells)
-                assert len(batch) == sims
-                decided = [i for i in range(sims) if batch[i]]
-                assert len(decided) >= sims - 1, (claim.id, seeds)
-                for i in decided:
-                    assert batch[i] == power.judge_draw(sctx, claim, {k: a[i] for k, a in cells.items()}), \
-                        (claim.id, seeds, i)
-                seen |= set(batch)
+            tie = {k: (np.repeat(v[:, :1], v.shape[1], axis=1) if v.shape[1] else v) for k, v in draws.items()}
+            for cells in (draws, shifted, kept, tie):
+                verdicts, evidence = _verdicts(sctx, claim, cells)
+                assert len(verdicts) == sims
+                for i in range(sims):
+                    one, one_evidence = _verdicts(sctx, claim, {k: a[i:i + 1] for k, a in cells.items()})
+                    assert one == [verdicts[i]], (claim.id, seeds, i)
+                    if i == 0:
+                        assert one_evidence == evidence, (claim.id, seeds)
+                seen |= set(verdicts)
+            assert power.draw_verdicts(sctx, claim, draws).tolist() == _verdicts(sctx, claim, draws)[0]
     assert {cl.SUPPORTED, cl.REFUTED, cl.NO_DATA} <= seen
-    # a tie (TACO's mean equal to DrQ-v2's on every task) is not decided at once: the rule judges it
+    # a tie (TACO's mean equal to DrQ-v2's on every task) is no lead, in one draw as in many: refuted
     claim = next(c for c in power.simulated_claims(ctx) if c.id == "online_beats_drqv2_all")
     sctx = power.sim_context(ctx, claim)
     tie = {c.key: np.full((4, 3), 500.0) for c in claim.cells}
-    assert list(claim.batch(sctx, tie)) == [""] * 4
-    assert power.judge_draw(sctx, claim, {k: v[0] for k, v in tie.items()}) == cl.REFUTED
+    assert _verdicts(sctx, claim, tie)[0] == [cl.REFUTED] * 4
+    assert _verdicts(sctx, claim, {k: v[:1] for k, v in tie.items()})[0] == [cl.REFUTED]
 
 
 def test_power_given_the_runs_done_keeps_their_values(tmp_path):

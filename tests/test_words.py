@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -58,10 +59,9 @@ def test_a_tie_is_not_sooner(tmp_path):
 
 
 def test_a_tie_on_a_task_is_not_ahead_and_a_lead_shows_in_its_digits():
-    ctx = Context(results=Results(Path("."), pd.DataFrame(), pd.DataFrame()), reps=0, min_seeds=1)
-    table = {(t, m): (3, 500.0) for t in cl.DMC9 for m in ("TACO", "DrQ-v2")}
-    table[("hopper_hop", "TACO")] = (3, 500.04)
-    verdict, evidence = cl.beats_drqv2_rule(ctx, table)
+    cells = {(t, m): np.full(3, 500.0) for t in DMC9 for m in ("TACO", "DrQ-v2")}
+    cells[("hopper_hop", "TACO")] = np.full(3, 500.04)
+    verdict, evidence = cl.beats_drqv2_rule(cl.one_draw(cells), min_seeds=1, budget="1M frames").first
     assert verdict == cl.REFUTED and "walker_run: 500.0 vs 500.0 (tie)" in evidence
     assert "hopper_hop: 500.04 vs 500.00" in evidence and "fails on quadruped_run" in evidence
 

@@ -1,7 +1,8 @@
-"""What every claim shares: the verdicts, a claim's spec (:class:`ClaimSpec`, :class:`Simulation`), the numbers a
-verdict prints, the means of the runs per cell, and the budget rule by which each claim is read (its own budget and
-seed minimum, an indicative reading below them). The claims themselves are in the family modules
-(analysis/claims/online.py, offline.py, ablations.py); analysis/claims/verdicts.py lists and judges them."""
+"""What every claim shares: the verdicts, a claim's spec (:class:`ClaimSpec`, :class:`Simulation`), what a rule
+takes and gives (:data:`Draws`, :class:`Judgement`), the numbers a verdict prints, the means of the runs per cell, and
+the budget rule by which each claim is read (its own budget and seed minimum, an indicative reading below them). The
+claims themselves are in the family modules (analysis/claims/online.py, offline.py, ablations.py), the helpers of
+rules over draws in analysis/claims/draws.py; analysis/claims/verdicts.py lists and judges them."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from analysis import comparable, select
-from analysis.cells import Cells, CellSource, Key
+from analysis.cells import Cells, CellSource, Key, means_table, observed_cells
 from analysis.claim_budget import ClaimBudget, claim_hint, claim_runs, frames_text, reach, seed_counts
 from analysis.context import Context
 from analysis.paper import PaperData
@@ -42,7 +43,7 @@ class Verdict:
 
 
 class NotEnoughData(Exception):
-    """Raised by a check when the cells it needs are missing or have too few seeds."""
+    """Raised by a check or a rule when the cells it needs are missing or have too few seeds."""
 
 
 Check = Callable[[Context], tuple[str, str]]  # a claim's check on the runs: (verdict, evidence)
@@ -57,31 +58,49 @@ def paper_text(text: PaperText, paper: PaperData) -> str:
     return text(paper) if callable(text) else text
 
 
-Draws = dict[Key, np.ndarray]  # every draw of the power simulation: cell -> (draws x its seeds)
+# A claim's cells with a leading draws axis: cell -> (draws, seeds) values, the same seeds in every draw. The user's
+# runs are one draw (analysis.claims.draws.one_draw); the power simulation's, thousands.
+Draws = dict[Key, np.ndarray]
 
 
-# A claim's verdict in every draw at once, as its ``judge`` gives it draw by draw: an object array of verdicts,
-# "" where a value the verdict compares lies within :data:`TIE` of its threshold (there the draw is judged one by
-# one, so that a difference in the last bits of a whole-array sum cannot change a verdict).
-BatchJudge = Callable[[Context, Draws], np.ndarray]
+@dataclass(frozen=True)
+class Judgement:
+    """What a claim's rule gives on :data:`Draws`: the verdict of every draw (supported, refuted, or not enough data
+    where that depends on the draw), and the evidence of draw 0 (its numbers, or why it is not enough data)."""
+
+    verdicts: np.ndarray  # (draws,) of SUPPORTED / REFUTED / NO_DATA
+    evidence: str
+
+    @property
+    def first(self) -> tuple[str, str]:
+        """Draw 0 as a check gives it: (verdict, evidence); :class:`NotEnoughData` with the evidence where it is not
+        enough data."""
+        verdict = str(self.verdicts[0])
+        if verdict == NO_DATA:
+            raise NotEnoughData(self.evidence)
+        return verdict, self.evidence
+
+
+# A claim's rule given the numbers it reads from a context (the paper's, the claim's seed minimum and budget, the
+# bootstrap of its CIs): what `repro claims` calls on the runs as one draw and the power simulation on all its draws.
+Judge = Callable[[Context, Draws], Judgement]
 
 
 @dataclass(frozen=True)
 class Simulation:
     """How the power simulation (analysis/power.py) runs a claim: ``sources(ctx, budget)`` the claim's cells with
-    where the paper gives each (analysis/cells.py), ``judge(ctx, cells)`` building the check's input from one draw
-    and calling the claim's rule (the function its check calls), ``observed(ctx)`` the same cells from the user's
+    where the paper gives each (analysis/cells.py), ``judge(ctx, draws)`` the claim's rule on every draw at once
+    (:data:`Judge`: the one its check calls on the runs as one draw), ``observed(ctx)`` the same cells from the user's
     runs (None: not conditioned on runs), ``tasks`` those of its runs (what its seeds cost), ``sims`` the draws if
     fewer than the caller's, ``reps`` the bootstrap repetitions the rule runs in every draw (0: none)."""
 
     sources: Callable[[Context, float], list[CellSource]]
-    judge: Callable[[Context, Cells], tuple[str, str]]
+    judge: Judge
     observed: Callable[[Context], Cells] | None
     tasks: tuple[str, ...]
     sims: int | None = None
     reps: int = 0
     notes: tuple[PaperText, ...] = ()
-    batch: BatchJudge | None = None  # ``judge`` on every draw at once (:data:`BatchJudge`); None: draw by draw
 
     def notes_text(self, paper: PaperData) -> list[str]:
         """``notes`` as shown for ``paper`` (:func:`paper_text`)."""
@@ -120,14 +139,8 @@ class ClaimSpec:
 
 
 def means(df: pd.DataFrame, keys: Sequence[str], value: str = "score") -> dict[tuple, tuple[int, float]]:
-    """(n, mean) per key over the runs that reached the budget."""
-    out: dict[tuple, tuple[int, float]] = {}
-    if df.empty:
-        return out
-    ok = df[df["reached"].astype(bool) & df[value].notna()]
-    for key, rows in ok.groupby(list(keys)):
-        out[key if isinstance(key, tuple) else (key,)] = (len(rows), float(rows[value].mean()))
-    return out
+    """(n, mean) per key over the runs that reached the budget: the means of their cells (analysis.cells)."""
+    return means_table(observed_cells(df, keys, value))
 
 
 def get(ctx: Context, table: dict[tuple, tuple[int, float]], *key) -> float | None:
@@ -185,26 +198,6 @@ def frames_apart(frames: Sequence[float]) -> list[str]:
     return [f"{int(f):,} frames" if f == int(f) else f"{f:,.1f} frames" for f in frames]
 
 
-def universal(ctx: Context, table: dict, pairs: Sequence[tuple[tuple, tuple, str]]) -> tuple[str, str]:
-    """Check 'A > B' for every (A key, B key, name): refuted by any counterexample present, supported if all hold."""
-    fails, lines, missing = [], [], []
-    for a, b, name in pairs:
-        va, vb = get(ctx, table, *a), get(ctx, table, *b)
-        if va is None or vb is None:
-            missing.append(name)
-            continue
-        lines.append(f"{name}: {vs_text(va, vb, 1)}")
-        if not va > vb:
-            fails.append(name)
-    evidence = "; ".join(lines)
-    if fails:
-        return REFUTED, f"fails on {', '.join(fails)}. {evidence}"
-    if missing:
-        raise NotEnoughData(f"need >= {ctx.min_seeds} seeds that reached {ctx.budget_text()} for: {', '.join(missing)}"
-                            + (f". So far: {evidence}" if evidence else ""))
-    return SUPPORTED, evidence
-
-
 def labelled(df: pd.DataFrame) -> pd.DataFrame:
     return df.drop(columns=["method"], errors="ignore").rename(columns={"label": "method"}) if "label" in df else df
 
@@ -230,7 +223,7 @@ def gain_bar(paper: PaperData) -> float:
     return round(paper_gain(paper) - GAIN_TOLERANCE, 6)
 
 
-def _claim_context(ctx: Context, spec: ClaimBudget, budget: int | None, below: bool) -> Context:
+def claim_context(ctx: Context, spec: ClaimBudget, budget: int | None, below: bool) -> Context:
     """``ctx`` for one claim: the claim's budget and seed minimum (or, ``below``, an indicative reading)."""
     key = ("claim-context", spec.kind, budget, spec.min_seeds, ctx.min_seeds, below)
     if key not in ctx.cache:
@@ -243,7 +236,7 @@ def _claim_context(ctx: Context, spec: ClaimBudget, budget: int | None, below: b
     return ctx.cache[key]
 
 
-def _short_of_budget(ctx: Context, spec: ClaimBudget) -> str | None:
+def short_of_budget(ctx: Context, spec: ClaimBudget) -> str | None:
     """Why the claim's runs cannot carry a verdict at its budget, or None if they may."""
     if spec.kind == "none":
         return None
@@ -262,7 +255,7 @@ def _short_of_budget(ctx: Context, spec: ClaimBudget) -> str | None:
     return None
 
 
-def _judge(ctx: Context, fn: Check) -> tuple[str, str]:
+def judge_check(ctx: Context, fn: Check) -> tuple[str, str]:
     try:
         return fn(ctx)
     except NotEnoughData as exc:
@@ -280,7 +273,7 @@ def budget_words(paper: PaperData, claim: str, words: str) -> str:
     return words.format_map({n: f"{v:g}" for n, v in values.items()})
 
 
-def _indicative(ctx: Context, spec: ClaimBudget, fn: Check) -> tuple[str, str]:
+def indicative_reading(ctx: Context, spec: ClaimBudget, fn: Check) -> tuple[str, str]:
     """A reading at the frames every run of the claim reaches (the lowest last frame, capped at the
     claim's budget), one seed per cell allowed: (label, evidence), or ("", reason) if there is none."""
     runs = claim_runs(ctx.scores, spec, ctx.experiment_map, offline=spec.kind == "offline_updates")
@@ -293,7 +286,7 @@ def _indicative(ctx: Context, spec: ClaimBudget, fn: Check) -> tuple[str, str]:
         where = frames_text(budget)
     else:
         budget, where = None, "latest evaluations" if spec.kind == "offline_updates" else "measurements"
-    verdict, evidence = _judge(_claim_context(ctx, spec, budget, below=True), fn)
+    verdict, evidence = judge_check(claim_context(ctx, spec, budget, below=True), fn)
     if verdict == NO_DATA:
         return "", f"no indicative reading at {where}: {evidence}"
     words = budget_words(ctx.paper, spec.id, spec.holds if verdict == SUPPORTED else spec.fails)
@@ -301,17 +294,17 @@ def _indicative(ctx: Context, spec: ClaimBudget, fn: Check) -> tuple[str, str]:
     return label, f"indicative reading at {where}, below the claim's budget or seed count: {evidence}"
 
 
-def _reading(ctx: Context, spec: ClaimBudget, short: str | None, fn: Check) -> tuple[str, str, str]:
+def read_claim(ctx: Context, spec: ClaimBudget, short: str | None, fn: Check) -> tuple[str, str, str]:
     """(verdict, evidence, indicative label) of claim function ``fn`` under the budget rule: no data when the
     runs fall ``short`` of the claim's budget (with a labelled indicative reading on request), else judged."""
     if short is not None:
         verdict, evidence = NO_DATA, short
     else:
-        verdict, evidence = _judge(_claim_context(ctx, spec, spec.budget, below=False), fn)
+        verdict, evidence = judge_check(claim_context(ctx, spec, spec.budget, below=False), fn)
     evidence = f"at {spec.text()}: {evidence}"
     label = ""
     if verdict == NO_DATA and ctx.indicative:
-        label, extra = _indicative(ctx, spec, fn)
+        label, extra = indicative_reading(ctx, spec, fn)
         evidence = f"{evidence}. {extra}"
     return verdict, evidence, label
 

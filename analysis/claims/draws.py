@@ -1,4 +1,13 @@
-"""The claims' verdicts in every draw of the power simulation at once."""
+"""What a claim's rule is written with: cells over a leading draws axis (:data:`Draws`), judged all at once.
+
+A simulated claim's rule is one function of its cells as :data:`Draws` (cell -> (draws, seeds) values) and of the
+numbers it compares with (the paper's, its seed minimum and budget, the bootstrap of a CI); it returns a
+:class:`~analysis.claims.core.Judgement`, the verdict of every draw and the evidence of draw 0. `repro claims` calls
+it on the user's runs as one draw (:func:`one_draw`, :func:`judged`); the power simulation (analysis/power.py) on all
+its draws at once, so there is one rule and no second copy of it. Every draw has the same seeds per cell, so whether
+a cell has enough of them is decided once, before any value is read (:func:`require_cells`, :func:`enough`), and
+every statistic reduces over the seeds (the last axes), draw by draw, the same way for one draw as for many.
+"""
 
 from __future__ import annotations
 
@@ -6,65 +15,75 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from analysis.cells import Cells, Key, means_table
-from analysis.claims.core import NO_DATA, REFUTED, SUPPORTED, BatchJudge, Draws  # noqa: F401
+from analysis.cells import Cells, Key
+from analysis.claims.core import NO_DATA, REFUTED, SUPPORTED, Check, Draws, Judge, Judgement, NotEnoughData, vs_text
 from analysis.context import Context
 
-TIE = 1e-9  # relative distance from a threshold under which a draw is judged by ``judge`` itself
+Pair = tuple[Key, Key, str]  # 'A > B': (A's cell, B's cell, the comparison's name in the evidence)
 
 
-def _sims(draws: Draws) -> int:
-    return next(iter(draws.values())).shape[0]
+def one_draw(cells: Cells) -> Draws:
+    """The cells of the runs (cell -> values over its seeds) as the one draw a rule reads."""
+    return {k: np.asarray(v, dtype=float)[None, :] for k, v in cells.items()}
 
 
-def _enough(ctx: Context, draws: Draws, key: Key) -> bool:
-    """analysis.claims.get's test of a cell (its seeds are the same number in every draw)."""
-    return key in draws and draws[key].shape[1] > 0 and draws[key].shape[1] >= ctx.min_seeds
+def judged(cells: Callable[[Context], Cells], judge: Judge) -> Check:
+    """A simulated claim's check on the runs: its rule (``judge``) on the cells of the runs (``cells``), one draw."""
+    return lambda ctx: judge(ctx, one_draw(cells(ctx))).first
 
 
-def _near(a: np.ndarray, b: np.ndarray | float) -> np.ndarray:
-    """Where ``a`` and ``b`` are within :data:`TIE` of each other (relative)."""
-    return np.abs(a - b) <= TIE * (1.0 + np.abs(a) + np.abs(b))
+def n_draws(draws: Draws) -> int:
+    """How many draws ``draws`` holds (one when it has no cell)."""
+    return next(iter(draws.values())).shape[0] if draws else 1
 
 
-def _verdicts(sims: int, supported: np.ndarray | bool, otherwise: str, unsure: np.ndarray | bool) -> np.ndarray:
-    out = np.where(np.broadcast_to(supported, (sims,)), SUPPORTED, otherwise).astype(object)
-    out[np.broadcast_to(unsure, (sims,))] = ""
-    return out
+def enough(draws: Draws, key: Key, min_seeds: int) -> bool:
+    """Whether cell ``key`` has at least one seed and at least ``min_seeds`` (the same in every draw)."""
+    return key in draws and draws[key].shape[1] > 0 and draws[key].shape[1] >= min_seeds
 
 
-def _all(sims: int, verdict: str) -> np.ndarray:
-    return np.full(sims, verdict, dtype=object)
+def require_cells(draws: Draws, keys: Sequence[Key], min_seeds: int, budget: str) -> None:
+    """:class:`NotEnoughData` naming the cells of ``keys`` with fewer than ``min_seeds`` seeds that reached
+    ``budget`` (in words), the first six of them."""
+    missing = [k for k in keys if not enough(draws, k, min_seeds)]
+    if missing:
+        shown = ", ".join("/".join(str(p) for p in k) for k in missing[:6])
+        more = f" (+{len(missing) - 6} more)" if len(missing) > 6 else ""
+        raise NotEnoughData(f"need >= {min_seeds} seeds that reached {budget} for: {shown}{more}")
 
 
-def _stacked_draws(draws: Draws, keys: Sequence[Key]) -> np.ndarray:
-    """:func:`stacked` of every draw: (draws x seeds x cells)."""
+def stacked(draws: Draws, keys: Sequence[Key]) -> np.ndarray:
+    """A (draws, seeds, cells) array of ``keys``' cells, each cut to the fewest seeds among them: in every draw the
+    (seeds x cells) matrix analysis.stats.score_matrix builds from runs."""
     k = min(draws[key].shape[1] for key in keys)
-    return np.stack([draws[key][:, :k] for key in keys], axis=2)
+    return np.ascontiguousarray(np.stack([draws[key][:, :k] for key in keys], axis=2), dtype=float)
 
 
-def _on_table(rule: Callable[[Context, dict], tuple[str, str]]) -> Callable[[Context, Cells], tuple[str, str]]:
-    return lambda ctx, cells: rule(ctx, means_table(cells))
+def verdicts(supported: np.ndarray, otherwise: str = REFUTED) -> np.ndarray:
+    """Every draw's verdict: supported where ``supported``, else ``otherwise``."""
+    return np.where(supported, SUPPORTED, otherwise).astype(object)
 
 
-def universal_batch(pairs: Callable[[Context], Sequence[tuple[Key, Key, str]]]) -> BatchJudge:
-    """analysis.claims.universal over a means table, every draw at once: refuted where a pair present fails,
-    else not enough data where one is missing, else supported."""
-
-    def judge(ctx: Context, draws: Draws) -> np.ndarray:
-        sims = _sims(draws)
-        fail, unsure, missing = np.zeros(sims, bool), np.zeros(sims, bool), False
-        for a, b, _ in pairs(ctx):
-            if not (_enough(ctx, draws, a) and _enough(ctx, draws, b)):
-                missing = True
-                continue
-            va, vb = draws[a].mean(axis=1), draws[b].mean(axis=1)
-            fail |= ~(va > vb)
-            unsure |= _near(va, vb)
-        out = np.where(fail, REFUTED, NO_DATA if missing else SUPPORTED).astype(object)
-        out[unsure] = ""
-        return out
-
-    return judge
-
-
+def universal(draws: Draws, pairs: Sequence[Pair], min_seeds: int, budget: str) -> Judgement:
+    """'A > B' for every pair, on the means over the seeds: in each draw refuted by any counterexample among the pairs
+    whose cells both have ``min_seeds`` seeds, else not enough data where a pair lacks them, else supported."""
+    sims = n_draws(draws)
+    fail = np.zeros(sims, dtype=bool)
+    lines, fails, missing = [], [], []
+    for a, b, name in pairs:
+        if not (enough(draws, a, min_seeds) and enough(draws, b, min_seeds)):
+            missing.append(name)
+            continue
+        va, vb = draws[a].mean(axis=1), draws[b].mean(axis=1)
+        lost = ~(va > vb)
+        fail |= lost
+        lines.append(f"{name}: {vs_text(va[0], vb[0], 1)}")
+        if lost[0]:
+            fails.append(name)
+    evidence = "; ".join(lines)
+    if fails:
+        evidence = f"fails on {', '.join(fails)}. {evidence}"
+    elif missing:
+        evidence = (f"need >= {min_seeds} seeds that reached {budget} for: {', '.join(missing)}"
+                    + (f". So far: {evidence}" if evidence else ""))
+    return Judgement(np.where(fail, REFUTED, NO_DATA if missing else SUPPORTED).astype(object), evidence)

@@ -1,27 +1,33 @@
-"""The claims of the offline experiments (Table 3)."""
+"""The claims of the offline experiments (Table 3): X+TACO against X on every task/dataset pair, and Table 3's printed
+averages inside the reproduced averages' CIs. Both are simulated: each is its cells from the runs, its rule over a
+leading draws axis (analysis/claims/draws.py) and a ``_judge_*`` giving the rule the numbers it reads."""
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
 
-from analysis import bootstrap as bs
-from analysis.cells import Cells, means_table, observed_cells, stacked
-from analysis.claims.core import NO_DATA, REFUTED, SUPPORTED, apart, means, require, universal
-from analysis.claims.draws import Draws, _all, _enough, _near, _sims, _stacked_draws, _verdicts
+from analysis.cells import Cells, CellSource, observed_cells, table3_cells
+from analysis.claims.core import ClaimSpec, Draws, Judgement, Simulation, apart
+from analysis.claims.draws import judged, n_draws, require_cells, stacked, universal, verdicts
 from analysis.context import Context
 from analysis.offline_tables import offline_runs
-from analysis.paper import OFFLINE_TASKS
-from analysis.stats import grand_mean_ci, score_matrix
+from analysis.paper import OFFLINE_TASKS, PaperData
+from analysis.stats import grand_mean_cis
 from repro.config.schema import DatasetKind
 
 OFFLINE_AVERAGED = ("TD3+BC+TACO", "TD3+BC", "CQL+TACO", "CQL")  # offline_average's methods: the +-TACO pairs
+PAIRS = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]  # Table 3's 12 task/dataset pairs
+CI_REPS = 300  # bootstrap repetitions per simulated draw where the verdict reads a CI (offline_average)
+CI_SIMS = 100  # simulated draws of such a claim (each runs four bootstraps)
 
 
-def offline_printed(ctx: Context) -> dict[str, float]:
+def offline_printed(paper: PaperData) -> dict[str, float]:
     """Table 3's printed average of each method of ``offline_average``, read from the packaged paper data
     (repro_data/paper/offline_average.csv), never repeated here."""
-    avg = ctx.paper.offline_average
+    avg = paper.offline_average
     printed = dict(zip(avg["method"], avg["average_normalized"].astype(float)))
     return {m: printed[m] for m in OFFLINE_AVERAGED}
 
@@ -38,90 +44,69 @@ def offline_scores(ctx: Context) -> pd.DataFrame:
     return df.assign(reached=(reached & offline).to_numpy(dtype=bool))
 
 
-def _offline_table(ctx: Context, value: str = "score") -> tuple[dict, pd.DataFrame]:
-    df = offline_runs(offline_scores(ctx), ctx.experiment_map)
-    return means(df, ["task", "dataset", "method"], value), df
+def _offline_cells(ctx: Context, value: str) -> Cells:
+    """The offline runs' cells (task, dataset, method) of ``value`` (returns: "score"; "normalized")."""
+    return observed_cells(offline_runs(offline_scores(ctx), ctx.experiment_map), ["task", "dataset", "method"], value)
 
 
-def _offline_gain(ctx: Context) -> tuple[str, str]:
-    table, _ = _offline_table(ctx)
-    return offline_gain_rule(ctx, table)
+def _returns(ctx: Context) -> Cells:
+    return _offline_cells(ctx, "score")
+
+
+def _normalized(ctx: Context) -> Cells:
+    return _offline_cells(ctx, "normalized")
 
 
 def offline_gain_pairs() -> list[tuple[tuple, tuple, str]]:
     """offline_gain's comparisons: X+TACO against X per task/dataset pair, X in TD3+BC and CQL."""
-    return [((t, d, f"{x}+TACO"), (t, d, x), f"{t}/{d} {x}") for t in OFFLINE_TASKS
-            for d in DatasetKind.values() for x in ("TD3+BC", "CQL")]
+    return [((t, d, f"{x}+TACO"), (t, d, x), f"{t}/{d} {x}") for t, d in PAIRS for x in ("TD3+BC", "CQL")]
 
 
-def offline_gain_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
-    """offline_gain on a (task, dataset, method) ``means`` table of returns."""
-    return universal(ctx, table, offline_gain_pairs())
+def offline_gain_rule(draws: Draws, *, min_seeds: int, budget: str) -> Judgement:
+    """offline_gain: X+TACO's mean > X's on each pair (:func:`offline_gain_pairs`, :func:`universal`)."""
+    return universal(draws, offline_gain_pairs(), min_seeds, budget)
 
 
-def _offline_average(ctx: Context) -> tuple[str, str]:
-    table, df = _offline_table(ctx, "normalized")
-    pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
-    require(ctx, table, [(t, d, m) for t, d in pairs for m in OFFLINE_AVERAGED])
-    matrices = {}
-    for m in OFFLINE_AVERAGED:
-        rows = df[(df["method"] == m) & df["reached"].astype(bool)]
-        rows = rows.assign(task=rows["task"] + "/" + rows["dataset"])
-        matrix, _ = score_matrix(rows, [f"{t}/{d}" for t, d in pairs], value="normalized")
-        assert matrix is not None  # require() saw runs on every pair
-        matrices[m] = matrix
-    return offline_average_rule(ctx, matrices)
+def _judge_gain(ctx: Context, draws: Draws) -> Judgement:
+    return offline_gain_rule(draws, min_seeds=ctx.min_seeds, budget=ctx.budget_text())
 
 
-def offline_average_rule(ctx: Context, matrices: dict[str, np.ndarray]) -> tuple[str, str]:
-    """offline_average on each printed method's (runs x 12 pairs) matrix of normalised scores: the verdict
-    reads the bootstrap CI (``ctx.reps`` repetitions)."""
-    ok, lines = True, []
-    for m, p in offline_printed(ctx).items():
-        mean, lo, hi = grand_mean_ci(matrices[m], ctx.reps, ctx.seed)
-        inside = lo <= p <= hi
+def offline_average_rule(draws: Draws, printed: Mapping[str, float], *, min_seeds: int, budget: str, reps: int,
+                         seed: int) -> Judgement:
+    """offline_average on (task, dataset, method) cells of normalised scores: in each draw, every method's printed
+    average (``printed``) lies inside the rliable CI (``reps`` repetitions, random state ``seed``) of its mean over the
+    12 pairs (each pair's cell cut to the fewest seeds among them, as analysis.stats.score_matrix cuts runs)."""
+    keys = {m: [(t, d, m) for t, d in PAIRS] for m in printed}
+    require_cells(draws, [(t, d, m) for t, d in PAIRS for m in printed], min_seeds, budget)
+    ok, lines = np.ones(n_draws(draws), dtype=bool), []
+    for m, p in printed.items():
+        mean, lo, hi = grand_mean_cis(stacked(draws, keys[m]), reps, seed)
+        inside = (lo <= p) & (p <= hi)
         ok &= inside
-        mean_s, lo_s, hi_s, _ = apart([mean, lo, hi, float(p)], 1)
-        lines.append(f"{m} {mean_s} [{lo_s}, {hi_s}] vs {p}{'' if inside else ' (outside)'}")
-    return (SUPPORTED if ok else REFUTED), "; ".join(lines)
+        mean_s, lo_s, hi_s, _ = apart([mean[0], lo[0], hi[0], float(p)], 1)
+        lines.append(f"{m} {mean_s} [{lo_s}, {hi_s}] vs {p}{'' if inside[0] else ' (outside)'}")
+    return Judgement(verdicts(ok), "; ".join(lines))
 
 
-CI_REPS = 300  # bootstrap repetitions per simulated draw where the verdict reads a CI (offline_average)
+def _judge_average(ctx: Context, draws: Draws) -> Judgement:
+    return offline_average_rule(draws, offline_printed(ctx.paper), min_seeds=ctx.min_seeds, budget=ctx.budget_text(),
+                                reps=ctx.reps, seed=ctx.seed)
 
 
-CI_SIMS = 100  # simulated draws of such a claim (each runs four bootstraps)
-
-
-def _judge_offline_average(ctx: Context, cells: Cells) -> tuple[str, str]:
-    pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
-    require(ctx, means_table(cells), [(t, d, m) for t, d in pairs for m in OFFLINE_AVERAGED])
-    return offline_average_rule(ctx, {m: stacked(cells, [(t, d, m) for t, d in pairs]) for m in OFFLINE_AVERAGED})
-
-
-def _offline_average_batch(ctx: Context, draws: Draws) -> np.ndarray:
-    """analysis.claims.offline_average_rule in every draw: each printed average inside its method's bootstrap CI
-    (the same bootstrap indices: they depend only on the shapes and the random state, so they are drawn once; the
-    means as one product, :func:`analysis.bootstrap.mean_intervals_many`, so a draw whose bound lies within
-    :data:`TIE` of the printed average is judged by the rule)."""
-    sims = _sims(draws)
-    pairs = [(t, d) for t in OFFLINE_TASKS for d in DatasetKind.values()]
-    keys = [(t, d, m) for t, d in pairs for m in OFFLINE_AVERAGED]
-    if not all(_enough(ctx, draws, k) for k in keys):
-        return _all(sims, NO_DATA)
-    ok, unsure = np.ones(sims, bool), np.zeros(sims, bool)
-    for m, p in offline_printed(ctx).items():
-        lo, hi = bs.mean_intervals_many(_stacked_draws(draws, [(t, d, m) for t, d in pairs]), ctx.reps, ctx.seed)
-        ok &= (lo <= p) & (p <= hi)
-        unsure |= _near(lo, p) | _near(hi, p)
-    return _verdicts(sims, ok, REFUTED, unsure)
-
-
-def _offline_observed(ctx: Context) -> Cells:
-    return observed_cells(offline_runs(offline_scores(ctx), ctx.experiment_map), ["task", "dataset", "method"],
-                          "normalized")
+def _sources(ctx: Context, budget: float) -> list[CellSource]:
+    return table3_cells(ctx, OFFLINE_AVERAGED)
 
 
 _OFFLINE_NOTE = ("the rule compares returns; the cells are Table 3's normalised scores (100 x return / the reference "
                  "return, increasing in the return), so every comparison agrees")
 
-
+SPECS: tuple[ClaimSpec, ...] = (
+    ClaimSpec("offline_gain", judged(_returns, _judge_gain),
+              "return of X+TACO > X for X in TD3+BC, CQL on each of the 12 task/dataset pairs",
+              Simulation(_sources, _judge_gain, _normalized, OFFLINE_TASKS, notes=(_OFFLINE_NOTE,))),
+    ClaimSpec("offline_average", judged(_normalized, _judge_average),
+              "each printed average of Table 3's average row (TD3+BC+TACO, TD3+BC, CQL+TACO, CQL; "
+              "repro_data/paper/offline_average.csv) lies in the 95% CI of the reproduced average normalised score "
+              "over the 12 pairs",
+              Simulation(_sources, _judge_average, _normalized, OFFLINE_TASKS, sims=CI_SIMS, reps=CI_REPS)),
+)

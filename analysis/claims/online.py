@@ -1,9 +1,15 @@
-"""The claims of the online experiments (Table 1, the learning curves, Meta-world, appendices F and G)."""
+"""The claims of the online experiments: Table 1's gain and wins (against DrQ-v2 as run and as published, and against
+the model-based baselines), the learning curves, Meta-world, and appendices F (seed robustness) and G (manipulator).
+
+A simulated claim is its cells from the runs, its rule over a leading draws axis (written once: analysis/claims/
+draws.py) and a ``_judge_*`` giving the rule the numbers it reads from the context; its spec (:data:`SPECS`) builds
+the check on the runs from the first two (:func:`~analysis.claims.draws.judged`) and the power simulation from the
+paper's cells.
+"""
 
 from __future__ import annotations
 
-import math
-from collections.abc import Sequence
+from collections.abc import Mapping
 from fractions import Fraction
 
 import numpy as np
@@ -11,17 +17,15 @@ import pandas as pd
 
 from analysis import bootstrap as bs
 from analysis import comparable, select
-from analysis.calibration import published_values
+from analysis.calibration import SOURCE_TEXT, published_values
 from analysis.cells import (
     Cells,
     CellSource,
     drqv2_cell,
-    means_table,
     observed_cells,
     published_fixed_cells,
     solve_upper_bound,
     solved_cells,
-    stacked,
     table1_cells,
 )
 from analysis.claim_budget import frames_text, load_budgets
@@ -30,65 +34,61 @@ from analysis.claims.core import (
     NO_DATA,
     REFUTED,
     SUPPORTED,
+    ClaimSpec,
+    Draws,
+    Judgement,
     NotEnoughData,
+    Simulation,
     apart,
     frames_apart,
     gain_bar,
-    get,
     labelled,
-    means,
     online_rows,
     paper_gain,
-    present,
-    require,
-    universal,
     vs_text,
 )
-from analysis.claims.draws import Draws, _all, _enough, _near, _sims, _stacked_draws, _verdicts
+from analysis.claims.draws import enough, judged, n_draws, one_draw, require_cells, stacked, universal, verdicts
 from analysis.context import Context
 from analysis.paper import DMC9, METAWORLD6, PaperData
-from analysis.robustness import BROKEN_FRACTION, cell_spread, seed_spread, solved_counts
-from analysis.stats import ratio_of_means, ratio_to_task_means, score_matrix
+from analysis.robustness import broken_seeds, seed_std, solved_counts
+from analysis.stats import ratio_of_means, ratio_to_task_means
 
 MODEL_BASED_WINS = 6  # online_beats_model_based: tasks of 9 on which TACO must beat both model-based baselines
-
-
 LESS_SPREAD_TASKS = 7  # seed_robustness: tasks of 9 on which TACO's std over seeds must be below DrQ-v2's
-
-
 SOLVED_FRACTION = 1 / 3  # manipulator: the fraction of TACO's seeds that must solve ("a third"; the paper: 3 of 6)
-
-
 MODEL_BASED = ("DreamerV3", "TD-MPC")
+TACO9 = [(t, "TACO") for t in DMC9]
+DRQ9 = [(t, "DrQ-v2") for t in DMC9]
+PUBLISHED_GAIN_ID = "online_avg_gain_vs_published"  # the reading of online_avg_gain against the published curves
 
 
+def _online_cells(ctx: Context) -> Cells:
+    """The main online experiment's cells (task, method) from the runs that reached the budget."""
+    return observed_cells(online_rows(ctx), ["task", "method"])
+
+
+# ---------------------------------------------------------------- Table 1: the gain over DrQ-v2
 def _gain_rule_text(paper: PaperData) -> str:
     return (f"mean over the 9 tasks of TACO / DrQ-v2 >= {gain_bar(paper):g} (about {paper_gain(paper):g}x, "
             f"tolerance {GAIN_TOLERANCE:g}); CI by rliable bootstrap")
 
 
-def _online_avg_gain(ctx: Context) -> tuple[str, str]:
-    df = online_rows(ctx)
-    table = means(df, ["task", "method"])
-    require(ctx, table, [(t, m) for t in DMC9 for m in ("TACO", "DrQ-v2")])
-    ok = df[df["reached"].astype(bool)]
-    x, _ = score_matrix(ok[ok["method"] == "TACO"], DMC9)
-    y, _ = score_matrix(ok[ok["method"] == "DrQ-v2"], DMC9)
-    assert x is not None and y is not None  # require() saw runs on every task
-    return avg_gain_rule(ctx, x, y)
+def avg_gain_rule(draws: Draws, *, bar: float, gain: float, table_gain: float, min_seeds: int, budget: str,
+                  reps: int = 0, seed: int = 0) -> Judgement:
+    """online_avg_gain: TACO's mean over its runs and the 9 tasks over DrQ-v2's >= ``bar`` (the paper's ``gain`` less
+    :data:`GAIN_TOLERANCE`) in each draw; the rliable CI of draw 0 (``reps`` repetitions, 0: none) is evidence, with
+    Table 1's own ratio ``table_gain``."""
+    require_cells(draws, TACO9 + DRQ9, min_seeds, budget)
+    x, y = stacked(draws, TACO9), stacked(draws, DRQ9)
+    r = bs.RATIO_OF_MEANS.vector(x, y)[:, 0]
+    _, lo, hi = ratio_of_means(x[0], y[0], reps, seed)
+    return Judgement(verdicts(r >= bar), f"TACO/DrQ-v2 = {apart([r[0], bar], 3)[0]} (95% CI [{lo:.3f}, {hi:.3f}]); "
+                                         f"paper: {gain:g}x (Table 1 gives {table_gain:.3f})")
 
 
-def avg_gain_rule(ctx: Context, x: np.ndarray, y: np.ndarray) -> tuple[str, str]:
-    """online_avg_gain on TACO's and DrQ-v2's (runs x 9 tasks) score matrices: the verdict reads the ratio of
-    means, the CI is evidence (``ctx.reps`` 0: no CI)."""
-    r, lo, hi = ratio_of_means(x, y, ctx.reps, ctx.seed)
-    verdict = SUPPORTED if r >= gain_bar(ctx.paper) else REFUTED
-    shown = apart([r, gain_bar(ctx.paper)], 3)[0]
-    return verdict, (f"TACO/DrQ-v2 = {shown} (95% CI [{lo:.3f}, {hi:.3f}]); paper: {paper_gain(ctx.paper):g}x "
-                     f"(Table 1 gives {ctx.paper.online_gain:.3f})")
-
-
-PUBLISHED_GAIN_ID = "online_avg_gain_vs_published"  # the reading of online_avg_gain against the published curves
+def _judge_gain(ctx: Context, draws: Draws) -> Judgement:
+    return avg_gain_rule(draws, bar=gain_bar(ctx.paper), gain=paper_gain(ctx.paper), table_gain=ctx.paper.online_gain,
+                         min_seeds=ctx.min_seeds, budget=ctx.budget_text(), reps=ctx.reps, seed=ctx.seed)
 
 
 def _published_gain_rule_text(paper: PaperData) -> str:
@@ -97,72 +97,81 @@ def _published_gain_rule_text(paper: PaperData) -> str:
             "over its own seeds")
 
 
-def _online_avg_gain_published(ctx: Context) -> tuple[str, str]:
-    """online_avg_gain with the DrQ-v2 authors' published curves as the baseline (no DrQ-v2 runs needed)."""
-    df = online_rows(ctx)
-    table = means(df, ["task", "method"])
-    require(ctx, table, [(t, "TACO") for t in DMC9])
-    ok = df[df["reached"].astype(bool)]
-    x, _ = score_matrix(ok[ok["method"] == "TACO"], DMC9)
-    assert x is not None  # require() saw TACO runs on every task
+def published_gain_rule(draws: Draws, *, bar: float, gain: float, table_gain: float, frame: float, min_seeds: int,
+                        budget: str, reps: int = 0, seed: int = 0) -> Judgement:
+    """online_avg_gain_vs_published: TACO's mean over its runs and the 9 tasks over the mean of the published DrQ-v2
+    task means (cells (task, "published"): the published values at ``frame``, each task over its own seeds) >= ``bar``
+    in each draw; the CI of draw 0 is evidence, as in :func:`avg_gain_rule`."""
+    require_cells(draws, TACO9, min_seeds, budget)
+    ys = [np.ascontiguousarray(draws.get((t, "published"), np.empty((n_draws(draws), 0))), dtype=float)
+          for t in DMC9]
+    if any(y.shape[1] < min_seeds for y in ys):
+        raise NotEnoughData(f"the published DrQ-v2 curves do not cover {budget} on every task")
+    x = stacked(draws, TACO9)
+    r = bs.RATIO_TO_TASK_MEANS.vector(x, *(y[:, :, None] for y in ys))[:, 0]
+    _, lo, hi = ratio_to_task_means(x[0], [y[0] for y in ys], reps, seed)
+    return Judgement(verdicts(r >= bar), (
+        f"TACO/DrQ-v2 (published curves at {frames_text(frame)}) = {apart([r[0], bar], 3)[0]} (95% CI [{lo:.3f}, "
+        f"{hi:.3f}]); published DrQ-v2 9-task mean {np.mean([np.mean(y[0]) for y in ys]):.1f}; paper: {gain:g}x "
+        f"(Table 1 gives {table_gain:.3f} with its own DrQ-v2)"))
+
+
+def _judge_published_gain(ctx: Context, draws: Draws) -> Judgement:
+    return published_gain_rule(draws, bar=gain_bar(ctx.paper), gain=paper_gain(ctx.paper),
+                               table_gain=ctx.paper.online_gain, frame=float(ctx.budget), min_seeds=ctx.min_seeds,
+                               budget=ctx.budget_text(), reps=ctx.reps, seed=ctx.seed)
+
+
+def _published_gain_cells(ctx: Context) -> Cells:
+    """The runs' cells and the published DrQ-v2 values at the budget (task, "published"), as they are."""
     frame = float(ctx.budget)
-    ys = [published_values(ctx.published, t, frame) for t in DMC9]
-    if any(len(y) < ctx.min_seeds for y in ys):
-        raise NotEnoughData(f"the published DrQ-v2 curves do not cover {ctx.budget_text()} on every task")
-    return published_gain_rule(ctx, x, ys)
+    return {**_online_cells(ctx), **{(t, "published"): published_values(ctx.published, t, frame) for t in DMC9}}
 
 
-def published_gain_rule(ctx: Context, x: np.ndarray, ys: Sequence[np.ndarray]) -> tuple[str, str]:
-    """online_avg_gain_vs_published on TACO's (runs x 9 tasks) matrix and the published DrQ-v2 values per task
-    at the budget; the verdict reads the ratio, the CI is evidence (``ctx.reps`` 0: no CI)."""
-    frame = float(ctx.budget)
-    r, lo, hi = ratio_to_task_means(x, ys, ctx.reps, ctx.seed)
-    verdict = SUPPORTED if r >= gain_bar(ctx.paper) else REFUTED
-    shown = apart([r, gain_bar(ctx.paper)], 3)[0]
-    return verdict, (f"TACO/DrQ-v2 (published curves at {frames_text(frame)}) = {shown} (95% CI [{lo:.3f}, {hi:.3f}]); "
-                     f"published DrQ-v2 9-task mean {np.mean([np.mean(y) for y in ys]):.1f}; paper: "
-                     f"{paper_gain(ctx.paper):g}x (Table 1 gives {ctx.paper.online_gain:.3f} with its own DrQ-v2)")
+# ---------------------------------------------------------------- Table 1: wins on every task, and on 6 of 9
+def beats_drqv2_rule(draws: Draws, *, min_seeds: int, budget: str) -> Judgement:
+    """online_beats_drqv2_all: TACO's mean > DrQ-v2's on each of the 9 tasks (:func:`universal`)."""
+    return universal(draws, [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9], min_seeds, budget)
 
 
-def _beats_drqv2(ctx: Context) -> tuple[str, str]:
-    return beats_drqv2_rule(ctx, means(online_rows(ctx), ["task", "method"]))
+def _judge_beats_drqv2(ctx: Context, draws: Draws) -> Judgement:
+    return beats_drqv2_rule(draws, min_seeds=ctx.min_seeds, budget=ctx.budget_text())
 
 
-def beats_drqv2_pairs() -> list[tuple[tuple, tuple, str]]:
-    """online_beats_drqv2_all's comparisons: (TACO cell, DrQ-v2 cell, name) per task."""
-    return [((t, "TACO"), (t, "DrQ-v2"), t) for t in DMC9]
-
-
-def beats_drqv2_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
-    """online_beats_drqv2_all on a (task, method) ``means`` table."""
-    return universal(ctx, table, beats_drqv2_pairs())
-
-
-def _beats_model_based(ctx: Context) -> tuple[str, str]:
-    return beats_model_based_rule(ctx, means(online_rows(ctx), ["task", "method"]))
-
-
-def beats_model_based_rule(ctx: Context, table: dict[tuple, tuple[int, float]]) -> tuple[str, str]:
-    """online_beats_model_based on a (task, method) ``means`` table (a baseline it lacks: Table 1's value)."""
-    require(ctx, table, [(t, "TACO") for t in DMC9])
-    wins, used_paper, lines = 0, False, []
+def model_based_rule(draws: Draws, printed: Mapping[tuple[str, str], float], *, min_seeds: int,
+                     budget: str) -> Judgement:
+    """online_beats_model_based: TACO's mean > both DreamerV3's and TD-MPC's on >= :data:`MODEL_BASED_WINS` of the 9
+    tasks; a baseline without enough seeds in ``draws`` is Table 1's mean (``printed``: (task, method) -> mean)."""
+    require_cells(draws, TACO9, min_seeds, budget)
+    sims = n_draws(draws)
+    wins, used_paper, lines = np.zeros(sims, dtype=int), False, []
     for t in DMC9:
         base = []
         for m in MODEL_BASED:
-            v = get(ctx, table, t, m)
-            if v is None:
-                printed = ctx.paper.online_value(t, m)
-                assert printed is not None  # Table 1 has both baselines on every DMC task
-                v, used_paper = printed[0], True
-            base.append(v)
-        taco = present(ctx, table, t, "TACO")
-        wins += taco > max(base)
-        lines.append(f"{t} {vs_text(taco, max(base), 0)}")
+            if enough(draws, (t, m), min_seeds):
+                base.append(draws[(t, m)].mean(axis=1))
+            else:
+                base.append(np.full(sims, printed[(t, m)]))
+                used_paper = True
+        best = np.max(np.stack(base), axis=0)
+        taco = draws[(t, "TACO")].mean(axis=1)
+        wins += taco > best
+        lines.append(f"{t} {vs_text(taco[0], best[0], 0)}")
     src = " (DreamerV3/TD-MPC values from the paper, not rerun)" if used_paper else ""
-    verdict = SUPPORTED if wins >= MODEL_BASED_WINS else REFUTED
-    return verdict, f"TACO beats both on {wins}/9{src}: " + "; ".join(lines)
+    return Judgement(verdicts(wins >= MODEL_BASED_WINS), f"TACO beats both on {wins[0]}/9{src}: " + "; ".join(lines))
 
 
+def _judge_model_based(ctx: Context, draws: Draws) -> Judgement:
+    printed = {}
+    for t in DMC9:
+        for m in MODEL_BASED:
+            value = ctx.paper.online_value(t, m)
+            assert value is not None  # Table 1 has both baselines on every DMC task
+            printed[(t, m)] = value[0]
+    return model_based_rule(draws, printed, min_seeds=ctx.min_seeds, budget=ctx.budget_text())
+
+
+# ---------------------------------------------------------------- learning curves (not simulated)
 def _mean_curves(ctx: Context, curves: pd.DataFrame, task: str) -> dict[str, pd.Series]:
     out = {}
     rows = curves[curves["task"] == task] if not curves.empty else curves
@@ -176,8 +185,6 @@ def _mean_curves(ctx: Context, curves: pd.DataFrame, task: str) -> dict[str, pd.
 # reacher_speed's bars are this project's reading of "about 0.75M steps while DrQ-v2 needs about 1.5M": TACO within
 # this fraction of the budget, DrQ-v2 needing at least this factor more frames (the paper's 2x less a margin).
 REACHER_TACO_WITHIN = 2 / 3
-
-
 REACHER_DRQ_FACTOR = 1.5
 
 
@@ -243,186 +250,76 @@ def _longer(ctx: Context) -> tuple[str, str]:
 
 
 def _metaworld(ctx: Context) -> tuple[str, str]:
-    table = means(labelled(select.metaworld(ctx.scores, ctx.experiment_map)), ["task", "method"])
-    bases = ["DrQ-v2"] + (["A-LIX"] if any(k[1] == "A-LIX" for k in table) else [])
-    verdict, ev = universal(ctx, table, [((t, "TACO"), (t, b), f"{t} vs {b}") for t in METAWORLD6 for b in bases])
+    cells = observed_cells(labelled(select.metaworld(ctx.scores, ctx.experiment_map)), ["task", "method"])
+    bases = ["DrQ-v2"] + (["A-LIX"] if any(k[1] == "A-LIX" for k in cells) else [])
+    pairs = [((t, "TACO"), (t, b), f"{t} vs {b}") for t in METAWORLD6 for b in bases]
+    verdict, ev = universal(one_draw(cells), pairs, ctx.min_seeds, ctx.budget_text()).first
     return verdict, ev + ("" if "A-LIX" in bases else " (A-LIX not run: checked against DrQ-v2 only)")
 
 
-def _seeds(ctx: Context) -> tuple[str, str]:
-    df = select.online_main(ctx.scores, ctx.experiment_map)
-    df = df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df
-    spread = seed_spread(df)
-    return seed_robustness_rule(ctx, spread.set_index(["task", "label"]).to_dict("index"))
-
-
-def seed_robustness_rule(ctx: Context, spread: dict[tuple, dict]) -> tuple[str, str]:
-    """seed_robustness on per-cell spreads ((task, label) -> analysis.robustness.cell_spread)."""
-    need = ctx.min_seeds
-    got = {k: v for k, v in spread.items() if v["n"] >= need}
+# ---------------------------------------------------------------- appendix F: seed robustness
+def seed_robustness_rule(draws: Draws, *, min_seeds: int) -> Judgement:
+    """seed_robustness on (task, label) cells: TACO's std over seeds below DrQ-v2's on >= :data:`LESS_SPREAD_TASKS`
+    of the 9 tasks, and at least one broken DrQ-v2 seed (analysis.robustness.broken_seeds) in the cells with
+    ``min_seeds`` seeds."""
+    got = {k: v for k, v in draws.items() if enough(draws, k, min_seeds)}
     tasks = [t for t in DMC9 if (t, "TACO") in got and (t, "DrQ-v2") in got]
     if len(tasks) < 9:
-        raise NotEnoughData(f"need >= {need} seeds of TACO and DrQ-v2 on all 9 tasks (have {len(tasks)})")
-    less = sum(got[(t, "TACO")]["std"] < got[(t, "DrQ-v2")]["std"] for t in tasks)
-    broken = int(sum(v["broken"] for k, v in got.items() if k[1] == "DrQ-v2"))
-    ok = less >= LESS_SPREAD_TASKS and broken >= 1
-    taco_broken = int(sum(v["broken"] for k, v in got.items() if k[1] == "TACO"))
-    return (SUPPORTED if ok else REFUTED), (f"TACO's std lower on {less}/9 tasks; DrQ-v2 broken seeds: {broken}; "
-                                            f"TACO broken seeds: {taco_broken}")
+        raise NotEnoughData(f"need >= {min_seeds} seeds of TACO and DrQ-v2 on all 9 tasks (have {len(tasks)})")
+    less = np.sum([seed_std(got[(t, "TACO")]) < seed_std(got[(t, "DrQ-v2")]) for t in tasks], axis=0)
+    broken = {m: sum((broken_seeds(v) for k, v in got.items() if k[1] == m), np.zeros(n_draws(draws), dtype=int))
+              for m in ("DrQ-v2", "TACO")}
+    return Judgement(verdicts((less >= LESS_SPREAD_TASKS) & (broken["DrQ-v2"] >= 1)),
+                     f"TACO's std lower on {less[0]}/9 tasks; DrQ-v2 broken seeds: {broken['DrQ-v2'][0]}; "
+                     f"TACO broken seeds: {broken['TACO'][0]}")
+
+
+def _judge_seeds(ctx: Context, draws: Draws) -> Judgement:
+    return seed_robustness_rule(draws, min_seeds=ctx.min_seeds)
+
+
+def _seeds_cells(ctx: Context) -> Cells:
+    df = select.online_main(ctx.scores, ctx.experiment_map)
+    return observed_cells(df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df, ["task", "label"])
+
+
+# ---------------------------------------------------------------- appendix G: manipulator
+def manipulator_rule(solved: Mapping[str, np.ndarray], runs: Mapping[str, int], *, last_frame: float, budget: float,
+                     budget_text: str, min_seeds: int) -> Judgement:
+    """manipulator on each label's solved seeds in every draw (``solved``: label -> (draws,) counts) of its ``runs``,
+    whose curves reach ``last_frame`` (the fewest among the labels): refuted where DrQ-v2 solves one; else, with
+    ``min_seeds`` runs of TACO and DrQ-v2, supported where TACO solves at least :data:`SOLVED_FRACTION` of its runs,
+    refuted where it does not and the runs reach the ``budget``, not enough data where they do not."""
+    sims = len(next(iter(solved.values()))) if solved else 1
+    drq_solves = solved["DrQ-v2"] > 0 if "DrQ-v2" in solved else np.zeros(sims, dtype=bool)
+    if "TACO" not in runs or "DrQ-v2" not in runs or min(runs.values()) < min_seeds:
+        out, evidence = np.full(sims, NO_DATA, dtype=object), "need TACO and DrQ-v2 runs on manipulator_bring_ball"
+    else:
+        reached = comparable.reached(last_frame, budget)
+        fraction = solved["TACO"] / runs["TACO"]
+        out = verdicts(fraction >= SOLVED_FRACTION, REFUTED if reached else NO_DATA)
+        evidence = f"TACO {int(solved['TACO'][0])}/{runs['TACO']}, DrQ-v2 0/{runs['DrQ-v2']} solved"
+        if out[0] == NO_DATA:
+            evidence += f"; runs reach only {frames_text(last_frame)} of {budget_text}"
+    out[drq_solves] = REFUTED
+    if drq_solves[0]:
+        evidence = f"DrQ-v2 solves {int(solved['DrQ-v2'][0])} seeds"
+    return Judgement(out, evidence)
 
 
 def _manipulator(ctx: Context) -> tuple[str, str]:
-    curves = select.manipulator(ctx.curves, ctx.experiment_map)
-    solved = solved_counts(curves, ctx.budget)
-    return manipulator_rule(ctx, solved.set_index("label").to_dict("index"))
+    counts = solved_counts(select.manipulator(ctx.curves, ctx.experiment_map), ctx.budget).set_index("label")
+    last = float(counts["last_frame"].min()) if len(counts) else 0.0
+    return manipulator_rule({m: np.array([float(n)]) for m, n in counts["solved"].items()},
+                            {m: int(n) for m, n in counts["runs"].items()}, last_frame=last,
+                            budget=float(ctx.budget), budget_text=ctx.budget_text(), min_seeds=ctx.min_seeds).first
 
 
-def manipulator_rule(ctx: Context, s: dict[str, dict]) -> tuple[str, str]:
-    """manipulator on solved counts per label (label -> runs, solved, last_frame; analysis.robustness)."""
-    if "DrQ-v2" in s and s["DrQ-v2"]["solved"] > 0:
-        return REFUTED, f"DrQ-v2 solves {int(s['DrQ-v2']['solved'])} seeds"
-    if "TACO" not in s or "DrQ-v2" not in s or min(v["runs"] for v in s.values()) < ctx.min_seeds:
-        raise NotEnoughData("need TACO and DrQ-v2 runs on manipulator_bring_ball")
-    taco_frac = s["TACO"]["solved"] / s["TACO"]["runs"]
-    ev = (f"TACO {int(s['TACO']['solved'])}/{int(s['TACO']['runs'])}, "
-          f"DrQ-v2 0/{int(s['DrQ-v2']['runs'])} solved")
-    if taco_frac >= SOLVED_FRACTION:
-        return SUPPORTED, ev
-    last = min(v["last_frame"] for v in s.values())
-    if comparable.reached(last, ctx.budget):
-        return REFUTED, ev
-    raise NotEnoughData(ev + f"; runs reach only {frames_text(last)} of {ctx.budget_text()}")
-
-
-def _online_sources(ctx: Context, budget: float) -> list[CellSource]:
-    """TACO's Table 1 cells and DrQ-v2's (its published per-seed values at ``budget``) on the nine tasks."""
-    return table1_cells(ctx, DMC9) + [drqv2_cell(ctx, t, budget, (t, "DrQ-v2")) for t in DMC9]
-
-
-def _published_sources(ctx: Context, budget: float) -> list[CellSource]:
-    return table1_cells(ctx, DMC9) + published_fixed_cells(ctx, DMC9, budget)
-
-
-def _manipulator_sources(ctx: Context, budget: float) -> list[CellSource]:
-    return solved_cells(ctx, "manipulator", {"TACO": "taco_solved", "DrQ-v2": "drqv2_solved"})
-
-
-def _judge_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
-    require(ctx, means_table(cells), [(t, m) for t in DMC9 for m in ("TACO", "DrQ-v2")])
-    return avg_gain_rule(ctx, stacked(cells, [(t, "TACO") for t in DMC9]),
-                         stacked(cells, [(t, "DrQ-v2") for t in DMC9]))
-
-
-def _judge_published_gain(ctx: Context, cells: Cells) -> tuple[str, str]:
-    require(ctx, means_table(cells), [(t, "TACO") for t in DMC9])
-    ys = [cells[(t, "published")] for t in DMC9]
-    if any(len(y) < ctx.min_seeds for y in ys):
-        raise NotEnoughData(f"the published DrQ-v2 curves do not cover {ctx.budget_text()} on every task")
-    return published_gain_rule(ctx, stacked(cells, [(t, "TACO") for t in DMC9]), ys)
-
-
-def _judge_seeds(ctx: Context, cells: Cells) -> tuple[str, str]:
-    return seed_robustness_rule(ctx, {k: cell_spread(v) for k, v in cells.items() if len(v)})
-
-
-def _judge_manipulator(ctx: Context, cells: Cells) -> tuple[str, str]:
-    return manipulator_rule(ctx, {k[0]: {"runs": len(v), "solved": int(v.sum()), "last_frame": float(ctx.budget)}
-                                  for k, v in cells.items()})
-
-
-def _gain_batch(ctx: Context, draws: Draws) -> np.ndarray:
-    """:func:`_judge_gain` (analysis.claims.avg_gain_rule) in every draw."""
-    sims = _sims(draws)
-    taco, drq = [(t, "TACO") for t in DMC9], [(t, "DrQ-v2") for t in DMC9]
-    if not all(_enough(ctx, draws, k) for k in taco + drq):
-        return _all(sims, NO_DATA)
-    r = bs.RATIO_OF_MEANS.vector(_stacked_draws(draws, taco), _stacked_draws(draws, drq))[:, 0]
-    bar = gain_bar(ctx.paper)
-    return _verdicts(sims, r >= bar, REFUTED, _near(r, bar))
-
-
-def _published_gain_batch(ctx: Context, draws: Draws) -> np.ndarray:
-    """:func:`_judge_published_gain` (analysis.claims.published_gain_rule) in every draw."""
-    sims = _sims(draws)
-    taco = [(t, "TACO") for t in DMC9]
-    if not all(_enough(ctx, draws, k) for k in taco):
-        return _all(sims, NO_DATA)
-    ys = [np.ascontiguousarray(draws[(t, "published")], dtype=float) for t in DMC9]
-    if any(y.shape[1] < ctx.min_seeds for y in ys):
-        return _all(sims, NO_DATA)
-    r = bs.RATIO_TO_TASK_MEANS.vector(_stacked_draws(draws, taco), *(y[:, :, None] for y in ys))[:, 0]
-    bar = gain_bar(ctx.paper)
-    return _verdicts(sims, r >= bar, REFUTED, _near(r, bar))
-
-
-def _model_based_batch(ctx: Context, draws: Draws) -> np.ndarray:
-    """analysis.claims.beats_model_based_rule in every draw (a baseline without cells: Table 1's value)."""
-    sims = _sims(draws)
-    if not all(_enough(ctx, draws, (t, "TACO")) for t in DMC9):
-        return _all(sims, NO_DATA)
-    wins, unsure = np.zeros(sims, int), np.zeros(sims, bool)
-    for t in DMC9:
-        base = []
-        for m in MODEL_BASED:
-            if _enough(ctx, draws, (t, m)):
-                base.append(draws[(t, m)].mean(axis=1))
-            else:
-                printed = ctx.paper.online_value(t, m)
-                assert printed is not None  # Table 1 has both baselines on every DMC task
-                base.append(np.full(sims, float(printed[0])))
-        best = np.max(np.stack(base), axis=0)
-        taco = draws[(t, "TACO")].mean(axis=1)
-        wins += taco > best
-        unsure |= _near(taco, best)
-    return _verdicts(sims, wins >= MODEL_BASED_WINS, REFUTED, unsure)
-
-
-def _seeds_batch(ctx: Context, draws: Draws) -> np.ndarray:
-    """analysis.claims.seed_robustness_rule on every draw's cell spreads (analysis.robustness.cell_spread)."""
-    sims = _sims(draws)
-    got = {k: v for k, v in draws.items() if v.shape[1] > 0 and v.shape[1] >= ctx.min_seeds}
-    tasks = [t for t in DMC9 if (t, "TACO") in got and (t, "DrQ-v2") in got]
-    if len(tasks) < 9:
-        return _all(sims, NO_DATA)
-    less, broken, unsure = np.zeros(sims, int), np.zeros(sims, int), np.zeros(sims, bool)
-    for t in tasks:
-        a, b = got[(t, "TACO")], got[(t, "DrQ-v2")]
-        sa = a.std(ddof=1, axis=1) if a.shape[1] > 1 else np.full(sims, math.nan)
-        sb = b.std(ddof=1, axis=1) if b.shape[1] > 1 else np.full(sims, math.nan)
-        less += sa < sb
-        unsure |= _near(sa, sb)
-    for k, v in got.items():
-        if k[1] != "DrQ-v2":
-            continue
-        med = np.median(v, axis=1)
-        half = BROKEN_FRACTION * med
-        broken += np.where(med > 0, (v < half[:, None]).sum(axis=1), 0)
-        unsure |= _near(med, 0.0) | _near(v, half[:, None]).any(axis=1)
-    return _verdicts(sims, (less >= LESS_SPREAD_TASKS) & (broken >= 1), REFUTED, unsure)
-
-
-def _manipulator_batch(ctx: Context, draws: Draws) -> np.ndarray:
-    """analysis.claims.manipulator_rule on every draw's solved counts (values 0 or 1: exact sums)."""
-    sims = _sims(draws)
-    runs = {k[0]: v.shape[1] for k, v in draws.items()}
-    solved = {k[0]: v.sum(axis=1) for k, v in draws.items()}
-    drq_solves = solved["DrQ-v2"] > 0 if "DrQ-v2" in solved else np.zeros(sims, bool)
-    if "TACO" not in runs or "DrQ-v2" not in runs or min(runs.values()) < ctx.min_seeds:
-        out = _all(sims, NO_DATA)
-    else:
-        # every cell's last frame is the budget in the simulation: short of a third of TACO's seeds is refuted
-        out = np.where(solved["TACO"] / runs["TACO"] >= SOLVED_FRACTION, SUPPORTED, REFUTED).astype(object)
-    out[drq_solves] = REFUTED
-    return out
-
-
-def _online_observed(ctx: Context) -> Cells:
-    return observed_cells(online_rows(ctx), ["task", "method"])
-
-
-def _seeds_observed(ctx: Context) -> Cells:
-    df = select.online_main(ctx.scores, ctx.experiment_map)
-    return observed_cells(df[df["label"].isin(["TACO", "DrQ-v2"])] if not df.empty else df, ["task", "label"])
+def _judge_manipulator(ctx: Context, draws: Draws) -> Judgement:
+    """The simulation's solved / not solved cells (label,): every run's curve reaches the budget."""
+    return manipulator_rule({k[0]: v.sum(axis=1) for k, v in draws.items()},
+                            {k[0]: v.shape[1] for k, v in draws.items()}, last_frame=float(ctx.budget),
+                            budget=float(ctx.budget), budget_text=ctx.budget_text(), min_seeds=ctx.min_seeds)
 
 
 def _manipulator_counts(paper: PaperData) -> tuple[float, float, float]:
@@ -443,3 +340,59 @@ def _manipulator_note(paper: PaperData) -> str:
             f"{solve_upper_bound(int(drq), int(seeds)):.0%}): optimistic")
 
 
+# ---------------------------------------------------------------- the claims' cells from the paper
+def _online_sources(ctx: Context, budget: float) -> list[CellSource]:
+    """TACO's Table 1 cells and DrQ-v2's (its published per-seed values at ``budget``) on the nine tasks."""
+    return table1_cells(ctx, DMC9) + [drqv2_cell(ctx, t, budget, (t, "DrQ-v2")) for t in DMC9]
+
+
+def _published_sources(ctx: Context, budget: float) -> list[CellSource]:
+    return table1_cells(ctx, DMC9) + published_fixed_cells(ctx, DMC9, budget)
+
+
+def _manipulator_sources(ctx: Context, budget: float) -> list[CellSource]:
+    return solved_cells(ctx, "manipulator", {"TACO": "taco_solved", "DrQ-v2": "drqv2_solved"})
+
+
+# ---------------------------------------------------------------- the claims
+SPECS: tuple[ClaimSpec, ...] = (
+    ClaimSpec("online_avg_gain", judged(_online_cells, _judge_gain), _gain_rule_text,
+              Simulation(_online_sources, _judge_gain, _online_cells, DMC9)),
+    ClaimSpec(PUBLISHED_GAIN_ID, judged(_published_gain_cells, _judge_published_gain), _published_gain_rule_text,
+              Simulation(_published_sources, _judge_published_gain, _online_cells, DMC9,
+                         notes=("DrQ-v2 is the published curves as published (fixed data, as `repro claims` reads "
+                                "them)",)),
+              reading_of="online_avg_gain",
+              note=f"read against DrQ-v2 as published by its authors, not against your DrQ-v2 runs: {SOURCE_TEXT}",
+              audit=("online_gain_vs_published",)),
+    ClaimSpec("online_beats_drqv2_all", judged(_online_cells, _judge_beats_drqv2),
+              "TACO mean > DrQ-v2 mean on each of the 9 tasks",
+              Simulation(_online_sources, _judge_beats_drqv2, _online_cells, DMC9)),
+    ClaimSpec("online_beats_model_based", judged(_online_cells, _judge_model_based),
+              f"TACO mean > both DreamerV3 and TD-MPC on >= {MODEL_BASED_WINS} of 9 tasks (baselines from runs, "
+              "else the paper's Table 1)",
+              Simulation(lambda ctx, budget: table1_cells(ctx, DMC9), _judge_model_based, _online_cells, DMC9,
+                         notes=("DreamerV3 and TD-MPC are Table 1's printed means (not rerun by any sweep), as the "
+                                "rule reads them",))),
+    ClaimSpec("reacher_speed", _reacher_speed, _reacher_rule_text,
+              not_simulated="its rule reads TACO's and DrQ-v2's mean learning curves up to 1.5M frames; the paper "
+                            "gives TACO's curve only as a figure (F4), with no per-seed or per-frame numbers"),
+    ClaimSpec("longer_training", _longer,
+              "TACO mean > DrQ-v2 mean at the last common frame (>= the budget, 2M) on quadruped_run, "
+              "hopper_hop, walker_run, cheetah_run",
+              not_simulated="its rule reads both methods at 2M frames; the paper gives those only as learning-curve "
+                            "figures (F4), with no numbers at 2M"),
+    ClaimSpec("metaworld", _metaworld,
+              "TACO mean success > each baseline's (DrQ-v2; A-LIX if run) on each of the 6 tasks at the budget",
+              not_simulated="the paper gives Meta-world success rates only as figures (F5), with no mean or std per "
+                            "task"),
+    ClaimSpec("seed_robustness", judged(_seeds_cells, _judge_seeds),
+              f"TACO's std over seeds < DrQ-v2's on >= {LESS_SPREAD_TASKS} of the 9 tasks, and DrQ-v2 has >= 1 broken "
+              "seed (below half its cell's median)",
+              Simulation(_online_sources, _judge_seeds, _seeds_cells, DMC9,
+                         notes=("a broken seed is one below half its cell's median: normal cells almost never have "
+                                "one, so DrQ-v2's published values carry the claim's second half",))),
+    ClaimSpec("manipulator", _manipulator, _manipulator_rule_text,
+              Simulation(_manipulator_sources, _judge_manipulator, None, ("manipulator_bring_ball",),
+                         notes=(_manipulator_note, "not conditioned on runs (the rule reads learning curves)"))),
+)
