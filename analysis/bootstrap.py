@@ -351,16 +351,39 @@ def draw_intervals(stat: Statistic, arrays: Sequence[np.ndarray], reps: int, see
     values = np.empty((draws, reps, points.shape[1]))
     flats = [a.reshape(draws, -1) for a in mats]
     done = 0
+    by_run = stat is MEAN and mats[0].shape[2] > 1
     for cells in index_chunks(stat, [a[0] for a in mats], reps, seed):
         b = cells[0].shape[0]
-        per_draw = b * sum(c[0].size for c in cells)
-        group = max(1, DRAW_ELEMENTS // max(1, per_draw))  # draws resampled at once (their values stay in cache)
+        # draws resampled at once: by run, a chunk's (reps, tasks) means of them all; else what stays in cache
+        per_draw = b * sum(c[0].size for c in cells) // (cells[0].shape[1] if by_run else 1)
+        group = max(1, (CHUNK_ELEMENTS if by_run else DRAW_ELEMENTS) // max(1, per_draw))
         for d in range(0, draws, group):
+            if by_run:
+                values[d:d + group, done:done + b, 0] = _mean_by_run(flats[0][d:d + group], cells[0])
+                continue
             part = [f[d:d + group][:, c].reshape(-1, *c.shape[1:]) for f, c in zip(flats, cells)]
             values[d:d + group, done:done + b] = stat.vector(*part).reshape(-1, b, points.shape[1])
         done += b
     alpha = (1.0 - size) / 2
     return points, np.percentile(values, [100 * alpha, 100 * (1.0 - alpha)], axis=1)
+
+
+def _mean_by_run(flat: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """:data:`MEAN` of every draw's resampled matrices: ``flat`` (draws, runs * tasks) each draw's matrix, ``cells``
+    (reps, runs, tasks) the drawn places (:func:`index_chunks`); (draws, reps). With several tasks NumPy's mean over
+    the runs (a middle axis) adds them in order, so adding the drawn runs one by one, every draw's value of a drawn
+    place at once, gives the same values without the reduction's short inner loops (tests/test_bootstrap.py: equal to
+    :func:`interval_estimates`); the mean over the tasks is then MEAN's call, on a (reps, tasks) matrix (NumPy sums a
+    3-D array's last axis otherwise)."""
+    idx = cells.astype(np.intp)
+    runs = idx.shape[1]
+    by_place = np.ascontiguousarray(flat.T)  # (runs * tasks, draws): a drawn place is one row of every draw's value
+    total = by_place[idx[:, 0, :]]  # (reps, tasks, draws): a new array
+    for i in range(1, runs):
+        total += by_place[idx[:, i, :]]
+    total /= runs
+    means = np.ascontiguousarray(total.transpose(2, 0, 1))  # (draws, reps, tasks)
+    return means.reshape(-1, idx.shape[2]).mean(axis=1).reshape(means.shape[:2])  # as MEAN's (reps, tasks) mean
 
 
 def _pairs(arrays: Sequence[np.ndarray]) -> int:
