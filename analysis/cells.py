@@ -1,6 +1,6 @@
 """A claim's cells: the values per cell (task x method, or task x dataset x method) that its rule reads, either from
 the user's runs (:func:`observed_cells`) or drawn from where the paper gives them (:class:`CellSource`), for the power
-simulation (analysis/power.py). The claims name their cells and their sources in their specs (analysis/claims.py);
+simulation (analysis/power.py). The claims name their cells and their sources in their specs (analysis/claims/);
 this module is what both sides build them from.
 
 Where a cell's truth comes from:
@@ -124,7 +124,7 @@ def _log_mass(a: float, b: float) -> float:
 
 # ---------------------------------------------------------------- cells from runs
 def means_table(cells: Cells) -> dict[Key, tuple[int, float]]:
-    """What analysis.claims.means builds from runs: (seeds, mean) per cell."""
+    """(seeds, mean) per cell: analysis.claims.means of the runs."""
     return {k: (len(v), float(np.mean(v))) for k, v in cells.items() if len(v)}
 
 

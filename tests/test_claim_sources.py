@@ -434,3 +434,26 @@ def test_f3_and_f9_take_the_prose_numbers_from_the_paper_data(tmp_path):
     assert "(quadruped_run 541/1.122, hopper_hop 261/1.8, reacher_hard 572 x 1.51)." in captions[1][0]
     assert "The paper's best K: 5 at action repeat 1, 3 at 2, 1 at 4." in captions[0][1]
     assert "The paper's best K: 5 at action repeat 1, 3 at 2, 3 at 4." in captions[1][1]
+
+
+def test_the_claim_of_docs_extending_is_one_rule_for_the_runs_and_the_simulation():
+    """docs/extending.md's "Add a claim" runs as written: its rule judges the runs as one draw (its check) and the
+    power simulation's draws at once, each draw as it judges that draw alone."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "extending.md").read_text(encoding="utf-8")
+    code = text.split("## Add a claim", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    namespace: dict = {}
+    exec(compile(code, "docs/extending.md", "exec"), namespace)
+    spec = namespace["SPEC"]
+    ctx = _ctx(PaperData())
+    with pytest.raises(cl.NotEnoughData, match="need >= 2 seeds that reached 1M frames for: quadruped_run/TACO"):
+        spec.check(ctx)  # no runs
+    rng = np.random.default_rng(0)
+    draws = {(t, "TACO"): rng.normal(550.0, 50.0, size=(50, 3)) for t in DMC9}
+    many = spec.simulation.judge(ctx, draws)
+    assert set(many.verdicts) == {cl.SUPPORTED, cl.REFUTED}
+    for i in range(50):
+        one = spec.simulation.judge(ctx, {k: v[i:i + 1] for k, v in draws.items()})
+        assert list(one.verdicts) == [many.verdicts[i]] and (i > 0 or one.evidence == many.evidence)
+    claim = power.SimClaim(spec.id, power.load_budgets()["online_avg_gain"], spec.simulation.sources(ctx, 1e6),
+                           spec.simulation.judge)
+    assert 0.0 < power.simulate(ctx, claim, 6, 200).supported < 1.0  # Table 1's TACO: a 9-task mean of 560

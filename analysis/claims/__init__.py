@@ -15,7 +15,7 @@ from the paper for the power simulation, or why it is not simulated); `repro cla
 (analysis/power.py) and the report list the claims through :func:`claim_specs`. A simulated claim's rule is written
 once, over a leading draws axis (analysis/claims/draws.py): the user's runs are its one-draw case, the power
 simulation its many-draw one. The claims are split by family (analysis/claims/online.py, offline.py, ablations.py);
-what they share is analysis/claims/core.py; analysis/claims/verdicts.py lists, judges and writes them.
+what they share is analysis/claims/core.py; analysis/claims/catalog.py lists, judges and writes them.
 """
 
 from analysis.claims.ablations import (
@@ -30,6 +30,15 @@ from analysis.claims.ablations import (
     speed_printed,
     vs_repr_pairs,
     vs_repr_rule,
+)
+from analysis.claims.catalog import (
+    SPEC_OF,
+    SPECS,
+    claim_specs,
+    claims_frame,
+    evaluate_claims,
+    verdict_counts,
+    write_claims,
 )
 from analysis.claims.core import (
     GAIN_TOLERANCE,
@@ -79,15 +88,6 @@ from analysis.claims.online import (
     published_gain_rule,
     reacher_printed,
     seed_robustness_rule,
-)
-from analysis.claims.verdicts import (
-    SPEC_OF,
-    SPECS,
-    claim_specs,
-    claims_frame,
-    evaluate_claims,
-    verdict_counts,
-    write_claims,
 )
 from repro.config.schema import DatasetKind  # the dataset kinds offline_gain and offline_average read
 

@@ -2,7 +2,7 @@
 takes and gives (:data:`Draws`, :class:`Judgement`), the numbers a verdict prints, the means of the runs per cell, and
 the budget rule by which each claim is read (its own budget and seed minimum, an indicative reading below them). The
 claims themselves are in the family modules (analysis/claims/online.py, offline.py, ablations.py), the helpers of
-rules over draws in analysis/claims/draws.py; analysis/claims/verdicts.py lists and judges them."""
+rules over draws in analysis/claims/draws.py; analysis/claims/catalog.py lists and judges them."""
 
 from __future__ import annotations
 
