@@ -1,6 +1,6 @@
 """Claims as specs (issue 36): each claim of claims.csv has exactly one spec (analysis.claims.SPECS), `repro claims`,
 `repro plan --claims` and the report list the same claims, and the paper's printed numbers a claim compares with or
-quotes are read from the packaged paper data (repro_data/paper/), not repeated as literals in analysis/claims.py."""
+quotes are read from the packaged paper data (repro_data/paper/), not repeated as literals in analysis/claims/."""
 
 from __future__ import annotations
 
