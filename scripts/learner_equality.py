@@ -36,6 +36,13 @@ SETUPS: dict[str, list[str]] = {
     "driml": ["agent=driml"],
     "reward": ["agent=taco", "agent.objectives.taco=0", "agent.objectives.curl=0"],
     "taco_amp": ["agent=taco", "agent.amp=true"],
+    "taco_no_action_encoder": ["agent=taco", "agent.action_encoder=false"],
+    "alix": ["agent=alix"],  # A-LIX: its encoder, critic and loss passed to the backbone as parts (issue 51)
+    "alix_variants": ["agent=alix", "agent.alix.input_shift=4", "agent.alix.critic_relu_gain=false",
+                      "agent.alix.fixed_batch=false"],
+    "alix_taco": ["agent=alix", "agent.action_encoder=true", "+agent.objectives.taco=1.0",
+                  "+agent.objectives.curl=1.0", "agent.K=3"],
+    "alix_amp": ["agent=alix", "agent.amp=true"],  # bf16 only where repro/agent/numerics.py allows it
     "bc": ["agent=bc"],
     "td3bc": ["agent=td3bc"],
     "td3bc_taco": ["agent=td3bc_taco"],
