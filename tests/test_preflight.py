@@ -20,6 +20,7 @@ from repro.launch.doctor import (
     WARN,
     DoctorInputs,
     cuda_check,
+    dataset_check,
     gpu_check,
     results_root_check,
     run_checks,
@@ -82,6 +83,22 @@ def test_a_job_cancelled_before_it_started_shows_as_cancelled(tmp_path):
     got = run_status(p.key, p.run_dir, tmp_path, sdir, {"12_0": "CANCELLED"})
     assert got.status == "cancelled" and "before it started" in got.detail
     assert run_status(p.key, p.run_dir, tmp_path, sdir, {"12_0": "FAILED"}).status == "failed"
+
+
+def test_dataset_check_hashes_every_episode_file_as_the_dataset_reader_does(tmp_path):
+    """The doctor's streamed sha256 of each episode file is the one the manifest records (the dataset module's
+    episode_digest): an intact dataset passes with its file count; one flipped byte in the third file fails naming
+    that file and no other."""
+    folder = write_dataset(tmp_path / "medium", task="cheetah_run", action_dim=6)
+    files = sorted((folder / "episodes").glob("*.npz"))
+    ok = dataset_check("medium", folder)
+    assert ok.status == OK and f": {len(files)} episode files match their sha256" in ok.detail, ok
+    raw = bytearray(files[2].read_bytes())
+    raw[len(raw) // 2] ^= 0x01
+    files[2].write_bytes(bytes(raw))
+    bad = dataset_check("medium", folder)
+    assert bad.status == FAIL and f"{files[2].name}: sha256 differs from the manifest" in bad.detail, bad
+    assert "more)" not in bad.detail, bad
 
 
 @pytest.mark.slow  # a sweep planned, torch imported and a renderer started in a subprocess: seconds

@@ -126,14 +126,30 @@ def load_manifest(directory: str | Path) -> Manifest:
     return Manifest.from_json(data, str(path))
 
 
+SHA256_MISMATCH = "sha256 differs from the manifest"  # an episode file whose bytes are not those its manifest names
+
+
+def episode_digest(source: bytes | Path) -> str:
+    """The sha256 (hex) a manifest records for an episode file: of ``source``'s bytes, or of the file at ``source``
+    read in 1 MiB chunks (`repro doctor` checks whole datasets without holding a file in memory). OSError as
+    reading raises it."""
+    if isinstance(source, bytes):
+        return hashlib.sha256(source).hexdigest()
+    digest = hashlib.sha256()
+    with open(source, "rb") as fh:
+        while chunk := fh.read(1 << 20):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
 def read_episode_file(path: Path, sha256: str | None = None) -> Episode:
     """The arrays of one episode file; a sha256 mismatch or an unreadable file is a :class:`DatasetError`."""
     try:
         raw = path.read_bytes()
     except OSError as exc:
         raise DatasetError(f"missing or unreadable episode file {path}: {exc.strerror}") from None
-    if sha256 is not None and hashlib.sha256(raw).hexdigest() != sha256:
-        raise DatasetError(f"corrupt episode file {path}: sha256 differs from the manifest")
+    if sha256 is not None and episode_digest(raw) != sha256:
+        raise DatasetError(f"corrupt episode file {path}: {SHA256_MISMATCH}")
     return _load_npz(raw, path)
 
 

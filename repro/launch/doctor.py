@@ -19,7 +19,6 @@ Each check is ``ok``, ``warn`` (shown; the runs can go) or ``fail`` (they cannot
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import re
@@ -395,7 +394,7 @@ def results_root_check(root: Path) -> Check:
 
 def dataset_check(label: str, folder: Path) -> Check:
     """Every episode file of the dataset at ``folder`` hashes to its manifest's sha256."""
-    from repro.data.dataset import DatasetError, listing_problems, load_manifest
+    from repro.data.dataset import SHA256_MISMATCH, DatasetError, episode_digest, listing_problems, load_manifest
 
     try:
         manifest = load_manifest(folder)
@@ -407,17 +406,14 @@ def dataset_check(label: str, folder: Path) -> Check:
     start, size = time.perf_counter(), 0
     for entry in manifest.episodes:
         path = folder / entry.file
-        digest = hashlib.sha256()
         try:
-            with open(path, "rb") as fh:
-                while chunk := fh.read(1 << 20):
-                    digest.update(chunk)
-                    size += len(chunk)
+            digest = episode_digest(path)
+            size += path.stat().st_size
         except OSError as exc:
             problems.append(f"{entry.file}: {exc.strerror or exc}")
             continue
-        if digest.hexdigest() != entry.sha256:
-            problems.append(f"{entry.file}: sha256 differs from the manifest")
+        if digest != entry.sha256:
+            problems.append(f"{entry.file}: {SHA256_MISMATCH}")
     if problems:
         more = f" (+{len(problems) - 1} more)" if len(problems) > 1 else ""
         return Check("dataset", FAIL, f"{label} at {folder}: {problems[0]}{more}")
