@@ -321,7 +321,6 @@ class DrQV2Backbone:
         q1, q2 = self.critic(h, self.encode_action(action))
         loss = losses.actor_loss(q1, q2)
         optimize(loss, self.actor_opt)
-        assert dist.pre_tanh is not None  # the Actor's distribution carries it
         return losses.actor_metrics(loss, log_prob, dist.entropy().sum(-1), dist.loc, dist.pre_tanh)
 
     def update_target(self) -> None:

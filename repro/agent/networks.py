@@ -59,14 +59,12 @@ def mlp(in_dim: int, hidden_dim: int, out_dim: int, depth: int = 2) -> nn.Sequen
 
 
 class TruncatedNormal(torch.distributions.Normal):
-    """Normal clipped to [-1+eps, 1-eps] with a straight-through gradient (DrQ-v2's policy noise). ``pre_tanh``: the
-    policy's output before its tanh, when the mean is one (the actor's health metrics read it: losses.py)."""
+    """Normal clipped to [-1+eps, 1-eps] with a straight-through gradient (DrQ-v2's policy noise)."""
 
     def __init__(self, loc: torch.Tensor, scale: torch.Tensor, low: float = -1.0, high: float = 1.0,
-                 eps: float = 1e-6, pre_tanh: torch.Tensor | None = None):
+                 eps: float = 1e-6):
         super().__init__(loc, scale, validate_args=False)
         self.low, self.high, self.eps = low, high, eps
-        self.pre_tanh = pre_tanh
 
     def _clamp(self, x: torch.Tensor) -> torch.Tensor:
         clamped = torch.clamp(x, self.low + self.eps, self.high - self.eps)
@@ -82,6 +80,16 @@ class TruncatedNormal(torch.distributions.Normal):
         return self._clamp(self.loc + eps)
 
 
+class Policy(TruncatedNormal):
+    """The actor's action distribution: a :class:`TruncatedNormal` around tanh(``pre_tanh``) with std ``std``, keeping
+    ``pre_tanh`` (the policy's output before its tanh), which the actor's health metrics read (losses.py)."""
+
+    def __init__(self, pre_tanh: torch.Tensor, std: float | torch.Tensor):
+        mu = torch.tanh(pre_tanh)
+        super().__init__(mu, torch.ones_like(mu) * std)
+        self.pre_tanh = pre_tanh
+
+
 class Actor(nn.Module):
     """Actor trunk + policy MLP; tanh mean, std given by the schedule."""
 
@@ -91,10 +99,8 @@ class Actor(nn.Module):
         self.policy = mlp(feature_dim, hidden_dim, action_dim)
         self.apply(orthogonal_init)
 
-    def forward(self, h: torch.Tensor, std: float | torch.Tensor) -> TruncatedNormal:
-        pre_tanh = self.policy(self.trunk(h))
-        mu = torch.tanh(pre_tanh)
-        return TruncatedNormal(mu, torch.ones_like(mu) * std, pre_tanh=pre_tanh)
+    def forward(self, h: torch.Tensor, std: float | torch.Tensor) -> Policy:
+        return Policy(self.policy(self.trunk(h)), std)
 
 
 class Critic(nn.Module):

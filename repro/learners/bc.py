@@ -64,5 +64,4 @@ class BC(LearnerBase, ModuleSet):
         dist = self.actor(self.encoder(self.aug(batch["obs"].float())), 1.0)
         loss = bc_loss(dist.mean, batch["action"])
         optimize(loss, self.actor_opt, self.encoder_opt)
-        assert dist.pre_tanh is not None  # the Actor's distribution carries it
         return {"bc_loss": loss.detach(), **saturation_metrics(dist.loc, dist.pre_tanh)}

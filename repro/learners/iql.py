@@ -142,7 +142,6 @@ class IQL(BackboneLearner):
             for group in bb.actor_opt.param_groups:
                 group["lr"] = iql_loss.cosine_lr(self.cfg.lr, step, c.actor_lr_cosine_updates)
         dist = bb.actor(h, bb.stddev(step))
-        assert dist.pre_tanh is not None  # the Actor's distribution carries it
         health = saturation_metrics(dist.loc, dist.pre_tanh)
         if self.log_std is not None:  # the JAX actor: Normal(tanh mean, exp(clip(log_stds)))
             dist = torch.distributions.Normal(dist.loc, self.log_std().expand_as(dist.loc))

@@ -49,5 +49,4 @@ class TD3BC(BackboneLearner):
         loss, metrics = td3bc_loss.actor_loss(q1, q2, policy_action, data_action, alpha=c.alpha,
                                               lambda_from=c.lambda_from)
         optimize(loss, bb.actor_opt)
-        assert dist.pre_tanh is not None  # the Actor's distribution carries it
         return {**metrics, **saturation_metrics(dist.loc, dist.pre_tanh)}
