@@ -34,6 +34,7 @@ import zlib
 from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -46,6 +47,9 @@ from analysis.context import Context
 from analysis.load import Results
 from analysis.paper import PaperData
 from analysis.tables import TableOutput, fmt_num, write_table
+
+if TYPE_CHECKING:
+    from analysis.audit import Finding
 
 TARGET = 0.8  # the power "seeds for 80%" asks for
 DEFAULT_SIMS = 2000
@@ -74,12 +78,14 @@ class SimClaim:
     memo: dict[Hashable, Power] = field(default_factory=dict, repr=False, compare=False)
 
 
-def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = None) -> list[SimClaim]:
+def simulated_claims(ctx: Context, budgets: Mapping[str, ClaimBudget] | None = None,
+                     specs: Sequence[cl.ClaimSpec] | None = None) -> list[SimClaim]:
     """Every claim whose spec has a simulation (analysis.claims.SPECS), in claims.csv's order, with its cells'
-    sources from the paper (``ctx.paper``) and the published DrQ-v2 curves (``ctx.published``) at its budget."""
+    sources from the paper (``ctx.paper``) and the published DrQ-v2 curves (``ctx.published``) at its budget.
+    ``specs``: the claims as listed for ``ctx.paper`` (analysis.claims.claim_specs, called here when None)."""
     budgets = budgets or load_budgets()
     out = []
-    for spec in cl.claim_specs(ctx.paper):
+    for spec in cl.claim_specs(ctx.paper) if specs is None else specs:
         sim = spec.simulation
         if sim is None:
             continue
@@ -246,16 +252,20 @@ class PowerRow:
 
 def power_rows(ctx: Context, sims: int = DEFAULT_SIMS, max_seeds: int = DEFAULT_MAX_SEEDS,
                verdicts: Sequence[cl.Verdict] | None = None, conditioned: bool = False,
-               bootstrap_claims: bool = True) -> list[PowerRow]:
+               bootstrap_claims: bool = True, findings: Sequence[Finding] | None = None,
+               specs: Sequence[cl.ClaimSpec] | None = None) -> list[PowerRow]:
     """One row per claim of analysis.claims.claim_specs (claims.csv's order, the published-curves reading of
     online_avg_gain after it). ``conditioned``: also the power given the user's runs in ``ctx`` (and their
     ``verdicts``); ``bootstrap_claims`` False: leave out the claims whose rule runs a bootstrap in every draw (the
-    report)."""
+    report). ``findings``: the audit of ``ctx.paper`` (analysis/audit.py; None: run here, once, if a claim's power
+    needs it); ``specs``: the claims as ``claim_specs(ctx.paper)`` lists them (None: listed here). The report passes
+    both, built once (analysis/report_model.py)."""
     budgets = load_budgets()
-    sim = {c.id: c for c in simulated_claims(ctx, budgets)}
+    specs = cl.claim_specs(ctx.paper) if specs is None else specs
+    sim = {c.id: c for c in simulated_claims(ctx, budgets, specs)}
     by_verdict = {v.id: v for v in verdicts or []}
     rows = []
-    for claim in cl.claim_specs(ctx.paper):
+    for claim in specs:
         cid, rule, spec = claim.id, claim.rule_text(ctx.paper), budgets.get(claim.claim_id)
         if spec is None:
             rows.append(PowerRow(cid, False, rule, 0, 0, reason="no budget in claim_budgets.csv"))
@@ -281,7 +291,11 @@ def power_rows(ctx: Context, sims: int = DEFAULT_SIMS, max_seeds: int = DEFAULT_
         if conditioned and c.observed is not None:
             condition_row(ctx, c, row, sims, max_seeds)
         if claim.audit and _short_of_target(row):
-            row.audit = audit_limit(ctx.paper, claim.audit)
+            if findings is None:
+                from analysis.audit import run_audit
+
+                findings = run_audit(ctx.paper)
+            row.audit = audit_limit(findings, claim.audit)
         rows.append(row)
     return rows
 
@@ -292,21 +306,21 @@ def _short_of_target(row: PowerRow) -> bool:
         row.simulated and row.seeds_80 is None)
 
 
-def audit_limit(paper: PaperData, checks: Sequence[str]) -> str:
-    """The audit's findings of ``checks`` that do not match (analysis/audit.py), as the power table names them: the
-    cause of a power that no number of seeds lifts, where the paper's own numbers disagree with the data the claim
-    is read against ("" when every one matches)."""
-    from analysis.audit import run_audit
-
-    bad = [f for f in run_audit(paper) if f.check in checks and not f.match]
+def audit_limit(findings: Sequence[Finding], checks: Sequence[str]) -> str:
+    """The audit's ``findings`` (analysis/audit.py) of ``checks`` that do not match, as the power table names them:
+    the cause of a power that no number of seeds lifts, where the paper's own numbers disagree with the data the
+    claim is read against ("" when every one matches)."""
+    bad = [f for f in findings if f.check in checks and not f.match]
     return "; ".join(f"limited by the audit's finding {f.check} ({f.where}): {f.recomputed} where the paper gives "
                      f"{f.printed} (audit.md)" for f in bad)
 
 
 def condition_row(ctx: Context, claim: SimClaim, row: PowerRow, sims: int, max_seeds: int) -> None:
-    """Fill the conditioned columns of ``row`` from the user's runs at the claim's budget."""
+    """Fill the conditioned columns of ``row`` from the user's runs at the claim's budget: the cells its check read
+    there (the claim's context and its cells are kept in ``ctx.cache``: analysis.claims.claim_cells), read now only
+    where `repro claims` did not read them."""
     cctx = cl.claim_context(ctx, claim.spec, claim.spec.budget, below=False)
-    observed = {k: v for k, v in claim.observed(cctx).items() if k in {c.key for c in claim.cells}} \
+    observed = {k: v for k, v in cl.claim_cells(cctx, claim.observed).items() if k in {c.key for c in claim.cells}} \
         if claim.observed is not None else {}
     drawn = [c.key for c in claim.cells if c.kind != "fixed"]
     row.done_seeds = min((len(observed.get(k, ())) for k in drawn), default=0)
@@ -372,7 +386,7 @@ def power_notes(sims: int, seed: int, max_seeds: int) -> list[str]:
     """The assumptions stated under the power table."""
     return [
         "P(supported): the probability that the claim's rule, applied as `repro claims` applies it (same statistic, "
-        "same seed minimum, analysis/claims.py), says 'supported' if the paper's numbers are the truth; ± is the "
+        "same seed minimum, analysis/claims/), says 'supported' if the paper's numbers are the truth; ± is the "
         f"Monte-Carlo standard error over {sims:,} draws (fewer where stated), random state {seed}.",
         "Cells: DrQ-v2 on a DMC task draws the DrQ-v2 authors' published per-seed values at the claim's budget "
         "(interpolated between evaluations), shifted to Table 1's mean; every other cell is normal with the "

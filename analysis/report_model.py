@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from analysis.audit import Finding, run_audit
 from analysis.calibration import CalibrationRow, calibrate
-from analysis.claims import Verdict, evaluate_claims
+from analysis.claims import Verdict, claim_specs, evaluate_claims
 from analysis.context import Context
 from analysis.power import PowerRow, power_rows
 from analysis.verify import Judgement, judgement
@@ -51,12 +51,15 @@ class ReportModel:
 def build_model(ctx: Context, sims: int, max_seeds: int) -> ReportModel:
     """Every section of the report from ``ctx``, each built once: the claims' verdicts, the audit, the calibration,
     `repro verify`'s verdicts and the claims' power (given those verdicts; the claims whose rule bootstraps in every
-    draw are left to `repro plan --claims`), with ``sims`` draws and at most ``max_seeds`` seeds per cell."""
-    verdicts = evaluate_claims(ctx)
+    draw are left to `repro plan --claims`), with ``sims`` draws and at most ``max_seeds`` seeds per cell. The claims
+    are listed once (``claim_specs``) for the verdicts and the power, and the power reads the audit's findings."""
+    specs = claim_specs(ctx.paper)
+    verdicts = evaluate_claims(ctx, specs)
     findings = run_audit(ctx.paper)
     cal_rows, cal_notes = calibrate(ctx.results, ctx.published, ctx.reps, ctx.seed)
     verify = judgement(ctx.results)
     conditioned = not ctx.no_runs
-    power = power_rows(ctx, sims, max_seeds, verdicts, conditioned, bootstrap_claims=False)
+    power = power_rows(ctx, sims, max_seeds, verdicts, conditioned, bootstrap_claims=False, findings=findings,
+                       specs=specs)
     return ReportModel(tuple(verdicts), tuple(findings), tuple(cal_rows), tuple(cal_notes), verify, tuple(power),
                        sims, max_seeds, conditioned)

@@ -152,7 +152,7 @@ def _plan_sweeps(names: list[str], all_: bool, results: Path, out: Path, bench_f
 
 def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: Optional[str], sims: int, max_seeds: int,
                  seed: int, reps: int, min_seeds: int) -> None:
-    from analysis.claims import evaluate_claims
+    from analysis.claims import claim_specs, evaluate_claims
     from analysis.composed import composed
     from analysis.power import power_rows, write_power
     from repro.launch import spec as specs
@@ -170,8 +170,9 @@ def _plan_claims(results: Path, out: Path, bench_file: Optional[Path], device: O
         extra.append(f"Cost of those seeds in frames only: {exc}.")
     ctx = make_context(results, out, 1_000_000, reps, seed, min_seeds)
     conditioned = not ctx.no_runs
-    verdicts = evaluate_claims(ctx) if conditioned else None
-    rows = power_rows(ctx, sims, max_seeds, verdicts, conditioned)
+    listed = claim_specs(ctx.paper)  # the claims, listed once for the verdicts and the power
+    verdicts = evaluate_claims(ctx, listed) if conditioned else None
+    rows = power_rows(ctx, sims, max_seeds, verdicts, conditioned, specs=listed)
     by_experiment = {s.experiment: s for s in specs.load_all()}
     needed = sorted({by_experiment[e].name for r in rows if r.seeds_80 for e in r.experiments if e in by_experiment})
     costs = plan_sweeps(needed, bench, results_root=results.expanduser().absolute(), memory=False,

@@ -99,7 +99,8 @@ def test_dataset_kinds_are_one_choice_with_one_normaliser():
     """The kinds in Table 3's order, one spelling for every way the paper, a config or a table writes one, read by
     the config's Table 6 lookup, `repro dataset make` and the analysis alike; an OmegaConf field of the Choice
     reads ``medium-replay`` (a member named by a value that is not a Python name)."""
-    from analysis import claims, load, paper
+    from analysis import load, paper
+    from analysis.claims import offline
     from repro.config import paper_defaults
     from repro.train import make_dataset
 
@@ -112,7 +113,8 @@ def test_dataset_kinds_are_one_choice_with_one_normaliser():
     assert normalize_dataset("imported-vd4rl") == "imported-vd4rl"  # a dataset's own name keeps its spelling
     assert paper_defaults.cql_alpha("cheetah_run", "medium_replay") == paper_defaults.cql_alpha("cheetah_run",
                                                                                                 "medium-replay")
-    assert load.normalize_dataset is paper.normalize_dataset is normalize_dataset and claims.DatasetKind is DatasetKind
+    # the offline claims read the schema's kinds (their module imports them from repro.config.schema)
+    assert load.normalize_dataset is paper.normalize_dataset is normalize_dataset and offline.DatasetKind is DatasetKind
     with pytest.raises(make_dataset.MakeError, match="one of medium, medium-replay, full-replay"):
         make_dataset.plan(None, "medium_replay", None, None, 0, None, None, "cpu")  # type: ignore[arg-type]
 

@@ -3,6 +3,7 @@ from a bench file (repro/launch/cost.py, its tables repro_app/plan.py)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -134,6 +135,31 @@ def test_every_claim_is_simulated_or_says_why_not(ctx):
     assert any(c.kind == "published" for c in claim.cells)  # the DrQ-v2 authors' per-seed values
     p = power.simulate(ctx, claim, 6, 200, seed=0)
     assert 0.0 <= p.supported <= 1.0 and p.sims == 200
+
+
+def test_the_power_reads_the_audit_findings_and_the_claim_list_it_is_given(ctx, monkeypatch):
+    """The report hands power_rows its audit's findings and its list of claims (analysis/report_model.py): a claim
+    bounded by an audit check names the finding given (none when that finding matches), and the rows follow the list
+    given, without running the audit or listing the claims again."""
+    import analysis.audit
+
+    findings = analysis.audit.run_audit(ctx.paper)
+    listed = cl.claim_specs(ctx.paper)
+
+    def again(*args, **kwargs):
+        raise AssertionError("power_rows ran the audit or listed the claims again")
+
+    monkeypatch.setattr(analysis.audit, "run_audit", again)
+    monkeypatch.setattr(cl, "claim_specs", again)
+    check = "online_gain_vs_published"
+    (found,) = [f for f in findings if f.check == check]
+    off = [f if f.check != check else dataclasses.replace(f, recomputed="9.876x") for f in findings]
+    fine = [f if f.check != check else dataclasses.replace(f, match=True) for f in findings]
+    published = [s for s in listed if s.id == cl.PUBLISHED_GAIN_ID]
+    rows = power.power_rows(ctx, 20, 4, bootstrap_claims=False, findings=off, specs=published)
+    assert [r.id for r in rows] == [cl.PUBLISHED_GAIN_ID] and not found.match
+    assert "9.876x" in rows[0].audit and found.recomputed not in rows[0].audit
+    assert power.power_rows(ctx, 20, 4, bootstrap_claims=False, findings=fine, specs=published)[0].audit == ""
 
 
 # ---------------------------------------------------------------- cost

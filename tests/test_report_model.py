@@ -1,7 +1,8 @@
 """The report's data flows one way (docs/analysis.md, "Report"): analysis builds each section's rows once into the
 report model (analysis/report_model.py), paper_figures draws from it, repro_app writes it. Counted here: every builder
-of a section is entered once during one `build_report`, and the verify figure draws the cells and verdicts the model
-holds without calling analysis/verify.py again."""
+of a section is entered once during one `build_report` (the claims listed once), the power reads no cells of the runs
+that the claims read, and the verify figure draws the cells and verdicts the model holds without calling
+analysis/verify.py again."""
 
 from __future__ import annotations
 
@@ -14,13 +15,17 @@ import pytest
 
 import analysis.audit
 import analysis.calibration
+import analysis.cells
 import analysis.claims
+import analysis.claims.draws
 import analysis.power
 import analysis.verify as V
 import paper_figures.verify_plot
 import repro_app.report
 from analysis.context import Context
 from analysis.load import load_results
+from analysis.paper import DMC9
+from analysis.report_model import build_model
 from analysis_fixtures import write_run
 from paper_figures.verify_plot import plot_verify
 from repro_app.report import build_report
@@ -54,8 +59,8 @@ def count_calls(mp: pytest.MonkeyPatch, fn: Callable[..., Any], calls: list[str]
 
 def verify_runs(root: Path) -> Path:
     """Two verify cells on TASK (DrQ-v2 and TACO, one seed each) under ``root``."""
-    for algo, curve in (("drqv2", [350, 300, 800, 980]), ("taco", [350, 900, 990, 990])):
-        write_run(root, experiment="verify", algo=algo, task=TASK, seed=1, final=0.0, frames=60_000,
+    for agent, curve in (("drqv2", [350, 300, 800, 980]), ("taco", [350, 900, 990, 990])):
+        write_run(root, experiment="verify", agent=agent, task=TASK, seed=1, final=0.0, frames=60_000,
                   eval_every=20_000, curve=curve, batch_size=256)
     return root
 
@@ -69,6 +74,7 @@ BUILDERS: dict[str, Callable[..., Any]] = {
     "verify cells": V.verify_cells,
     "power": analysis.power.power_rows,
     "verify figure": plot_verify,
+    "claim list": analysis.claims.claim_specs,  # not a section: the claims, listed once for the verdicts and power
 }
 
 
@@ -88,12 +94,7 @@ def report_calls(tmp_path_factory) -> tuple[list[str], Path]:
     return calls, ctx.out_dir
 
 
-@pytest.mark.parametrize("section", [
-    "claims",
-    # analysis/power.py's audit_limit runs the audit again for each claim whose power stays under 80% and that an
-    # audit finding bounds (power_rows takes no findings): strict, so this fails once power reads the report's
-    pytest.param("audit", marks=pytest.mark.xfail(strict=True, reason="power.audit_limit calls run_audit again")),
-    "calibration", "verify", "verify cells", "power", "verify figure"])
+@pytest.mark.parametrize("section", list(BUILDERS))
 def test_each_section_is_built_once_in_a_report(report_calls, section):
     calls, out = report_calls
     assert calls.count(BUILDERS[section].__name__) == 1, calls
@@ -135,3 +136,60 @@ def test_verify_plot_draws_the_cells_and_verdicts_of_the_model(tmp_path, monkeyp
     paths = plot_verify(results, model, tmp_path / "out")
     assert [p.suffix for p in paths] == [".png", ".pdf"] and all(p.stat().st_size > 5000 for p in paths)
     assert drawn == [(list(full.cells.loc[keep, "run_id"]), model.rows)]
+
+
+def test_the_power_reuses_the_cells_of_the_runs_the_claims_read(tmp_path, monkeypatch):
+    """The power conditioned on the runs reads no claim's cells that evaluate_claims read: each (cells, claim
+    context) is read from the runs once in a report model (analysis.claims.claim_cells), the online claims' cells by
+    their checks (the main runs reach 1M frames), and the power reads them through the same cache."""
+    for agent, final in (("taco", 600.0), ("drqv2", 400.0)):
+        for seed in (1, 2, 3):
+            write_run(tmp_path, experiment="main", agent=agent, task=DMC9[0], seed=seed, final=final,
+                      frames=1_000_000, eval_every=500_000)
+    ctx = Context(results=load_results(tmp_path), out_dir=tmp_path / "out", reps=50)
+    reads: list[tuple[str, Any, int]] = []  # (the builder running, the cells function, id of the claim context)
+    running = ["none"]
+    read_cells = analysis.claims.draws.read_cells
+
+    def recorded_read(cctx: Context, cells: Callable[..., Any]) -> Any:
+        reads.append((running[0], cells, id(cctx)))
+        return read_cells(cctx, cells)
+
+    def running_in(name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            running[0] = name
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                running[0] = "none"
+        return wrapper
+
+    count_calls(monkeypatch, read_cells, [], replace=recorded_read)
+    observed = analysis.cells.observed_cells  # each claim's cells function calls it once
+    looked: list[str] = []  # the builder running at each call
+
+    def recorded_look(*args: Any, **kwargs: Any) -> Any:
+        looked.append(running[0])
+        return observed(*args, **kwargs)
+
+    count_calls(monkeypatch, observed, [], replace=recorded_look)
+    count_calls(monkeypatch, analysis.claims.evaluate_claims, [],
+                replace=running_in("claims", analysis.claims.evaluate_claims))
+    count_calls(monkeypatch, analysis.power.power_rows, [], replace=running_in("power", analysis.power.power_rows))
+    model = build_model(ctx, sims=20, max_seeds=4)
+    assert model.conditioned and {r.id for r in model.power if r.now is not None} >= {
+        "online_avg_gain", "online_beats_drqv2_all", "online_beats_model_based"}
+    read = [(fn, c) for _, fn, c in reads]
+    assert len(read) == len(set(read)), reads  # no cells read twice
+    by_claims = {(fn, c) for who, fn, c in reads if who == "claims"}
+    online = {(fn, c) for fn, c in by_claims if fn.__name__ == "_online_cells"}
+    assert len(online) == 1, reads  # the online claims' checks read the main runs' cells, at 1M frames
+    # ... which the four online claims' power (avg gain twice, beats DrQ-v2, beats model-based) reads again without
+    # a second read, and the seeds the power conditions on are those runs' (3 per cell)
+    assert not any(fn.__name__ == "_online_cells" for who, fn, _ in reads if who == "power"), reads
+    # and the power reads the runs only through the claims' cells (no read that bypasses them)
+    assert looked.count("power") == sum(who == "power" for who, _, _ in reads), (looked, reads)
+    assert {r.id: r.done_seeds for r in model.power}["online_avg_gain"] == 0  # 8 of the 9 tasks have no runs
+    assert max(len(v) for v in analysis.claims.claim_cells(*next(
+        (ctx.cache[k][0], k[1]) for k in ctx.cache if k[0] == "claim-cells" and k[1].__name__ == "_online_cells"
+    )).values()) == 3

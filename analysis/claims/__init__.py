@@ -63,7 +63,17 @@ from analysis.claims.core import (
     pct,
     vs_text,
 )
-from analysis.claims.draws import enough, judged, n_draws, one_draw, require_cells, stacked, universal, verdicts
+from analysis.claims.draws import (
+    claim_cells,
+    enough,
+    judged,
+    n_draws,
+    one_draw,
+    require_cells,
+    stacked,
+    universal,
+    verdicts,
+)
 from analysis.claims.offline import (
     CI_REPS,
     CI_SIMS,
@@ -89,10 +99,8 @@ from analysis.claims.online import (
     reacher_printed,
     seed_robustness_rule,
 )
-from repro.config.schema import DatasetKind  # the dataset kinds offline_gain and offline_average read
 
 __all__ = [
-    "DatasetKind",
     "ACTION_REPEATS",
     "CI_REPS",
     "CI_SIMS",
@@ -128,6 +136,7 @@ __all__ = [
     "beats_drqv2_rule",
     "best_k_printed",
     "budget_words",
+    "claim_cells",
     "claim_context",
     "claim_specs",
     "claims_frame",

@@ -34,13 +34,14 @@ def claim_specs(paper: PaperData) -> list[ClaimSpec]:
     return [s for i in ids for s in [SPEC_OF[i], *(r for r in SPECS if r.reading_of == i)]]
 
 
-def evaluate_claims(ctx: Context) -> list[Verdict]:
+def evaluate_claims(ctx: Context, specs: Sequence[ClaimSpec] | None = None) -> list[Verdict]:
     """One verdict per claim of :func:`claim_specs` (claims.csv's order, the reading of online_avg_gain against the
-    published DrQ-v2 curves after it), each at the claim's own budget."""
+    published DrQ-v2 curves after it), each at the claim's own budget. ``specs``: ``claim_specs(ctx.paper)`` where the
+    caller has it (the report lists the claims once for the verdicts and the power), None: listed here."""
     budgets = load_budgets()
     text = dict(zip(ctx.paper.claims["id"], ctx.paper.claims["claim"]))
     out = []
-    for spec in claim_specs(ctx.paper):
+    for spec in claim_specs(ctx.paper) if specs is None else specs:
         claim = text[spec.claim_id] + (f" [{spec.note}]" if spec.note else "")
         budget = budgets.get(spec.claim_id)
         if budget is None:

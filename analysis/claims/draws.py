@@ -27,9 +27,27 @@ def one_draw(cells: Cells) -> Draws:
     return {k: np.asarray(v, dtype=float)[None, :] for k, v in cells.items()}
 
 
+def claim_cells(ctx: Context, cells: Callable[[Context], Cells]) -> Cells:
+    """``cells(ctx)``, the cells of the runs a claim reads in its context ``ctx`` (analysis.claims.claim_context),
+    read once per context: kept in ``ctx.cache``, which the claims' contexts share, so that the power conditioned on
+    the runs (analysis/power.py) reuses the cells `repro claims` read instead of reading the runs again. The entry
+    holds ``ctx`` itself, so an entry is found only by the context that read it."""
+    key = ("claim-cells", cells, id(ctx))
+    kept = ctx.cache.get(key)
+    if kept is None or kept[0] is not ctx:
+        kept = ctx.cache[key] = (ctx, read_cells(ctx, cells))
+    return kept[1]
+
+
+def read_cells(ctx: Context, cells: Callable[[Context], Cells]) -> Cells:
+    """``cells(ctx)`` read from the runs (what :func:`claim_cells` keeps)."""
+    return cells(ctx)
+
+
 def judged(cells: Callable[[Context], Cells], judge: Judge) -> Check:
-    """A simulated claim's check on the runs: its rule (``judge``) on the cells of the runs (``cells``), one draw."""
-    return lambda ctx: judge(ctx, one_draw(cells(ctx))).first
+    """A simulated claim's check on the runs: its rule (``judge``) on the cells of the runs (``cells``, read once per
+    claim context: :func:`claim_cells`), one draw."""
+    return lambda ctx: judge(ctx, one_draw(claim_cells(ctx, cells))).first
 
 
 def n_draws(draws: Draws) -> int:
