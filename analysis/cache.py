@@ -14,8 +14,9 @@ A result is reused only when everything it depends on is unchanged; its key hold
   figure whose files are still on disk as written is not drawn again;
 * ``compose``: a sweep run's composed config (``repro plan --claims``), keyed by its overrides and the config files.
 
-Every key also holds the code version (:func:`code_version`: the analysis code's sources, the registered method
-labels and the numeric libraries' versions), so changed code recomputes everything. The file is
+The file holds its format (:data:`FORMAT`: a file of another format is not read). Every key also holds the code
+version (:func:`code_version`: the analysis code's sources, the registered method labels and the numeric libraries'
+versions), so changed code recomputes everything. The file is
 ``<out>/.cache/analysis.pkl`` (one per output folder: ``repro report``, ``figures``, ``claims`` and ``plan --claims``
 share the default one), written atomically at the end of a command. What a command did not use is kept for the next
 (``repro claims`` after a report keeps the report's figures), except what it superseded: a run directory read
@@ -44,7 +45,7 @@ T = TypeVar("T")
 
 CACHE_DIR = ".cache"
 CACHE_FILE = "analysis.pkl"
-FORMAT = 1
+FORMAT = 2  # of the file (2: the runs table's agent column renamed to ``agent``, issue 51); another is not read
 ROOT = Path(__file__).resolve().parents[1]
 # the code whose output is cached: the analysis, the figures and the run-format readers and config it reads
 CODE_DIRS = ("analysis", "paper_figures", "repro_app", "repro/runs", "repro/config", "repro_data")
@@ -70,9 +71,9 @@ def code_version() -> str:
             h.update(f"{lib}={importlib.metadata.version(lib)}".encode())
         except importlib.metadata.PackageNotFoundError:
             h.update(lib.encode())
-    from analysis.identity import algo_labels
+    from analysis.identity import agent_labels
 
-    h.update(repr(sorted(algo_labels().items())).encode())
+    h.update(repr(sorted(agent_labels().items())).encode())
     return h.hexdigest()
 
 

@@ -21,14 +21,14 @@ UNREGISTERED_LABELS: dict[str, str] = {
 
 
 @functools.cache
-def algo_labels() -> dict[str, str]:
+def agent_labels() -> dict[str, str]:
     """Normalised ``agent.name`` -> the paper's label: a learner's from its registration (its plain agent file is
     named after it; the built-in online learner's agent files are named after their objectives instead), an
     objective's (the online agent named after it: ``spr`` -> SPR), and :data:`UNREGISTERED_LABELS`. Plugins'
     learners and objectives included."""
     labels = dict(UNREGISTERED_LABELS)
-    labels.update({algo_key(s.name): s.label for s in objective_specs().values() if s.label is not None})
-    labels.update({algo_key(s.name): s.label for s in learner_specs().values()})
+    labels.update({agent_key(s.name): s.label for s in objective_specs().values() if s.label is not None})
+    labels.update({agent_key(s.name): s.label for s in learner_specs().values()})
     return labels
 
 
@@ -42,7 +42,7 @@ _TASK_NAMES: dict[str, str] = {
 }
 
 
-def algo_key(name: Any) -> str:
+def agent_key(name: Any) -> str:
     """Normalise an ``agent.name`` ("DrQ-v2", "drqv2", "td3_bc") to a lookup key ("drqv2", "td3bc")."""
     return re.sub(r"[^a-z0-9]", "", str(name).lower())
 
@@ -62,10 +62,10 @@ def enabled_objectives(objectives: Mapping[str, Any] | None) -> tuple[str, ...]:
     return tuple(sorted(out))
 
 
-def algo_label(name: Any) -> str:
+def agent_label(name: Any) -> str:
     """The label of an algorithm (``agent.name``, e.g. a bench result's agent file) from its name alone:
-    :func:`algo_labels`, else the name. A run's label is :func:`method_label`, from what it trained."""
-    return algo_labels().get(algo_key(name), str(name))
+    :func:`agent_labels`, else the name. A run's label is :func:`method_label`, from what it trained."""
+    return agent_labels().get(agent_key(name), str(name))
 
 
 def objective_tags(objectives: Iterable[str]) -> list[str]:

@@ -26,7 +26,7 @@ from omegaconf.errors import OmegaConfBaseException
 from pandas.api.types import is_numeric_dtype, is_object_dtype
 
 from analysis.cache import file_signature, lookup
-from analysis.identity import algo_key, enabled_objectives, method_label
+from analysis.identity import agent_key, enabled_objectives, method_label
 from analysis.plaincsv import plain_columns
 from repro.bench.results import BenchFile, BenchFormatError, path_of
 from repro.bench.results import read as read_bench
@@ -64,7 +64,7 @@ IDENTITY = (
     "run_id",
     "experiment",
     "variant",
-    "algo",
+    "agent",
     "method",
     "task",
     "suite",
@@ -153,7 +153,7 @@ def identity_from_config(cfg: dict[str, Any]) -> dict[str, Any]:
     return {
         "experiment": str(ident["experiment"] or ""),
         "variant": str(ident["variant"] or "base"),
-        "algo": algo_key(ident["algo"]) if ident["algo"] is not None else None,
+        "agent": agent_key(ident["agent"]) if ident["agent"] is not None else None,
         "task": ident["task"],
         "suite": ident["suite"],
         "seed": _int_or_none(ident["seed"]),
@@ -434,13 +434,13 @@ def load_run(run_dir: Path, root: Path) -> tuple[dict[str, Any] | None, dict[str
     if not isinstance(cfg, dict):
         return None, None, [Problem(str(cfg_path), "config is not a mapping; run skipped")]
     ident = identity_from_config(cfg)
-    missing = [IDENTITY_KEYS[k] for k in ("algo", "task", "seed") if ident[k] is None]  # the config's keys
+    missing = [IDENTITY_KEYS[k] for k in ("agent", "task", "seed") if ident[k] is None]  # the config's keys
     if missing:
         return None, None, [Problem(str(cfg_path), f"config lacks {', '.join(missing)}; run skipped")]
     values, source, problem = _resolved(run_dir, cfg)
     if problem is not None:
         problems.append(problem)
-    ident.update(resolved_columns(values, ident["algo"]))
+    ident.update(resolved_columns(values, ident["agent"]))
     offline = ident["dataset"] is not None or _get(cfg, RESOLVED_CONFIG_KEYS["dataset"]) is not None
     if offline:  # the run's own budget (analysis/claim_budgets.csv: offline claims judge each run at it)
         ident["offline_updates"] = _int_or_none(_get(cfg, "offline.updates"))
@@ -566,7 +566,7 @@ def load_results(root: Path | str) -> Results:
         runs = pd.DataFrame(columns=[*IDENTITY, "resolved_from", "speedup", "eval_rows", "last_frame", "last_update",
                                      "fps", "updates_per_s"])
     else:
-        dup = runs.duplicated(["experiment", "algo", "variant", "task", "dataset", "seed"], keep=False)
+        dup = runs.duplicated(["experiment", "agent", "variant", "task", "dataset", "seed"], keep=False)
         for run_id in runs.loc[dup, "run_id"]:
             problems.append(Problem(str(root / run_id),
                                     "same experiment/agent/variant/task/dataset/seed as another run", "warning"))
@@ -613,7 +613,7 @@ def _published_file(path: Path) -> pd.DataFrame:
 def load_published(root: Path | str = PUBLISHED_DIR) -> Results:
     """The DrQ-v2 authors' published learning curves (``repro_data/reference/drqv2_curves``) as a
     :class:`Results` of their own: one "run" per task and seed, with the identity and eval columns of
-    :func:`load_results` (algo ``drqv2``, method ``DrQ-v2``, experiment ``published``, action repeat 2, status
+    :func:`load_results` (agent ``drqv2``, method ``DrQ-v2``, experiment ``published``, action repeat 2, status
     done, ``run_id`` ``published/{task}/seed{n}``) and ``source`` = ``published``, so every function of the
     analysis that reads a Results (scores, learning curves) reads them unchanged. They are never merged with
     a user's runs: callers keep the two Results apart. A malformed file is a :class:`Problem` and skipped."""
@@ -633,7 +633,7 @@ def load_published(root: Path | str = PUBLISHED_DIR) -> Results:
         for seed, part in df.groupby("seed", sort=True):
             run_id = f"{PUBLISHED_EXPERIMENT}/{task}/seed{int(seed)}"
             ident: dict[str, Any] = {k: None for k in IDENTITY}
-            ident.update(run_id=run_id, experiment=PUBLISHED_EXPERIMENT, variant="base", algo="drqv2",
+            ident.update(run_id=run_id, experiment=PUBLISHED_EXPERIMENT, variant="base", agent="drqv2",
                          method="DrQ-v2", task=task, suite="dmc", seed=int(seed), objectives="",
                          action_repeat=PUBLISHED_ACTION_REPEAT, distracting_dims=0,
                          train_frames=int(part["frame"].max()), status="done")

@@ -19,7 +19,7 @@ from repro.config.errors import UserError
 from repro.runs.runformat import EVAL_COLUMNS, TRAIN, TRAIN_REQUIRED
 
 # Names accepted by --by besides the identity columns of analysis/load.py.
-BY_ALIASES = {"agent": "algo", "frames": "train_frames"}
+BY_ALIASES = {"frames": "train_frames"}
 NOT_METRICS = ("frame", "step", "update")  # x axes, not values
 
 
@@ -51,7 +51,7 @@ def load_runs(paths: Sequence[str | Path]) -> tuple[pd.DataFrame, pd.DataFrame, 
 
 
 def by_columns(by: str) -> list[str]:
-    """``agent,variant`` -> identity columns (``algo``, ``variant``); PlotInputError for an unknown one."""
+    """``agent,variant`` -> identity columns (``agent``, ``variant``); PlotInputError for an unknown one."""
     names = [b.strip() for b in by.split(",") if b.strip()]
     if not names:
         raise PlotInputError("--by needs at least one column, e.g. --by agent,variant")
@@ -99,10 +99,10 @@ def tidy_curves(runs: pd.DataFrame, evals: pd.DataFrame, metric: str, by: Sequen
     values = values.assign(value=pd.to_numeric(values["value"], errors="coerce")).dropna(subset=["value"])
     meta = runs[["run_id", "task", "seed", *by]].copy()
     named = meta[list(by)].astype(str)
-    if "algo" in by and "method" in runs.columns:
+    if "agent" in by and "method" in runs.columns:
         # the method's registered label (analysis.identity.method_label, the loader's method column), not the
         # agent file's name: CQL+TACO for cql_taco, a plugin's own label for its agent
-        named["algo"] = runs["method"].where(runs["method"].notna(), runs["algo"]).astype(str)
+        named["agent"] = runs["method"].where(runs["method"].notna(), runs["agent"]).astype(str)
     meta["label"] = named.agg(" / ".join, axis=1)
     env = [c for c in (*ENV_KEYS, "suite") if c in runs.columns]  # to label runs of another environment
     out = values.merge(meta[["run_id", "task", "seed", "label"]].join(runs[env]), on="run_id", how="inner")

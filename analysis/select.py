@@ -96,7 +96,7 @@ def repr_objectives(scores: pd.DataFrame, experiment_map: ExperimentMap | None =
         ["repr_objectives", "main"],
         by_method,
         experiment_map=experiment_map,
-        algo={"taco", "spr", "atc", "driml", "drqv2"},
+        agent={"taco", "spr", "atc", "driml", "drqv2"},
         dataset=lambda d: pd.isna(d),
     )
 
@@ -105,9 +105,9 @@ def action_repr(scores: pd.DataFrame, experiment_map: ExperimentMap | None = Non
     """F3: TACO with and without the action encoder, and DrQ-v2."""
 
     def label(row: pd.Series) -> str | None:
-        if row["algo"] == "drqv2":
+        if row["agent"] == "drqv2":
             return "DrQ-v2"
-        if row["algo"] == "taco":
+        if row["agent"] == "taco":
             enc = row["action_encoder"]
             off = enc is not None and not pd.isna(enc) and not bool(enc)
             return "TACO w/o action repr" if off else "TACO"
@@ -120,9 +120,9 @@ def horizon(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None) -
     """F8: TACO at each K, and DrQ-v2, on the nine DMC tasks."""
 
     def label(row: pd.Series) -> str | None:
-        if row["algo"] == "drqv2":
+        if row["agent"] == "drqv2":
             return "DrQ-v2"
-        if row["algo"] == "taco" and not pd.isna(row["K"]):
+        if row["agent"] == "taco" and not pd.isna(row["K"]):
             return f"K={int(row['K'])}"
         return None
 
@@ -151,7 +151,7 @@ def action_repeat(scores: pd.DataFrame, experiment_map: ExperimentMap | None = N
         label,
         experiment_map=experiment_map,
         task="hopper_hop",
-        algo="taco",
+        agent="taco",
     )
 
 
@@ -169,7 +169,7 @@ def batch_size(scores: pd.DataFrame, experiment_map: ExperimentMap | None = None
         label,
         experiment_map=experiment_map,
         task="quadruped_run",
-        algo={"taco", "drqv2"},
+        agent={"taco", "drqv2"},
     )
 
 
@@ -192,7 +192,7 @@ def objective_removal(scores: pd.DataFrame, experiment_map: ExperimentMap | None
         lambda r: objective_label(r["objectives"]),
         experiment_map=experiment_map,
         task="quadruped_run",
-        algo="taco",
+        agent="taco",
     )
 
 
@@ -214,7 +214,7 @@ def action_dim_runs(scores: pd.DataFrame, experiment_map: ExperimentMap | None =
         label,
         experiment_map=experiment_map,
         task="quadruped_run",
-        algo="taco",
+        agent="taco",
     )
     if not df.empty:
         df["dim"] = df.apply(dim_value, axis=1)

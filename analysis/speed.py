@@ -7,7 +7,7 @@ from typing import Any
 
 import pandas as pd
 
-from analysis.identity import algo_label
+from analysis.identity import agent_label
 from analysis.load import Results
 from repro.bench.results import ONLINE, rate, settings
 
@@ -58,7 +58,7 @@ def speed_measurements(results: Results, experiments: tuple[str, ...] = ("speed"
             if found is None:
                 continue
             source = f"bench {bench.name} ({found.source})"
-            rows.append({"method": algo_label(agent), "batch_size": batch, "fps": found.fps, "hardware": hw,
+            rows.append({"method": agent_label(agent), "batch_size": batch, "fps": found.fps, "hardware": hw,
                          "source": source if path == "plain" else f"{source} [{path}]", "task": None,
                          "speedup": path})
     return pd.DataFrame(rows, columns=["method", "batch_size", "fps", "hardware", "source", "task", "speedup"])

@@ -101,7 +101,7 @@ def find_tsne_run(runs) -> Any:
 
     if runs.empty:
         return None
-    cand = runs[(runs["algo"] == "taco") & (pd.to_numeric(runs["distracting_dims"], errors="coerce").fillna(0) > 0)]
+    cand = runs[(runs["agent"] == "taco") & (pd.to_numeric(runs["distracting_dims"], errors="coerce").fillna(0) > 0)]
     if cand.empty:
         return None
     cand = cand.assign(

@@ -70,7 +70,7 @@ def trained_frames(ctx: Context, task: str) -> tuple[np.ndarray | None, str]:
     """Frames saved by a TACO run of ``task`` (done runs first)."""
     runs = ctx.results.runs
     if not runs.empty:
-        cand = runs[(runs["task"] == task) & (runs["algo"] == "taco")].sort_values("status")
+        cand = runs[(runs["task"] == task) & (runs["agent"] == "taco")].sort_values("status")
         for run_id in cand["run_id"]:
             frames = saved_frames(ctx.results.root / run_id)
             if frames is not None and len(frames):

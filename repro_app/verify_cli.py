@@ -215,7 +215,7 @@ def _print_cost(sel: Selection, agents: tuple[str, ...], variants: tuple[str, ..
 
     def planned(bench):
         return [c for c in plan_sweeps([SWEEP], bench, sel, memory=False)
-                if c.algo in agents and c.run_dir.parent.parent.name in variants]  # verify/agent/VARIANT/task/seed_N
+                if c.agent in agents and c.run_dir.parent.parent.name in variants]  # verify/agent/VARIANT/task/seed_N
 
     try:
         bench = find_bench(root, device)

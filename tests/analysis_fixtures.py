@@ -86,7 +86,7 @@ def write_run(
     root: Path,
     *,
     experiment: str,
-    agent: str | None = None,
+    agent: str,
     task: str,
     seed: int,
     final: float,
@@ -116,7 +116,6 @@ def write_run(
     train_rows: int = 3,
     save_frames: bool = False,
     config: dict[str, Any] | None = None,
-    algo: str | None = None,
 ) -> Path:
     """Write one run directory and return it. Arguments left None keep the composed config's value; the
     config goes through the training schema, and resolved.json through the code training uses
@@ -133,12 +132,9 @@ def write_run(
     ``save_frames``: a done online run also writes its final evaluation episode's frames (frames.npz, by the writer
     training uses) where its config's train.save_frames says so (on by default), as a trained run does; synthetic
     frames of the run's image size, one per action-repeated step of a 500-step episode. ``config``: other dotted
-    config values (e.g. ``{"env.max_episode_frames": 100}``). ``agent``: the run's agent.name (required; ``algo``, its
-    old name, until the tests of the claims, report, figures, verify and words switch to ``agent``)."""
-    if (agent is None) == (algo is None):
-        raise TypeError("write_run: give agent= (the run's agent.name), once")
+    config values (e.g. ``{"env.max_episode_frames": 100}``). ``agent``: the run's agent.name."""
     cfg = run_config(
-        agent or str(algo), task, seed, root, experiment=experiment, variant=variant, **{
+        agent, task, seed, root, experiment=experiment, variant=variant, **{
             "agent.K": K, "agent.batch_size": batch_size, "agent.latent_action_dim": latent_action_dim,
             "agent.action_encoder": action_encoder, "agent.objectives": objectives,
             "env.action_repeat": action_repeat, "env.distracting_dims": distracting_dims, "train.frames": frames,

@@ -49,7 +49,7 @@ def test_identity_comes_from_config_not_path(tmp_path):
               path=tmp_path / "somewhere" / "else")
     res = load_results(tmp_path)
     row = res.runs.iloc[0]
-    assert (row["experiment"], row["algo"], row["method"], row["task"], row["seed"], row["K"]) == (
+    assert (row["experiment"], row["agent"], row["method"], row["task"], row["seed"], row["K"]) == (
         "main", "taco", "TACO", "hopper_hop", 3, 1)
     assert row["objectives"] == "curl+reward+taco"
     assert row["run_id"] == "somewhere/else"

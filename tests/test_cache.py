@@ -5,6 +5,7 @@ computed."""
 from __future__ import annotations
 
 import os
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +57,41 @@ def test_same_size_rewrite_is_seen_by_its_modification_time(tmp_path: Path):
     with opened(tmp_path / "out") as again:
         load_results(tmp_path / "runs")
     assert again.misses == {"runs": 1}
+
+
+OLD_AGENT_COLUMN = "algo"  # the runs table's agent column in a cache of format 1
+
+
+def _renamed_agent_column(entry: tuple) -> tuple:
+    """A ``runs`` entry as format 1 stored it: the agent column under its old name (issue 51)."""
+    row, columns, problems = entry
+    return ({(OLD_AGENT_COLUMN if k == "agent" else k): v for k, v in row.items()},
+            {(OLD_AGENT_COLUMN if k == "agent" else k): v for k, v in columns.items()}, problems)
+
+
+def test_a_cache_of_the_old_format_is_not_reused(tmp_path: Path):
+    """A cache written before the runs table's agent column was renamed (format 1, the column under its old
+    name) is read afresh, even with this code's version; the same entries under the current format would be
+    reused (so it is the format that keeps the old column out of the table)."""
+    _tree(tmp_path / "runs")
+    out = tmp_path / "out"
+    with opened(out):
+        fresh = load_results(tmp_path / "runs")
+    path = out / cache_mod.CACHE_DIR / cache_mod.CACHE_FILE
+    stored = pickle.loads(path.read_bytes())
+    assert stored["format"] == cache_mod.FORMAT != 1
+    old = {k: _renamed_agent_column(v) for k, v in stored["sections"]["runs"].items()}
+    path.write_bytes(pickle.dumps({"format": 1, "version": stored["version"], "sections": {"runs": old}}))
+    with opened(out) as again:
+        loaded = load_results(tmp_path / "runs")
+    assert again.misses == {"runs": 4} and not again.hits
+    pd.testing.assert_frame_equal(loaded.runs, fresh.runs)
+    assert sorted(loaded.runs["agent"]) == ["drqv2", "drqv2", "taco", "taco"]
+    current_format = {"format": cache_mod.FORMAT, "version": stored["version"], "sections": {"runs": old}}
+    path.write_bytes(pickle.dumps(current_format))
+    with opened(out) as current:
+        rows = [current.peek("runs", key)[0] for key in old]
+    assert sorted(row[OLD_AGENT_COLUMN] for row in rows) == ["drqv2", "drqv2", "taco", "taco"]
 
 
 def test_intervals_are_reused_and_changed_code_recomputes(tmp_path: Path, monkeypatch):

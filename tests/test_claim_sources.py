@@ -301,14 +301,14 @@ def test_the_claims_evidence_reads_reacher_speeds_steps_and_the_action_represent
     runs = tmp_path / "runs"
     frames = 1_500_000  # reacher_speed's budget (claim_budgets.csv); the action_repr claims' is 1M
     for seed in range(3):
-        for algo, curve in (("taco", [0, 500, 950, 950]), ("drqv2", [0, 300, 600, 950])):
-            write_run(runs, experiment="main", algo=algo, task="reacher_hard", seed=seed, final=curve[-1],
+        for agent, curve in (("taco", [0, 500, 950, 950]), ("drqv2", [0, 300, 600, 950])):
+            write_run(runs, experiment="main", agent=agent, task="reacher_hard", seed=seed, final=curve[-1],
                       frames=frames, eval_every=frames // 3, curve=curve)
-        write_run(runs, experiment="action_repr", algo="taco", task="reacher_hard", seed=seed, final=700.0 + seed,
+        write_run(runs, experiment="action_repr", agent="taco", task="reacher_hard", seed=seed, final=700.0 + seed,
                   action_encoder=False, frames=1_000_000, eval_every=500_000, variant="no_action_repr")
         for task in ("quadruped_run", "hopper_hop"):
-            for algo, encoder, final in (("taco", None, 600.0), ("taco", False, 500.0), ("drqv2", None, 400.0)):
-                write_run(runs, experiment="action_repr" if encoder is False else "main", algo=algo, task=task,
+            for agent, encoder, final in (("taco", None, 600.0), ("taco", False, 500.0), ("drqv2", None, 400.0)):
+                write_run(runs, experiment="action_repr" if encoder is False else "main", agent=agent, task=task,
                           seed=seed, final=final + seed, action_encoder=encoder, frames=1_000_000,
                           eval_every=500_000, variant="no_action_repr" if encoder is False else "base")
     results = load_results(runs)
@@ -349,7 +349,7 @@ def test_the_action_repeat_claim_reads_the_best_k_of_appendix_b(tmp_path):
     for ar in cl.ACTION_REPEATS:
         for k in cl.REPEAT_HORIZONS:
             for seed in range(3):
-                write_run(runs, experiment="action_repeat", algo="taco", task="hopper_hop", K=k, action_repeat=ar,
+                write_run(runs, experiment="action_repeat", agent="taco", task="hopper_hop", K=k, action_repeat=ar,
                           variant=f"ar{ar}_K{k}", seed=seed, final=100.0 * k + seed, frames=1_000_000,
                           eval_every=500_000)  # K=5 best at every action repeat
     results = load_results(runs)

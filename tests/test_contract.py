@@ -60,7 +60,7 @@ def test_real_run_loads_with_every_field_it_used(trained):
     assert len(res.runs) == 1
     row = res.runs.iloc[0]
     expected = {
-        "run_id": str(run.relative_to(root)), "experiment": "contract", "variant": "v1", "algo": "taco",
+        "run_id": str(run.relative_to(root)), "experiment": "contract", "variant": "v1", "agent": "taco",
         "method": "TACO", "task": "hopper_hop", "suite": rc.task.suite, "seed": 5, "learner": "actor_critic",
         "K": k_used, "batch_size": rc.agent.batch_size, "nstep": rc.agent.nstep, "latent_action_dim": latent,
         "action_encoder": True, "objectives": "+".join(objectives), "action_repeat": 4,

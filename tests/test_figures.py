@@ -221,8 +221,8 @@ def test_bars_and_curves_mark_short_runs_and_runs_of_another_environment(tmp_pat
     from analysis_fixtures import write_run
 
     for s in (1, 2):
-        for algo, final in (("taco", 1.0), ("drqv2", 2.0)):
-            write_run(tmp_path / "runs", experiment="tiny", algo=algo, task="cheetah_run", seed=s, final=final + s,
+        for agent, final in (("taco", 1.0), ("drqv2", 2.0)):
+            write_run(tmp_path / "runs", experiment="tiny", agent=agent, task="cheetah_run", seed=s, final=final + s,
                       frames=400, eval_every=200, config={"env.max_episode_frames": 100})
     drawn: dict[str, object] = {}
 

@@ -19,7 +19,7 @@ import torch
 import yaml
 from typer.testing import CliRunner
 
-from analysis.identity import algo_labels, method_label
+from analysis.identity import agent_labels, method_label
 from analysis.load import load_results
 from analysis.scores import final_scores
 from analysis.tables import to_markdown
@@ -64,7 +64,7 @@ def test_the_example_registers_through_its_entry_points_only():
     assert offline_agents() == ("bc", "td3bc", "td3bc_taco", "cql", "cql_taco", "iql", "dt", "toy_rwbc")
     assert {"taco", "drqv2", "toy_inv", "toy_utd"} <= set(online_agents())  # `repro bench update --agent`'s choices
     assert not set(online_agents()) & set(offline_agents())
-    labels = algo_labels()
+    labels = agent_labels()
     assert (labels["toyrwbc"], labels["toyutd"], labels["toyinv"]) == ("RWBC", "DrQ-v2-UTD", "InvDyn")
     assert method_label("toy_rwbc", ("taco", "curl", "reward")) == "RWBC+TACO"  # with TACO, as CQL+TACO
     assert method_label("toy_rwbc", ("toy_inv",)) == "RWBC+InvDyn"

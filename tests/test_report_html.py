@@ -26,8 +26,8 @@ ARTIFACTS = ("F3", "F7a")  # two figures that render in well under a second with
 def report(tmp_path_factory) -> Path:
     """REPORT.md and REPORT.html as `repro report` writes them, of two artifacts and a verify section."""
     root = tmp_path_factory.mktemp("report")
-    for algo, curve in (("drqv2", [350, 300, 800, 980]), ("taco", [350, 900, 990, 990])):
-        write_run(root, experiment="verify", algo=algo, task="cartpole_balance", seed=1, final=0.0, frames=60_000,
+    for agent, curve in (("drqv2", [350, 300, 800, 980]), ("taco", [350, 900, 990, 990])):
+        write_run(root, experiment="verify", agent=agent, task="cartpole_balance", seed=1, final=0.0, frames=60_000,
                   eval_every=20_000, curve=curve, batch_size=256)
     ctx = Context(results=load_results(root), out_dir=root / "out", budget=60_000, reps=100)
     artifacts = render_artifacts(ctx, resolve(ARTIFACTS))

@@ -29,9 +29,9 @@ TASK = "cartpole_balance"
 RANDOM = {TASK: 300.0}  # the random-policy reference, fixed so that the thresholds below are known
 
 
-def _runs(root: Path, algo: str, curves: list[list[float]], eval_every: int = 20_000) -> None:
+def _runs(root: Path, agent: str, curves: list[list[float]], eval_every: int = 20_000) -> None:
     for seed, curve in enumerate(curves, start=1):
-        write_run(root, experiment="verify", algo=algo, task=TASK, seed=seed, final=0.0,
+        write_run(root, experiment="verify", agent=agent, task=TASK, seed=seed, final=0.0,
                   frames=eval_every * (len(curve) - 1), eval_every=eval_every, curve=curve, batch_size=256)
 
 
@@ -97,7 +97,7 @@ def test_too_short_or_too_few_is_not_enough_data(tmp_path):
     assert row.verdict == V.NOT_ENOUGH and "1 seed(s)" in row.note
     # one seed of two unfinished: the cell is read where every seed is
     _runs(tmp_path / "mixed", "drqv2", [[350, 300, 800, 980]])
-    write_run(tmp_path / "mixed", experiment="verify", algo="drqv2", task=TASK, seed=2, final=0.0, frames=40_000,
+    write_run(tmp_path / "mixed", experiment="verify", agent="drqv2", task=TASK, seed=2, final=0.0, frames=40_000,
               eval_every=20_000, curve=[350, 300, 800], done=False)
     row = _judge(tmp_path / "mixed")["DrQ-v2"]
     assert row.verdict == V.NOT_ENOUGH and row.reached == 40_000
@@ -165,9 +165,9 @@ def test_a_saturated_seed_is_named_beside_its_verdict_and_in_the_report(tmp_path
 
 
 def test_only_the_verify_experiment_is_judged(tmp_path):
-    write_run(tmp_path, experiment="main", algo="drqv2", task=TASK, seed=1, final=0.0, frames=60_000,
+    write_run(tmp_path, experiment="main", agent="drqv2", task=TASK, seed=1, final=0.0, frames=60_000,
               eval_every=20_000, curve=[350, 135, 135, 135])
-    write_run(tmp_path, experiment="verify", algo="drqv2", task="cheetah_run", seed=1, final=500.0)
+    write_run(tmp_path, experiment="verify", agent="drqv2", task="cheetah_run", seed=1, final=500.0)
     assert V.judge(load_results(tmp_path), random_returns=RANDOM) == []
 
 

@@ -34,9 +34,9 @@ def test_numbers_a_verdict_compares_print_apart():
 
 
 def _reacher(root: Path, curves: dict[str, list[float]], seeds: int = 3) -> Context:
-    for algo, curve in curves.items():
+    for agent, curve in curves.items():
         for seed in range(seeds):
-            write_run(root, experiment="main", algo=algo, task="reacher_hard", seed=seed, final=0.0, frames=400,
+            write_run(root, experiment="main", agent=agent, task="reacher_hard", seed=seed, final=0.0, frames=400,
                       eval_every=200, curve=curve)
     return Context(results=load_results(root), out_dir=root / "_out", reps=100, indicative=True)
 

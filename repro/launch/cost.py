@@ -166,11 +166,6 @@ class RunCost:
     cores: int | None = None
 
     @property
-    def algo(self) -> str:
-        """The old name of :attr:`agent`, until repro_app/verify_cli.py reads ``agent``."""
-        return self.agent
-
-    @property
     def budget(self) -> int:
         """Its frames (online) or updates (offline) to train in all."""
         return self.updates if self.offline else self.frames

@@ -155,7 +155,7 @@ def dataset_tag(value: str) -> str:
 IDENTITY_KEYS: dict[str, str] = {
     "experiment": "experiment",
     "variant": "variant",
-    "algo": "agent.name",
+    "agent": "agent.name",
     "task": "task.name",
     "suite": "task.suite",
     "seed": "seed",
