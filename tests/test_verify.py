@@ -382,13 +382,15 @@ def test_verify_tiny_end_to_end(tmp_path):
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "out2" / "verify.csv"), table)
 
 
-@pytest.mark.parametrize("record, verdicts", [("bf16_heads", [V.BELOW]), ("", [V.LEARNS, V.LEARNED])])
+@pytest.mark.parametrize("record, verdicts", [("bf16_heads", [V.BELOW]), ("", [V.LEARNS, V.LEARNED]),
+                                             ("in_progress", [V.NOT_ENOUGH, V.NOT_ENOUGH])])
 def test_the_kept_cpu_runs_are_judged_as_recorded(record, verdicts):
     """docs/verification/ holds the CPU check's run files and its verdicts, both written by `repro verify
     --judge-only --keep-runs`: judging the kept files again gives the recorded table (a change to the rule, the band
     or the kept files fails here). ``bf16_heads/``: the run with the actor and critic under bf16 autocast (issue 33's
     bug), below the band; the top folder: the same run after the fix, as published, and TACO's run beside it,
-    learned."""
+    learned; ``in_progress/``: issue 49's runs as far as they have come (TACO seed 2, fast at 20K frames and plain at
+    its first checkpoint: short of the learned frame, 40K)."""
     kept = Path(__file__).resolve().parents[1] / "docs" / "verification" / record
     rows = V.judge(load_results(kept / "runs"))
     recorded = pd.read_csv(kept / "verify.csv")
