@@ -185,7 +185,7 @@ def draw_verdicts(sctx: Context, claim: SimClaim, draws: Draws) -> np.ndarray:
     try:
         return claim.judge(sctx, draws).verdicts
     except cl.NotEnoughData:
-        return np.full(next(iter(draws.values())).shape[0] if draws else 1, cl.NO_DATA, dtype=object)
+        return np.full(cl.n_draws(draws), cl.NO_DATA, dtype=object)
 
 
 def seeds_for(ctx: Context, claim: SimClaim, target: float = TARGET, sims: int = DEFAULT_SIMS, seed: int = 0,

@@ -156,12 +156,20 @@ def present(ctx: Context, table: dict[tuple, tuple[int, float]], *key) -> float:
     return value
 
 
+def too_few_seeds(missing: Sequence[tuple], min_seeds: int, budget: str) -> NotEnoughData:
+    """The one "not enough data" of cells that lack seeds: it names the first six of ``missing`` with the seeds they
+    need (``min_seeds``) and the budget they must reach (in words). Raised by :func:`require` on a ``means`` table and
+    by analysis.claims.draws.require_cells on draws."""
+    shown = ", ".join("/".join(str(p) for p in k) for k in missing[:6])
+    more = f" (+{len(missing) - 6} more)" if len(missing) > 6 else ""
+    return NotEnoughData(f"need >= {min_seeds} seeds that reached {budget} for: {shown}{more}")
+
+
 def require(ctx: Context, table: dict, keys: Sequence[tuple]) -> None:
+    """:func:`too_few_seeds` of the cells of ``keys`` whose mean in ``table`` has fewer than ``ctx.min_seeds``."""
     missing = [k for k in keys if get(ctx, table, *k) is None]
     if missing:
-        shown = ", ".join("/".join(str(p) for p in k) for k in missing[:6])
-        more = f" (+{len(missing) - 6} more)" if len(missing) > 6 else ""
-        raise NotEnoughData(f"need >= {ctx.min_seeds} seeds that reached {ctx.budget_text()} for: {shown}{more}")
+        raise too_few_seeds(missing, ctx.min_seeds, ctx.budget_text())
 
 
 def apart(values: Sequence[float], digits: int, most: int = 6) -> list[str]:
@@ -207,8 +215,6 @@ def online_rows(ctx: Context) -> pd.DataFrame:
     return labelled(select.online_main(ctx.scores, ctx.experiment_map))
 
 
-# The rules below take a claim's cells (a ``means`` table, score matrices or per-cell summaries) instead of the
-# runs, so that the power simulation (analysis.power) applies them, unchanged, to simulated cells.
 GAIN_TOLERANCE = 0.1  # online_avg_gain: how far short of the paper's "about 1.4x" the ratio may fall
 
 

@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from analysis.cells import Cells, Key
-from analysis.claims.core import NO_DATA, REFUTED, SUPPORTED, Check, Draws, Judge, Judgement, NotEnoughData, vs_text
+from analysis.claims.core import NO_DATA, REFUTED, SUPPORTED, Check, Draws, Judge, Judgement, too_few_seeds, vs_text
 from analysis.context import Context
 
 Pair = tuple[Key, Key, str]  # 'A > B': (A's cell, B's cell, the comparison's name in the evidence)
@@ -61,13 +61,11 @@ def enough(draws: Draws, key: Key, min_seeds: int) -> bool:
 
 
 def require_cells(draws: Draws, keys: Sequence[Key], min_seeds: int, budget: str) -> None:
-    """:class:`NotEnoughData` naming the cells of ``keys`` with fewer than ``min_seeds`` seeds that reached
-    ``budget`` (in words), the first six of them."""
+    """analysis.claims.core.too_few_seeds of the cells of ``keys`` with fewer than ``min_seeds`` seeds that reached
+    ``budget`` (in words)."""
     missing = [k for k in keys if not enough(draws, k, min_seeds)]
     if missing:
-        shown = ", ".join("/".join(str(p) for p in k) for k in missing[:6])
-        more = f" (+{len(missing) - 6} more)" if len(missing) > 6 else ""
-        raise NotEnoughData(f"need >= {min_seeds} seeds that reached {budget} for: {shown}{more}")
+        raise too_few_seeds(missing, min_seeds, budget)
 
 
 def stacked(draws: Draws, keys: Sequence[Key]) -> np.ndarray:
