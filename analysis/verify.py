@@ -52,7 +52,7 @@ from analysis.tables import TableOutput, fmt_num, write_table
 from repro.envs.dmc import random_policy_returns
 from repro.envs.registry import get_task
 from repro.runs import runformat
-from repro.runs.health import read_rows, saturation
+from repro.runs.health import at_bound, read_rows
 
 EXPERIMENT = "verify"  # sweeps/verify.yaml's experiment
 BASELINE = "DrQ-v2"  # the method judged against the published band
@@ -144,7 +144,7 @@ class VerdictRow:
     statistic: str = ""  # what the rule reads, at each frame it reads (or "n/a: why")
     band: str = ""  # DrQ-v2: the published band at those frames; other methods: the learned threshold
     environment: str = ""  # how the runs' environment differs from the published curves' ("" when it does not)
-    health: str = ""  # the seeds whose actor is saturated (repro/runs/health.py), "" when none
+    health: str = ""  # the seeds whose actor is at the bound, saturated or not yet (repro/runs/health.py)
     health_logged: bool = True  # every seed's train.csv logs actor_saturated (runs before issue 49 do not)
     repeats: tuple[int, ...] = ()  # the action repeats of the cell's runs (shown beside the frames reached)
     frames: list[FrameRow] = field(default_factory=list, repr=False)
@@ -357,13 +357,14 @@ def _advantage_rows(cell: Results, published: Results, task: str, method: str, v
 
 def cell_health(root: str | Path, cell: pd.DataFrame) -> dict[str, object]:
     """``health``: "seed N: actor saturated since frame F: ..." for each run of ``cell`` whose actor is saturated at
-    the end of its train.csv (the rule of repro/runs/health.py), "" when none is; ``health_logged``: whether every
-    run logs the metric."""
+    the end of its train.csv (the rule of repro/runs/health.py), and "seed N: actor at the bound since frame F: ..."
+    for one at the bound for a shorter stretch so far; "" when none is; ``health_logged``: whether every run logs the
+    metric."""
     out, logged = [], True
     for run_id, seed in zip(cell["run_id"], cell["seed"]):
         rows = read_rows(Path(root) / str(run_id))
         logged = logged and bool(rows)
-        found = saturation(rows)
+        found = at_bound(rows)
         if found is not None:
             out.append(f"seed {seed}: {found.message()}")
     return {"health": "; ".join(out), "health_logged": logged}
@@ -392,7 +393,7 @@ def cell_environment(root: str | Path, cell: pd.DataFrame, task: str) -> str:
 
 
 def health_text(row: VerdictRow) -> str:
-    """The verdict table's actor column: the saturated seeds, else whether the seeds' actors were watched."""
+    """The verdict table's actor column: the seeds at the bound, else whether the seeds' actors were watched."""
     return row.health or ("not saturated" if row.health_logged else "not logged (a run written before issue 49)")
 
 

@@ -64,6 +64,18 @@ def test_the_rule_needs_a_whole_stretch_at_the_end():
     assert broken is not None and broken.since == 13000  # the stretch after the break, not the first one
 
 
+def test_a_shorter_stretch_at_the_bound_is_said_as_what_it_is_so_far():
+    nan = math.nan
+    early = health.at_bound(_rows([nan] * 4 + [0.2] + [0.995] * 2))  # at the bound since the 6th episode
+    assert early is not None and not early.saturated and (early.since, early.frames) == (5000, 2000)
+    assert early.message() == "actor at the bound since frame 5,000: 2,000 of the 10,000 frames that make it saturated"
+    assert health.saturation(_rows([nan] * 4 + [0.2] + [0.995] * 2)) is None  # the rule does not hold yet
+    dead = health.at_bound(_rows([nan] * 4 + [0.2] + [1.0] * 10))
+    assert dead is not None and dead.saturated and dead.message().startswith("actor saturated since frame 5,000")
+    assert health.at_bound(_rows([1.0] * 3 + [0.98])) is None  # left the bound at the last row
+    assert health.at_bound(_rows([nan] * 3)) is None
+
+
 def test_the_watch_says_a_stretch_once_and_a_new_one_again():
     watch = health.Watch()
     said = [watch.add(r) for r in _rows([1.0] * 15 + [0.0] + [1.0] * 12)]
@@ -91,7 +103,7 @@ def test_the_online_logger_prints_one_warning_and_a_resume_does_not_repeat_it(tm
     log.log_train({"frame": 17000, "episode_length": 1000, "actor_saturated": 1.0})
     log.close()
     assert not [x for x in again if x.startswith("warning:")]
-    assert health.read_saturation(tmp_path) == health.Saturation(4000, 17000, 1.0)
+    assert health.read_at_bound(tmp_path) == health.Saturation(4000, 17000, 1.0)
 
 
 def test_a_log_with_fewer_columns_is_widened_on_resume(tmp_path: Path):
@@ -119,19 +131,24 @@ def _train_csv(run: Path, shares: list[float]) -> None:
 
 
 def test_status_flags_a_saturated_actor(tmp_path: Path):
-    sweep = write_sweep(tmp_path, "hs", ["cartpole_balance"], {"ok": [], "dead": []}, 1)
+    sweep = write_sweep(tmp_path, "hs", ["cartpole_balance"], {"ok": [], "dead": [], "early": []}, 1)
     selection = specs.Selection(sets=(f"runtime.results_root={tmp_path}",))
     planned = specs.plan(specs.expand(specs.load(str(sweep)), selection))
     root = specs.results_root_of(planned)
     sdir = state_dir(root, "hs")
-    dead, ok = sorted(planned, key=lambda p: "/ok/" in str(p.run_dir))
+    ok, dead, early = (next(p for p in planned if f"/{v}/" in str(p.run_dir)) for v in ("ok", "dead", "early"))
     _train_csv(ok.run_dir, [math.nan] * 4 + [0.3] * 16)
     _train_csv(dead.run_dir, [math.nan] * 4 + [0.2] * 2 + [1.0] * 14)
+    _train_csv(early.run_dir, [math.nan] * 4 + [0.2] * 14 + [1.0] * 2)  # at the bound for its last 2,000 frames
     record_launch(sdir, "hs", sweep, "local", {p.key: {"run_dir": str(p.run_dir), "overrides": []} for p in planned})
     got = {s.run_dir: s for s in collect({p.key: p.run_dir for p in planned}, root, sdir)}
-    assert got[ok.run_dir].health == ""
+    assert got[ok.run_dir].health == "" and not got[ok.run_dir].saturated
     assert got[dead.run_dir].health == "actor saturated since frame 6,000: its policy gradient is zero"
+    assert got[dead.run_dir].saturated and not got[early.run_dir].saturated
+    assert got[early.run_dir].health == ("actor at the bound since frame 18,000: 2,000 of the 10,000 frames that make "
+                                         "it saturated")
     res = CliRunner().invoke(launch_app(), ["status", "hs", "--results-root", str(tmp_path)])
     code, out = res.exit_code, res.output
-    assert code == 0 and "1 run(s) with a saturated actor" in out
-    assert "actor saturated since frame 6,000" in " ".join(out.split())
+    assert code == 0 and "1 run(s) with a saturated actor" in out  # the shorter stretch is shown, not counted
+    words = " ".join(out.split())
+    assert "actor saturated since frame 6,000" in words and "actor at the bound since frame 18,000" in words

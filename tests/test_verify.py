@@ -156,6 +156,11 @@ def test_a_saturated_seed_is_named_beside_its_verdict_and_in_the_report(tmp_path
     taco = next(r for r in rows if r.method == "TACO")
     assert taco.health == "seed 1: actor saturated since frame 4,000: its policy gradient is zero"
     assert V.health_text(next(r for r in rows if r.method == "DrQ-v2")) == "not saturated"
+    # a seed at the bound for a shorter stretch so far is named as such, not "not saturated"
+    _saturated_train_csv(next(tmp_path.glob("verify/drqv2/base/cartpole_balance/seed_1")), episodes=7)
+    drq = next(r for r in V.judge(load_results(tmp_path), random_returns=RANDOM) if r.method == "DrQ-v2")
+    assert V.health_text(drq) == ("seed 1: actor at the bound since frame 4,000: 3,000 of the 10,000 frames that make "
+                                  "it saturated")
     assert taco.health in next(line for line in V.verdict_lines(rows) if "TACO" in line)
     section = _verify_section(rows)
     assert "seed 1: actor saturated since frame 4,000" in section and "Early advantage" in section

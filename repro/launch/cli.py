@@ -410,10 +410,11 @@ def _print_status(name: str, root: Path, sdir: Path) -> list[RunStatus]:
         table.add_row(escape(_rel(s.run_dir, root)), f"[{style}]{s.status}[/]",
                       "" if s.frame is None else f"{s.frame:,}",
                       "" if s.eval_return is None else f"{s.eval_return:.1f}", s.job_id or "",
-                      escape(s.detail) + (f"{'; ' if s.detail else ''}[red]{escape(s.health)}[/]" if s.health else ""))
+                      escape(s.detail) + (f"{'; ' if s.detail else ''}[{'red' if s.saturated else 'yellow'}]"
+                                          f"{escape(s.health)}[/]" if s.health else ""))
     con = console()
     con.print(table)
-    sick = [s for s in statuses if s.health]
+    sick = [s for s in statuses if s.saturated]
     if sick:
         con.print(f"[red]{len(sick)} run(s) with a saturated actor[/] (its tanh exactly +-1 on nearly every state "
                   "of its batches: the policy gradient is zero; docs/watching.md)", highlight=False)

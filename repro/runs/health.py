@@ -10,6 +10,8 @@ encoder's features (DrQ-v2's actor trains on detached features, its trunk does n
     environment frames without a break, all have ``actor_saturated >= SATURATED_SHARE``;
 
 it is reported as "actor saturated since frame N: its policy gradient is zero", N the first frame of the stretch.
+A shorter stretch at the end is reported too, as what it is so far ("actor at the bound since frame N: F of the 10,000
+frames that make it saturated"), so that no table calls an actor at the bound on every state "not saturated".
 A stretch of 10K frames is 10 episodes of cartpole_balance and 20% of the published curves' first 50K frames: at
 130 frames/s (the paper's DrQ-v2 on an A100) a GPU user reads it about a minute and a half after it starts. It says
 what the gradient is, not that the seed cannot recover: two of the ten published DrQ-v2 seeds on cartpole_balance sit
@@ -39,13 +41,22 @@ class Saturation:
     since: int  # the first environment frame of the stretch (the start of its first episode)
     until: int  # the last row's frame
     share: float  # the last row's actor_saturated
+    min_frames: int = SATURATED_FRAMES  # the length that makes the stretch saturated
 
     @property
     def frames(self) -> int:
         return self.until - self.since
 
+    @property
+    def saturated(self) -> bool:
+        """The rule holds: the stretch spans at least ``min_frames``."""
+        return self.frames >= self.min_frames
+
     def message(self) -> str:
-        return f"actor saturated since frame {self.since:,}: its policy gradient is zero"
+        if self.saturated:
+            return f"actor saturated since frame {self.since:,}: its policy gradient is zero"
+        return (f"actor at the bound since frame {self.since:,}: {self.frames:,} of the {self.min_frames:,} frames "
+                "that make it saturated")
 
 
 @dataclass(frozen=True)
@@ -61,11 +72,12 @@ class Row:
 class Watch:
     """The rule over rows in the order a run writes them, one row at a time: :meth:`add` returns the saturation the
     first time a stretch reaches the length (once per stretch; a recovery and a new stretch report again);
-    :attr:`current` is the stretch ending at the last row with updates, once long enough. A row without updates
-    (NaN share) neither extends nor breaks a stretch."""
+    :attr:`stretch` is the stretch ending at the last row with updates, of any length, and :attr:`current` the same
+    once long enough. A row without updates (NaN share) neither extends nor breaks a stretch."""
 
     def __init__(self, min_share: float = SATURATED_SHARE, min_frames: int = SATURATED_FRAMES):
         self.min_share, self.min_frames = min_share, min_frames
+        self.stretch: Saturation | None = None
         self.current: Saturation | None = None
         self._since: int | None = None  # the first frame of the stretch of saturated rows ending at the last one
         self._said: int | None = None  # the ``since`` of the stretch already reported
@@ -74,12 +86,12 @@ class Watch:
         if math.isnan(row.share):
             return None
         if row.share < self.min_share:
-            self._since, self.current = None, None
+            self._since, self.stretch, self.current = None, None, None
             return None
         if self._since is None:
             self._since = row.frame - row.length
-        found = Saturation(since=self._since, until=row.frame, share=row.share)
-        self.current = found if found.frames >= self.min_frames else None
+        self.stretch = Saturation(since=self._since, until=row.frame, share=row.share, min_frames=self.min_frames)
+        self.current = self.stretch if self.stretch.saturated else None
         if self.current is None or self.current.since == self._said:
             return None
         self._said = self.current.since
@@ -98,6 +110,15 @@ def saturation(rows: Iterable[Row], min_share: float = SATURATED_SHARE,
     watch = Watch(min_share, min_frames)
     watch.extend(rows)
     return watch.current
+
+
+def at_bound(rows: Iterable[Row], min_share: float = SATURATED_SHARE,
+             min_frames: int = SATURATED_FRAMES) -> Saturation | None:
+    """The stretch at the bound ending at the last row with updates, of any length (its ``saturated`` says whether
+    the rule holds yet); None when the last row with updates is under ``min_share`` or there is none."""
+    watch = Watch(min_share, min_frames)
+    watch.extend(rows)
+    return watch.stretch
 
 
 def _number(text: str | None) -> float:
@@ -131,6 +152,6 @@ def read_rows(run_dir: str | os.PathLike[str]) -> list[Row]:
         return []
 
 
-def read_saturation(run_dir: str | os.PathLike[str]) -> Saturation | None:
-    """The rule applied to ``run_dir``'s train.csv (None: not saturated, or nothing to judge)."""
-    return saturation(read_rows(run_dir))
+def read_at_bound(run_dir: str | os.PathLike[str]) -> Saturation | None:
+    """:func:`at_bound` of ``run_dir``'s train.csv: the stretch at the bound at its end, saturated or not yet."""
+    return at_bound(read_rows(run_dir))
