@@ -14,7 +14,7 @@ from repro.launch import lock
 from repro.launch.slurm_query import FAILED, NEVER_STARTS, QUEUED, explain, job_details
 from repro.launch.state import read_record, read_state
 from repro.launch.waiting import DatasetNeed, missing_reason
-from repro.runs.health import read_at_bound
+from repro.runs.health import Saturation, read_at_bound
 from repro.runs.runformat import EVAL, STATE_DONE, STATE_PARTIAL, TRAIN, run_state
 
 STATUSES = ("done", "running", "queued", "failed", "pending", "waiting", "cancelled")
@@ -31,9 +31,18 @@ class RunStatus:
     detail: str  # failed: the error; running: where; queued: SLURM's pending reason; cancelled: before or after it
     # started; pending: partial or not started; waiting: the dataset
     log: str | None = None  # failed runs: the file holding the error (local log or SLURM stderr)
-    health: str = ""  # an actor at the bound (repro/runs/health.py), whatever the status: "actor saturated since ..."
-    # once the rule holds, "actor at the bound since ..." before
-    saturated: bool = False  # the rule holds: the actor has been at the bound for the whole stretch
+    bound: Saturation | None = None  # the actor's stretch at the bound at the end of train.csv (repro/runs/health.py)
+
+    @property
+    def health(self) -> str:
+        """Whatever the status: "actor saturated since ..." once the rule holds, "actor at the bound since ..."
+        before; "" when the actor is not at the bound."""
+        return self.bound.message() if self.bound is not None else ""
+
+    @property
+    def saturated(self) -> bool:
+        """The rule holds: the actor has been at the bound for the whole stretch."""
+        return self.bound is not None and self.bound.saturated
 
 
 def last_row(path: Path, tail_bytes: int = 8192) -> dict[str, str] | None:
@@ -93,8 +102,7 @@ def run_status(key: str, run_dir: Path, results_root: Path, sdir: Path,
     bound = read_at_bound(run_dir) if frame is not None else None
 
     def make(status: str, detail: str) -> RunStatus:
-        return RunStatus(key, run_dir, status, frame, ret, job, detail, health=bound.message() if bound else "",
-                         saturated=bound is not None and bound.saturated)
+        return RunStatus(key, run_dir, status, frame, ret, job, detail, bound=bound)
 
     if state == STATE_DONE:
         return make("done", "")

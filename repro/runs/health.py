@@ -78,7 +78,6 @@ class Watch:
     def __init__(self, min_share: float = SATURATED_SHARE, min_frames: int = SATURATED_FRAMES):
         self.min_share, self.min_frames = min_share, min_frames
         self.stretch: Saturation | None = None
-        self.current: Saturation | None = None
         self._since: int | None = None  # the first frame of the stretch of saturated rows ending at the last one
         self._said: int | None = None  # the ``since`` of the stretch already reported
 
@@ -86,16 +85,21 @@ class Watch:
         if math.isnan(row.share):
             return None
         if row.share < self.min_share:
-            self._since, self.stretch, self.current = None, None, None
+            self._since, self.stretch = None, None
             return None
         if self._since is None:
             self._since = row.frame - row.length
         self.stretch = Saturation(since=self._since, until=row.frame, share=row.share, min_frames=self.min_frames)
-        self.current = self.stretch if self.stretch.saturated else None
-        if self.current is None or self.current.since == self._said:
+        found = self.current
+        if found is None or found.since == self._said:
             return None
-        self._said = self.current.since
-        return self.current
+        self._said = found.since
+        return found
+
+    @property
+    def current(self) -> Saturation | None:
+        """:attr:`stretch` once the rule holds for it, else None."""
+        return self.stretch if self.stretch is not None and self.stretch.saturated else None
 
     def extend(self, rows: Iterable[Row]) -> None:
         """Rows already written (a resumed run): remembered, a stretch among them not reported again."""
@@ -107,9 +111,8 @@ def saturation(rows: Iterable[Row], min_share: float = SATURATED_SHARE,
                min_frames: int = SATURATED_FRAMES) -> Saturation | None:
     """The saturated stretch ending at the last row with updates, when it spans at least ``min_frames``; None
     otherwise (also for a run that has logged no update yet)."""
-    watch = Watch(min_share, min_frames)
-    watch.extend(rows)
-    return watch.current
+    found = at_bound(rows, min_share, min_frames)
+    return found if found is not None and found.saturated else None
 
 
 def at_bound(rows: Iterable[Row], min_share: float = SATURATED_SHARE,
