@@ -8,7 +8,10 @@ run's learner from its ``config.yaml``, loads the checkpoint's modules and, on t
   zero there) and the range of the pre-tanh output,
 - the critic's slope dQ/da at the policy mean (min of the two heads, through the action encoder, as the actor's loss
   sees it): the share of states where it points back towards 0 from the mean's side ("inward"), over all states and
-  over the saturated ones (where the critic says "move away from the bound" but the actor cannot).
+  over the saturated ones (where the critic says "move away from the bound" but the actor cannot),
+- from the second checkpoint on, how many of the actor's and the encoder's weights changed since the previous one
+  given, and by how much at most (an actor at the bound on every batch state gets an exactly zero gradient, so only
+  Adam's decaying momentum and the encoder, trained by the critic's and auxiliary losses, can still move its output).
 
     OMP_NUM_THREADS=1 .venv/bin/python scripts/saturation_probe.py RUN_DIR [CHECKPOINT ...] [--every 10] [--json OUT]
 """
@@ -44,14 +47,22 @@ def stacked_replay(run: Path, state: dict, rc, action_dim: int, every: int) -> t
     return buffer._stack(slots), len(buffer)
 
 
-def probe(run: Path, checkpoint: Path, every: int) -> dict:
+def weights_moved(before: dict, after: dict) -> dict:
+    """How many of a module's weights differ between two state dicts, of how many, and the largest |difference|."""
+    changed = sum(int((before[k] != after[k]).sum()) for k in after)
+    largest = max(float((before[k].double() - after[k].double()).abs().max()) for k in after)
+    return {"changed": changed, "of": sum(int(after[k].numel()) for k in after), "max_diff": largest}
+
+
+def probe(run: Path, checkpoint: Path, every: int, previous: dict | None = None) -> dict:
+    """The row for ``checkpoint``; ``previous``: the module state dicts of the checkpoint probed before it."""
     rc = typed(rundir.saved_config(run))
     state = load_checkpoint(checkpoint)
     frame = int(state["counters"]["step"]) * int(rc.env.action_repeat)
     action_dim = int(state["agent"]["actor"]["policy.4.weight"].shape[0])
     obs, stored = stacked_replay(run, state, rc, action_dim, every)
     with torch.random.fork_rng(devices=[]):
-        agent = build_run_learner(rc, tuple(obs.shape[1:]), action_dim, "cpu")
+        agent = build_run_learner(rc, (obs.shape[1], obs.shape[2], obs.shape[3]), action_dim, "cpu")
     agent.load_state_dict({"modules": state["agent"], "optimizers": state["optimizers"]})
     bb = agent.backbone  # type: ignore[attr-defined]
     with torch.no_grad():
@@ -65,12 +76,15 @@ def probe(run: Path, checkpoint: Path, every: int) -> dict:
     at_bound = mean.abs() >= 1.0
     back = torch.sign(slope) == -torch.sign(mean)  # the critic's slope points back towards 0 from the mean's side
     inward = at_bound & back
+    moved = {f"{name}_moved": weights_moved(previous[name], state["agent"][name])
+             for name in ("actor", "encoder") if previous is not None}
     return {"checkpoint": str(checkpoint), "frame": frame, "states": int(len(obs)), "stored": stored,
             "saturated": float(at_bound.float().mean()), "pretanh_min": float(pre.min()),
             "pretanh_max": float(pre.max()), "pretanh_mean": float(pre.mean()),
             "mean_action": float(mean.mean()), "inward_share": float(back.float().mean()),
             "inward_share_of_saturated":
-                float(inward.float().sum() / at_bound.float().sum()) if bool(at_bound.any()) else float("nan")}
+                float(inward.float().sum() / at_bound.float().sum()) if bool(at_bound.any()) else float("nan"),
+            **moved, "modules": {name: state["agent"][name] for name in ("actor", "encoder")}}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -83,13 +97,18 @@ def main(argv: list[str] | None = None) -> int:
     checkpoints = args.checkpoints or [args.run / "checkpoint.pt"]
     rows = []
     print("frame   states  saturated  pre-tanh [min, max] (mean)  mean action  critic 'inward': all states, "
-          "saturated ones")
+          "saturated ones; weights changed since the previous checkpoint: actor, encoder (max |diff|)")
+    previous = None
     for ckpt in checkpoints:
-        row = probe(args.run, ckpt, args.every)
+        row = probe(args.run, ckpt, args.every, previous)
+        previous = row.pop("modules")
         rows.append(row)
+        moved = "".join(f"  {row[f'{name}_moved']['changed']}/{row[f'{name}_moved']['of']} "
+                        f"({row[f'{name}_moved']['max_diff']:.2g})" for name in ("actor", "encoder")
+                        if f"{name}_moved" in row)
         print(f"{row['frame']:>6} {row['states']:>7} {row['saturated']:10.3f}  [{row['pretanh_min']:6.2f}, "
               f"{row['pretanh_max']:6.2f}] ({row['pretanh_mean']:6.2f})  {row['mean_action']:11.3f}  "
-              f"{row['inward_share']:.3f}, {row['inward_share_of_saturated']:.3f}", flush=True)
+              f"{row['inward_share']:.3f}, {row['inward_share_of_saturated']:.3f}{moved}", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0
