@@ -54,8 +54,9 @@ def weights_moved(before: dict, after: dict) -> dict:
     return {"changed": changed, "of": sum(int(after[k].numel()) for k in after), "max_diff": largest}
 
 
-def probe(run: Path, checkpoint: Path, every: int, previous: dict | None = None) -> dict:
-    """The row for ``checkpoint``; ``previous``: the module state dicts of the checkpoint probed before it."""
+def probe(run: Path, checkpoint: Path, every: int, previous: dict | None = None) -> tuple[dict, dict]:
+    """The row for ``checkpoint`` and its actor's and encoder's state dicts; ``previous``: those of the checkpoint
+    probed before it."""
     rc = typed(rundir.saved_config(run))
     state = load_checkpoint(checkpoint)
     frame = int(state["counters"]["step"]) * int(rc.env.action_repeat)
@@ -76,15 +77,16 @@ def probe(run: Path, checkpoint: Path, every: int, previous: dict | None = None)
     at_bound = mean.abs() >= 1.0
     back = torch.sign(slope) == -torch.sign(mean)  # the critic's slope points back towards 0 from the mean's side
     inward = at_bound & back
-    moved = {f"{name}_moved": weights_moved(previous[name], state["agent"][name])
-             for name in ("actor", "encoder") if previous is not None}
+    modules = {name: state["agent"][name] for name in ("actor", "encoder")}
+    moved = {} if previous is None else {f"{name}_moved": weights_moved(previous[name], modules[name])
+                                         for name in modules}
     return {"checkpoint": str(checkpoint), "frame": frame, "states": int(len(obs)), "stored": stored,
             "saturated": float(at_bound.float().mean()), "pretanh_min": float(pre.min()),
             "pretanh_max": float(pre.max()), "pretanh_mean": float(pre.mean()),
             "mean_action": float(mean.mean()), "inward_share": float(back.float().mean()),
             "inward_share_of_saturated":
                 float(inward.float().sum() / at_bound.float().sum()) if bool(at_bound.any()) else float("nan"),
-            **moved, "modules": {name: state["agent"][name] for name in ("actor", "encoder")}}
+            **moved}, modules
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -100,12 +102,10 @@ def main(argv: list[str] | None = None) -> int:
           "saturated ones; weights changed since the previous checkpoint: actor, encoder (max |diff|)")
     previous = None
     for ckpt in checkpoints:
-        row = probe(args.run, ckpt, args.every, previous)
-        previous = row.pop("modules")
+        row, previous = probe(args.run, ckpt, args.every, previous)
         rows.append(row)
-        moved = "".join(f"  {row[f'{name}_moved']['changed']}/{row[f'{name}_moved']['of']} "
-                        f"({row[f'{name}_moved']['max_diff']:.2g})" for name in ("actor", "encoder")
-                        if f"{name}_moved" in row)
+        moved = "".join(f"  {m['changed']}/{m['of']} ({m['max_diff']:.2g})"
+                        for m in (row.get("actor_moved"), row.get("encoder_moved")) if m is not None)
         print(f"{row['frame']:>6} {row['states']:>7} {row['saturated']:10.3f}  [{row['pretanh_min']:6.2f}, "
               f"{row['pretanh_max']:6.2f}] ({row['pretanh_mean']:6.2f})  {row['mean_action']:11.3f}  "
               f"{row['inward_share']:.3f}, {row['inward_share_of_saturated']:.3f}{moved}", flush=True)
